@@ -1,0 +1,224 @@
+"""The emitter-observer problem: null geodesics that connect a static observer with a point.
+
+Units: lengths in r_s (Schwarzschild radius), c = 1, so times are in r_s/c; angles in radians.
+Conventions (seed 000, sections 2.2-2.5): the observer is static at (r_obs, phi = 0) in the plane
+through the hole, the observer and the target; the target sits at (r, phi) with 0 <= phi <= pi.
+The ray is traced backwards from the observer. ``xi`` in [0, pi] is the angle between the ray's
+initial direction and the outward radial direction in the observer's static orthonormal frame
+(eq. 11): xi = pi looks straight at the hole.
+
+* order 1 sweeps the angle phi (the ray leaves towards the target's side of the axis, +e2);
+* order 2 passes the hole on the other side and sweeps 2*pi - phi (it leaves towards -e2; xi is
+  still the unsigned angle from the outward radial direction).
+
+(ux, uy) is the ray's tangent at the target in the plane's pseudo-Cartesian axes (eq. 17; e1 points
+from the hole to the observer, e2 towards the target's side), with the affine normalisation of
+eq. (11) (u^t = -1/sqrt(1 - 1/r_obs) at the observer). It points away from the observer along the
+ray, so -(ux, uy) is the direction in which light leaves the target towards the observer.
+
+Connecting rays include the ones steeper than the critical angle: they reach points close to the hole,
+inside the photon sphere too, before they fall in. For every target with r > 1 and each order there is
+exactly one connecting ray: along the family of rays the angle swept on reaching radius r grows
+monotonically from 0 to infinity. Each case is solved with a vectorised bracketing root finder
+(Chandrupatla's method, scipy.optimize.elementwise.find_root) on closed-form swept angles.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from scipy.optimize import elementwise
+
+from . import orbit as _orb
+
+TWO_PI = 2.0 * np.pi
+_B_TINY = 1e-20
+
+
+class Connection(NamedTuple):
+    """A connecting null geodesic (arrays broadcast from the inputs; NaN where no ray exists).
+
+    xi: initial angle at the observer from the outward radial direction (radians, [0, pi]).
+    dt: coordinate light travel time between observer and target (units of r_s/c).
+    ux, uy: ray tangent at the target in the plane's pseudo-Cartesian axes (eq. 17).
+    b: impact parameter (units of r_s).
+    """
+
+    xi: np.ndarray
+    dt: np.ndarray
+    ux: np.ndarray
+    uy: np.ndarray
+    b: np.ndarray
+
+
+def shadow_half_angle(r_obs) -> np.ndarray:
+    """Half opening angle of the black hole's shadow for a static observer at r_obs (units of r_s,
+    r_obs > 1.5): the angle xi_crit of eq. (14), sin^2 xi_crit = 27/4 (1/r_obs^2)(1 - 1/r_obs).
+    Rays with xi > pi - xi_crit fall into the hole. Radians."""
+    r_obs = np.asarray(r_obs, dtype=float)
+    s2 = 6.75 / r_obs**2 * (1.0 - 1.0 / r_obs)
+    return np.arcsin(np.sqrt(np.clip(s2, 0.0, 1.0)))
+
+
+def check_observer_radius(r_obs: float) -> float:
+    """Validate a static observer radius (units of r_s) and return it as float.
+
+    Raises ValueError for NaN/inf, for observers inside the horizon (no static observer exists there)
+    and for observers inside the photon sphere (r_obs <= 1.5, not supported: the ray families differ).
+    """
+    try:
+        r = float(r_obs)
+    except (TypeError, ValueError):
+        raise ValueError(f"r_obs must be a number (units of r_s), got {r_obs!r}") from None
+    if not np.isfinite(r):
+        raise ValueError(f"r_obs must be finite, got {r}")
+    if r <= 1.0:
+        raise ValueError(f"observer at r_obs = {r} r_s is inside the event horizon (r_obs must be > 1.5 r_s)")
+    if r <= 1.5:
+        raise ValueError(
+            f"observer at r_obs = {r} r_s is inside the photon sphere; only r_obs > 1.5 r_s is supported")
+    return r
+
+
+def _bracket_root(f, lo, hi, args, *, xatol, xrtol, maxiter=200):
+    """Vectorised root of f(x, *args) on [lo, hi] (f(lo) and f(hi) of opposite signs)."""
+    res = elementwise.find_root(
+        f, (lo, hi), args=args,
+        tolerances=dict(xatol=xatol, xrtol=xrtol, fatol=0.0, frtol=0.0),
+        maxiter=maxiter,
+    )
+    return res.x
+
+
+def _direct_sweep(b, u, uo):
+    """Angle swept by a ray of impact parameter b between uo and u without a turning point."""
+    # Below b = 1e-20 the swept angle is linear in b to double precision; scaling keeps the formulas
+    # (whose roots grow like b^(-2/3)) finite down to the radial ray b = 0.
+    b_eval = np.maximum(b, _B_TINY)
+    orb = _orb.orbit_from_b(b_eval)
+    return np.abs(_orb.sweep(orb, u) - _orb.sweep(orb, uo)) * (b / b_eval)
+
+
+def _turning_sweep(eps, u, uo):
+    """Angle swept from uo in to the periapsis e2 = 2/3 - eps and back out to u."""
+    orb = _orb.orbit_from_turning_point(eps)
+    return 2.0 * _orb.sweep_to_turning_point(orb) - _orb.sweep(orb, uo) - _orb.sweep(orb, u)
+
+
+def connect(r_obs, r, phi, order: int = 1) -> Connection:
+    """Connecting null geodesic of the given order between a static observer at (r_obs, 0) and the
+    points (r, phi), vectorised over ``r`` and ``phi`` (broadcast).
+
+    Parameters: r_obs (scalar, units of r_s, > 1.5), r (units of r_s), phi (radians, [0, pi]),
+    order 1 (sweeps phi) or 2 (sweeps 2*pi - phi). Points that no ray reaches (r <= 1, inside the
+    horizon), or with NaN/inf/out-of-range input, come back as NaN in every field.
+    See the module docstring for conventions; returns a :class:`Connection`.
+    """
+    r_obs = check_observer_radius(r_obs)
+    if order not in (1, 2):
+        raise ValueError(f"order must be 1 or 2, got {order!r}")
+    r, phi = np.broadcast_arrays(np.asarray(r, dtype=float), np.asarray(phi, dtype=float))
+    shape = r.shape
+    r = r.ravel()
+    phi = phi.ravel()
+    out = {k: np.full(r.shape, np.nan) for k in Connection._fields}
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(r) & np.isfinite(phi) & (r > 1.0) & (phi >= 0.0) & (phi <= np.pi)
+    idx = np.flatnonzero(ok)
+    if idx.size:
+        res = _solve(r_obs, r[idx], phi[idx], order)
+        for k in Connection._fields:
+            out[k][idx] = res[k]
+    return Connection(**{k: v.reshape(shape) for k, v in out.items()})
+
+
+def _solve(r_obs, r, phi, order):
+    uo = 1.0 / r_obs
+    u = 1.0 / r
+    sweep = phi if order == 1 else TWO_PI - phi
+    n = u.size
+    b = np.zeros(n)
+    eps = np.full(n, np.nan)
+    branch = np.zeros(n, dtype=np.int8)  # 0 radial, 1 direct inbound, 2 direct outbound, 3 turning
+
+    radial = sweep == 0.0
+    inward = u > uo  # target closer to the hole than the observer
+    # Largest impact parameter of the direct (turning-point-free) branch and the angle it sweeps.
+    u_turn = np.where(inward, u, uo)
+    can_turn = u_turn < _orb.U_PHOTON
+    with np.errstate(divide="ignore", invalid="ignore"):
+        b_turn = np.where(can_turn, 1.0 / (u_turn * np.sqrt(1.0 - u_turn)), _orb.B_CRIT)
+        b_max = np.where(can_turn, b_turn, _orb.B_CRIT * (1.0 - 1e-15))
+    sweep_turn = np.full(n, np.inf)
+    ct = np.flatnonzero(can_turn & ~radial)
+    if ct.size:
+        orb = _orb.orbit_from_turning_point(_orb.U_PHOTON - u_turn[ct])
+        sweep_turn[ct] = np.abs(_orb.sweep_to_turning_point(orb) - _orb.sweep(orb, np.where(inward[ct], uo, u[ct])))
+
+    direct = ~radial & (sweep <= sweep_turn)
+    turning = ~radial & ~direct
+    branch[direct & inward] = 1
+    branch[direct & ~inward] = 2
+    branch[turning] = 3
+
+    d = np.flatnonzero(direct)
+    if d.size:
+        f = lambda bb, uu, uuo, target: _direct_sweep(bb, uu, uuo) - target  # noqa: E731
+        b[d] = _bracket_root(f, np.zeros(d.size), b_max[d], (u[d], uo * np.ones(d.size), sweep[d]),
+                             xatol=1e-300, xrtol=4e-16)
+    t = np.flatnonzero(turning)
+    if t.size:
+        # solve in s = log(eps), eps = 2/3 - e2: the swept angle grows like -log(eps) as the periapsis
+        # approaches the photon sphere, so it is nearly linear in s.
+        f = lambda s, uu, uuo, target: _turning_sweep(np.exp(s), uu, uuo) - target  # noqa: E731
+        s_hi = np.log(_orb.U_PHOTON - u_turn[t])
+        s_lo = np.full(t.size, np.log(1e-15))
+        s = _bracket_root(f, s_lo, s_hi, (u[t], uo * np.ones(t.size), sweep[t]), xatol=1e-15, xrtol=0.0)
+        eps[t] = np.exp(s)
+
+    return _finish(r_obs, u, uo, phi, order, b, eps, branch)
+
+
+def _finish(r_obs, u, uo, phi, order, b, eps, branch):
+    """Initial angle, travel time and arrival direction from the solved orbits."""
+    n = u.size
+    xi = np.empty(n)
+    dt = np.empty(n)
+    u_r = np.empty(n)  # dr/dlambda at the target
+    b_out = b.copy()
+    k = np.sqrt(1.0 - uo)
+
+    rad = branch == 0
+    if rad.any():
+        inward = u[rad] > uo
+        xi[rad] = np.where(inward, np.pi, 0.0)
+        dt[rad] = _orb.radial_travel_time(uo, u[rad])
+        u_r[rad] = np.where(inward, -k, k)
+
+    dirm = (branch == 1) | (branch == 2)
+    if dirm.any():
+        orb = _orb.orbit_from_b(b[dirm])
+        bb = b[dirm]
+        outward = branch[dirm] == 2
+        cos_xi = np.where(outward, 1.0, -1.0) * bb * np.sqrt(np.maximum(orb.P(uo), 0.0))
+        xi[dirm] = np.arctan2(bb * k * uo, cos_xi)
+        dt[dirm] = _orb.travel_time(orb, uo, u[dirm])
+        u_r[dirm] = np.where(outward, 1.0, -1.0) * k * bb * np.sqrt(np.maximum(orb.P(u[dirm]), 0.0))
+
+    tm = branch == 3
+    if tm.any():
+        orb = _orb.orbit_from_turning_point(eps[tm])
+        bb = 1.0 / orb.inv_b
+        b_out[tm] = bb
+        cos_xi = -bb * np.sqrt(np.maximum(orb.P(uo), 0.0))
+        xi[tm] = np.arctan2(bb * k * uo, cos_xi)
+        dt[tm] = _orb.travel_time(orb, uo, orb.e2) + _orb.travel_time(orb, u[tm], orb.e2)
+        u_r[tm] = k * bb * np.sqrt(np.maximum(orb.P(u[tm]), 0.0))
+
+    # u^phi = h/r^2 = k b u^2 (negative for order 2, which sweeps towards -phi)
+    u_phi = (1.0 if order == 1 else -1.0) * k * b_out * u * u
+    r = 1.0 / u
+    c, s = np.cos(phi), np.sin(phi)
+    ux = u_r * c - u_phi * r * s
+    uy = u_r * s + u_phi * r * c
+    return dict(xi=xi, dt=dt, ux=ux, uy=uy, b=b_out)

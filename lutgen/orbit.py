@@ -1,0 +1,259 @@
+"""Closed-form light orbits in the Schwarzschild plane (units r_s = 1, c = 1).
+
+A null geodesic in the plane theta = pi/2 obeys the orbit equation in the inverse radius u = r_s/r:
+
+    (du/dphi)^2 = P(u) = u^3 - u^2 + 1/b^2 = (u - e1) * Q(u),
+
+with impact parameter b (units of r_s). P always has exactly one negative root e1 < 0, and every orbit
+is labelled by it; we use the well-conditioned label ``sigma = 1 + 3*e1`` in (-inf, 1):
+
+* sigma < 0 (b < b_crit = 3*sqrt(3)/2): Q has the complex roots m +- i*n, the ray plunges.
+* sigma > 0 (b > b_crit): Q has the real roots 0 < e2 < 2/3 < e3 and the ray turns at u = e2
+  (its periapsis, r = 1/e2).
+* sigma = 0: the critical orbit that winds onto the photon sphere u = 2/3 (r = 1.5 r_s).
+
+The swept angle between two inverse radii of one monotone leg is a difference of the elliptic integral
+of the first kind ``F(u) = integral_{e1}^{u} du'/sqrt(P(u'))``, evaluated with Carlson's symmetric
+R_F (scipy.special.elliprf). Coordinate light travel time along a leg,
+``dt = integral dphi / (b u^2 (1 - u))``, is integrated with Gauss-Legendre quadrature in a variable
+that removes the square-root singularities of 1/sqrt(P) (turning points, near-double roots near
+the photon sphere), on segments that are uniform in logit(u) (for far points and points next to the
+horizon) and in that variable (for rays that wind).
+
+Everything here is vectorised over numpy arrays; nothing loops over elements in Python.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import elliprf, roots_legendre
+
+B_CRIT = 1.5 * np.sqrt(3.0)
+"""Critical impact parameter 3*sqrt(3)/2, in units of r_s (rays with smaller b fall in)."""
+
+U_PHOTON = 2.0 / 3.0
+"""Inverse radius of the photon sphere (r = 1.5 r_s)."""
+
+
+@dataclass
+class Orbit:
+    """Root structure of P(u) for a batch of orbits (arrays of one shape).
+
+    Attributes are the roots of P in units of 1/r_s. For plunging orbits (``real`` False) ``m, n`` are
+    the real and imaginary parts of the complex pair; for turning orbits (``real`` True) ``e2 <= e3``
+    are the real roots and ``delta = e3 - e2`` (computed without cancellation). Unused fields hold NaN.
+    """
+
+    e1: np.ndarray
+    real: np.ndarray
+    e2: np.ndarray
+    e3: np.ndarray
+    delta: np.ndarray
+    m: np.ndarray
+    n: np.ndarray
+
+    @property
+    def inv_b(self) -> np.ndarray:
+        """1/b in units of 1/r_s (b = impact parameter)."""
+        return -self.e1 * np.sqrt(1.0 - self.e1)
+
+    def P(self, u):
+        """P(u) = (du/dphi)^2 in factored form (accurate next to roots)."""
+        u = np.asarray(u, dtype=float)
+        with np.errstate(invalid="ignore"):
+            p_real = (u - self.e1) * (self.e2 - u) * (self.e3 - u)
+            p_cplx = (u - self.e1) * ((u - self.m) ** 2 + self.n**2)
+        return np.where(self.real, p_real, p_cplx)
+
+    def subset(self, mask) -> "Orbit":
+        return Orbit(*(getattr(self, f)[mask] for f in ("e1", "real", "e2", "e3", "delta", "m", "n")))
+
+
+def _from_sigma_e1(sigma, e1, delta=None, e2=None) -> Orbit:
+    sigma = np.asarray(sigma, dtype=float)
+    e1 = np.asarray(e1, dtype=float)
+    real = sigma > 0
+    one_m = 1.0 - e1
+    with np.errstate(invalid="ignore", divide="ignore"):
+        if delta is None:
+            delta = np.where(real, np.sqrt(np.where(real, one_m * sigma, 0.0)), np.nan)
+        if e2 is None:
+            e2 = np.where(real, -2.0 * e1 * one_m / (one_m + delta), np.nan)
+        e3 = np.where(real, e2 + delta, np.nan)
+        m = np.where(real, np.nan, 0.5 * one_m)
+        n = np.where(real, np.nan, 0.5 * np.sqrt(np.where(real, 0.0, -one_m * sigma)))
+    return Orbit(e1=e1, real=real, e2=e2, e3=e3, delta=delta, m=m, n=n)
+
+
+def orbit_from_b(b) -> Orbit:
+    """Orbits with impact parameters ``b`` (units of r_s, b > 0).
+
+    sigma = 1 + 3 e1 solves sigma (3 - sigma)^2 = y with y = 4 (b^2 - b_crit^2)/b^2 (a cubic whose
+    trigonometric/hyperbolic solution is written so that it keeps full relative accuracy as
+    b -> b_crit): sigma = 4 sin^2(asin(sqrt(y)/2)/3) for y >= 0, -4 sinh^2(asinh(sqrt(-y)/2)/3) else.
+    """
+    b = np.asarray(b, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        y = 4.0 * (b - B_CRIT) * (b + B_CRIT) / (b * b)
+        sq = 0.5 * np.sqrt(np.abs(y))
+        sigma = np.where(
+            y >= 0.0,
+            4.0 * np.sin(np.arcsin(np.minimum(sq, 1.0)) / 3.0) ** 2,
+            -4.0 * np.sinh(np.arcsinh(sq) / 3.0) ** 2,
+        )
+    return _from_sigma_e1(sigma, (sigma - 1.0) / 3.0)
+
+
+def orbit_from_turning_point(eps) -> Orbit:
+    """Turning orbits whose periapsis is u = e2 = 2/3 - eps (0 < eps < 2/3; units of 1/r_s).
+
+    Parametrising by the distance ``eps`` of the periapsis from the photon sphere keeps
+    e3 - e2 and sigma accurate for orbits that wind many times (eps -> 0).
+    """
+    eps = np.asarray(eps, dtype=float)
+    e2 = U_PHOTON - eps
+    d2 = np.sqrt((1.0 - e2) * (1.0 + 3.0 * e2))
+    e1 = -2.0 * e2 * (1.0 - e2) / ((1.0 - e2) + d2)
+    delta = np.where(
+        e2 > 1.0 / 3.0,
+        6.0 * e2 * eps / (d2 + 3.0 * e2 - 1.0),
+        0.5 * ((1.0 - 3.0 * e2) + d2),
+    )
+    sigma = delta**2 / (1.0 - e1)
+    return _from_sigma_e1(sigma, e1, delta=delta, e2=e2)
+
+
+def _legendre_F(s, c2, k2c_s2):
+    """F(phi|k^2) = s R_F(c2, c2 + (1-k^2) s^2, 1) with s = sin(phi), c2 = cos^2(phi) (phi <= pi/2)."""
+    return s * elliprf(c2, c2 + k2c_s2, 1.0)
+
+
+def sweep(orb: Orbit, u) -> np.ndarray:
+    """F(u) = integral from e1 to u of du'/sqrt(P(u')): the angle (radians) a ray sweeps from the
+    (unphysical) root e1 to inverse radius u along a monotone leg. Differences of F give the angle
+    swept between two radii. For turning orbits u must not exceed e2.
+    """
+    u, e1 = np.broadcast_arrays(np.asarray(u, dtype=float), orb.e1)
+    out = np.empty(u.shape)
+    real = np.broadcast_to(orb.real, u.shape)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        if real.any():
+            # turning orbits: Legendre form, sin^2 = (u-e1)/(e2-e1), k^2 = (e2-e1)/(e3-e1)
+            uu, a, e2, e3 = u[real], e1[real], _pick(orb.e2, real), _pick(orb.e3, real)
+            e21, e31 = e2 - a, e3 - a
+            s_r = np.sqrt(np.clip((uu - a) / e21, 0.0, 1.0))
+            c2_r = np.clip((e2 - uu) / e21, 0.0, 1.0)
+            out[real] = 2.0 / np.sqrt(e31) * s_r * elliprf(c2_r, (e3 - uu) / e31, 1.0)
+        cplx = ~real
+        if cplx.any():
+            # plunging orbits: cos(phi) = (A - x)/(A + x), k^2 = (A + m - e1)/(2A)
+            uu, a, m, n = u[cplx], e1[cplx], _pick(orb.m, cplx), _pick(orb.n, cplx)
+            x = uu - a
+            me1 = m - a
+            A = np.sqrt(me1**2 + n**2)
+            k2c = n**2 / (2.0 * A * (A + me1))  # 1 - k^2 without cancellation
+            cphi = (A - x) / (A + x)
+            sphi = 2.0 * np.sqrt(A * x) / (A + x)
+            half = _legendre_F(sphi, cphi**2, k2c * sphi**2)
+            neg = cphi < 0.0
+            if neg.any():
+                half[neg] = 2.0 * elliprf(0.0, k2c[neg], 1.0) - half[neg]
+            out[cplx] = half / np.sqrt(A)
+    return out
+
+
+def _pick(a, mask):
+    return np.broadcast_to(a, mask.shape)[mask]
+
+
+def sweep_to_turning_point(orb: Orbit) -> np.ndarray:
+    """F(e2): the angle swept from e1 to the periapsis e2 (turning orbits only; NaN otherwise)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        e31 = orb.e3 - orb.e1
+        out = 2.0 / np.sqrt(e31) * elliprf(0.0, orb.delta / e31, 1.0)
+    return np.where(orb.real, out, np.nan)
+
+
+# --------------------------------------------------------------------------------------------------
+# Light travel time
+# --------------------------------------------------------------------------------------------------
+_GL_ORDER = 10
+_GL_X, _GL_W = roots_legendre(_GL_ORDER)
+
+
+def _v_of_u(orb: Orbit, u):
+    """Regularising variable v(u): turning orbits u = e2 - delta sinh^2 v, plunging u = m + n sinh v."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        v_r = np.arcsinh(np.sqrt(np.maximum(orb.e2 - u, 0.0) / orb.delta))
+        v_c = np.arcsinh((u - orb.m) / orb.n)
+    return np.where(orb.real, v_r, v_c)
+
+
+def _u_of_v(orb: Orbit, v):
+    with np.errstate(invalid="ignore", over="ignore"):
+        u_r = orb.e2 - orb.delta * np.sinh(v) ** 2
+        u_c = orb.m + orb.n * np.sinh(v)
+    return np.where(orb.real, u_r, u_c)
+
+
+def _logit(u):
+    return np.log(u) - np.log1p(-u)
+
+
+def travel_time(orb: Orbit, u_a, u_b, *, logit_step: float = 0.75, n_v_segments: int = 6) -> np.ndarray:
+    """Coordinate light travel time (units of r_s/c) along one monotone leg between inverse radii
+    ``u_a`` and ``u_b`` (either order; for turning orbits both must be <= e2, the periapsis).
+
+    dt = integral |dphi| / (b u^2 (1-u)), with dphi = 2 dv/sqrt(u-e1) (turning) or dv/sqrt(u-e1)
+    (plunging). Quadrature: Gauss-Legendre of order 10 on the union of segments uniform in
+    logit(u) (width <= ``logit_step``) and ``n_v_segments`` segments uniform in v.
+    """
+    u_a = np.asarray(u_a, dtype=float)
+    u_b = np.asarray(u_b, dtype=float)
+    lo = np.minimum(u_a, u_b)
+    hi = np.maximum(u_a, u_b)
+    shape = np.broadcast(lo, orb.e1).shape
+    lo = np.broadcast_to(lo, shape).ravel()
+    hi = np.broadcast_to(hi, shape).ravel()
+    orb = Orbit(*(np.broadcast_to(getattr(orb, f), shape).ravel()
+                  for f in ("e1", "real", "e2", "e3", "delta", "m", "n")))
+    if lo.size == 0:
+        return np.zeros(shape)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        l_lo, l_hi = _logit(lo), _logit(hi)
+        span = np.nan_to_num(l_hi - l_lo, nan=0.0, posinf=0.0)
+    n_logit = int(np.clip(np.ceil(np.max(span, initial=0.0) / logit_step), 1, 64))
+    t = np.linspace(0.0, 1.0, n_logit + 1)
+    u_break = 1.0 / (1.0 + np.exp(-(l_lo[:, None] + (l_hi - l_lo)[:, None] * t[None, :])))
+    u_break[:, 0], u_break[:, -1] = lo, hi
+    v_logit = _v_of_u(_bcast(orb), u_break)
+    v_lo, v_hi = v_logit[:, :1], v_logit[:, -1:]
+    tv = np.linspace(0.0, 1.0, n_v_segments + 1)[1:-1]
+    v_uni = v_lo + (v_hi - v_lo) * tv[None, :]
+    v_all = np.sort(np.concatenate([v_logit, v_uni], axis=1), axis=1)
+    a = v_all[:, :-1]
+    h = 0.5 * (v_all[:, 1:] - a)
+    v_nodes = (a + h)[:, :, None] + h[:, :, None] * _GL_X[None, None, :]
+    ob = _bcast(orb, 2)
+    u = _u_of_v(ob, v_nodes)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dphi_dv = np.where(ob.real, 2.0, 1.0) / np.sqrt(u - ob.e1)
+        g = ob.inv_b / (u * u * (1.0 - u))
+        integrand = g * dphi_dv
+    total = np.sum(np.sum(integrand * _GL_W, axis=2) * np.abs(h), axis=1)
+    total = np.where(hi > lo, total, 0.0)
+    return total.reshape(shape)
+
+
+def _bcast(orb: Orbit, extra_dims: int = 1) -> Orbit:
+    idx = (slice(None),) + (None,) * extra_dims
+    return Orbit(*(getattr(orb, f)[idx] for f in ("e1", "real", "e2", "e3", "delta", "m", "n")))
+
+
+def radial_travel_time(u_a, u_b) -> np.ndarray:
+    """Light travel time (units of r_s/c) of a radial ray between inverse radii u_a and u_b:
+    |Delta r + ln((r_b - 1)/(r_a - 1))|, r = 1/u."""
+    r_a = 1.0 / np.asarray(u_a, dtype=float)
+    r_b = 1.0 / np.asarray(u_b, dtype=float)
+    return np.abs((r_b - r_a) + np.log((r_b - 1.0) / (r_a - 1.0)))
