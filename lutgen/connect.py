@@ -191,7 +191,8 @@ def _finish(r_obs, u, uo, phi, order, b, eps, branch):
     rad = branch == 0
     if rad.any():
         inward = u[rad] > uo
-        xi[rad] = np.where(inward, np.pi, 0.0)
+        # a point at the observer's own position gets the limit phi -> 0+ of its circle: tangential
+        xi[rad] = np.where(inward, np.pi, np.where(u[rad] < uo, 0.0, 0.5 * np.pi))
         dt[rad] = _orb.radial_travel_time(uo, u[rad])
         u_r[rad] = np.where(inward, -k, k)
 

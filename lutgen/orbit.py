@@ -178,77 +178,95 @@ def sweep_to_turning_point(orb: Orbit) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------
 # Light travel time
 # --------------------------------------------------------------------------------------------------
-_GL_ORDER = 10
+_GL_ORDER = 8
 _GL_X, _GL_W = roots_legendre(_GL_ORDER)
-
-
-def _v_of_u(orb: Orbit, u):
-    """Regularising variable v(u): turning orbits u = e2 - delta sinh^2 v, plunging u = m + n sinh v."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        v_r = np.arcsinh(np.sqrt(np.maximum(orb.e2 - u, 0.0) / orb.delta))
-        v_c = np.arcsinh((u - orb.m) / orb.n)
-    return np.where(orb.real, v_r, v_c)
-
-
-def _u_of_v(orb: Orbit, v):
-    with np.errstate(invalid="ignore", over="ignore"):
-        u_r = orb.e2 - orb.delta * np.sinh(v) ** 2
-        u_c = orb.m + orb.n * np.sinh(v)
-    return np.where(orb.real, u_r, u_c)
 
 
 def _logit(u):
     return np.log(u) - np.log1p(-u)
 
 
-def travel_time(orb: Orbit, u_a, u_b, *, logit_step: float = 0.75, n_v_segments: int = 6) -> np.ndarray:
+def travel_time(orb: Orbit, u_a, u_b, *, logit_step: float = 0.5, v_step: float = 1.5) -> np.ndarray:
     """Coordinate light travel time (units of r_s/c) along one monotone leg between inverse radii
     ``u_a`` and ``u_b`` (either order; for turning orbits both must be <= e2, the periapsis).
 
-    dt = integral |dphi| / (b u^2 (1-u)), with dphi = 2 dv/sqrt(u-e1) (turning) or dv/sqrt(u-e1)
-    (plunging). Quadrature: Gauss-Legendre of order 10 on the union of segments uniform in
-    logit(u) (width <= ``logit_step``) and ``n_v_segments`` segments uniform in v.
+    dt = integral |dphi| / (b u^2 (1-u)). The substitution u = e2 - delta sinh^2(v) (turning orbits,
+    dphi = 2 dv/sqrt(u-e1)) or u = m + n sinh(v) (plunging, dphi = dv/sqrt(u-e1)) makes the
+    integrand smooth even next to turning points and for rays that wind around the photon sphere.
+    Quadrature: Gauss-Legendre (order 8) on the union of segments uniform in logit(u) (width at most
+    ``logit_step``, for far points and points next to the horizon) and segments uniform in v (width at
+    most ``v_step``, for rays that wind near the photon sphere).
     """
     u_a = np.asarray(u_a, dtype=float)
     u_b = np.asarray(u_b, dtype=float)
-    lo = np.minimum(u_a, u_b)
-    hi = np.maximum(u_a, u_b)
-    shape = np.broadcast(lo, orb.e1).shape
-    lo = np.broadcast_to(lo, shape).ravel()
-    hi = np.broadcast_to(hi, shape).ravel()
-    orb = Orbit(*(np.broadcast_to(getattr(orb, f), shape).ravel()
-                  for f in ("e1", "real", "e2", "e3", "delta", "m", "n")))
-    if lo.size == 0:
-        return np.zeros(shape)
+    shape = np.broadcast(u_a, u_b, orb.e1).shape
+    lo = np.broadcast_to(np.minimum(u_a, u_b), shape).ravel()
+    hi = np.broadcast_to(np.maximum(u_a, u_b), shape).ravel()
+    out = np.zeros(lo.size)
+    fields = {f: np.broadcast_to(getattr(orb, f), shape).ravel()
+              for f in ("e1", "real", "e2", "e3", "delta", "m", "n")}
+    todo = hi > lo
+    # Steep plunging rays (far from the critical orbit): integrate in logit(u) directly, where
+    # dt = dlogit / (u sqrt(1 - b^2 u^2 (1-u))) is smooth, with no cancellation as b -> 0.
+    steep = todo & ~fields["real"] & (fields["n"] >= 0.5)
+    sel = np.flatnonzero(steep)
+    if sel.size:
+        out[sel] = _leg_time_steep(lo[sel], hi[sel], fields["e1"][sel], logit_step)
+    for real in (True, False):
+        sel = np.flatnonzero((fields["real"] == real) & todo & ~steep)
+        if sel.size:
+            out[sel] = _leg_time(real, lo[sel], hi[sel], *(fields[f][sel] for f in
+                                 ("e1", "e2", "delta", "m", "n")), logit_step, v_step)
+    return out.reshape(shape)
+
+
+def _gauss_nodes(breaks):
+    """Gauss-Legendre nodes and half-widths on the segments between consecutive columns of breaks."""
+    a = breaks[:, :-1]
+    h = 0.5 * (breaks[:, 1:] - a)
+    return (a + h)[:, :, None] + h[:, :, None] * _GL_X, h
+
+
+def _logit_breaks(lo, hi, logit_step):
     with np.errstate(invalid="ignore", divide="ignore"):
         l_lo, l_hi = _logit(lo), _logit(hi)
-        span = np.nan_to_num(l_hi - l_lo, nan=0.0, posinf=0.0)
-    n_logit = int(np.clip(np.ceil(np.max(span, initial=0.0) / logit_step), 1, 64))
+    span = np.nan_to_num(l_hi - l_lo, nan=0.0, posinf=0.0, neginf=0.0)
+    n_logit = int(np.clip(np.ceil(np.max(span, initial=0.0) / logit_step), 1, 128))
     t = np.linspace(0.0, 1.0, n_logit + 1)
-    u_break = 1.0 / (1.0 + np.exp(-(l_lo[:, None] + (l_hi - l_lo)[:, None] * t[None, :])))
+    return l_lo[:, None] + (l_hi - l_lo)[:, None] * t[None, :]
+
+
+def _leg_time_steep(lo, hi, e1, logit_step):
+    lam, h = _gauss_nodes(_logit_breaks(lo, hi, logit_step))
+    u = 1.0 / (1.0 + np.exp(-lam))
+    b2 = 1.0 / (e1 * e1 * (1.0 - e1))[:, None, None]
+    integrand = 1.0 / (u * np.sqrt(1.0 - b2 * u * u * (1.0 - u)))
+    return np.einsum("ijk,k,ij->i", integrand, _GL_W, h)
+
+
+def _leg_time(real, lo, hi, e1, e2, delta, m, n, logit_step, v_step):
+    if real:
+        v_of_u = lambda u: np.arcsinh(np.sqrt(np.maximum(e2[:, None] - u, 0.0) / delta[:, None]))  # noqa: E731
+    else:
+        v_of_u = lambda u: np.arcsinh((u - m[:, None]) / n[:, None])  # noqa: E731
+    u_break = 1.0 / (1.0 + np.exp(-_logit_breaks(lo, hi, logit_step)))
     u_break[:, 0], u_break[:, -1] = lo, hi
-    v_logit = _v_of_u(_bcast(orb), u_break)
+    v_logit = v_of_u(u_break)
     v_lo, v_hi = v_logit[:, :1], v_logit[:, -1:]
-    tv = np.linspace(0.0, 1.0, n_v_segments + 1)[1:-1]
-    v_uni = v_lo + (v_hi - v_lo) * tv[None, :]
-    v_all = np.sort(np.concatenate([v_logit, v_uni], axis=1), axis=1)
-    a = v_all[:, :-1]
-    h = 0.5 * (v_all[:, 1:] - a)
-    v_nodes = (a + h)[:, :, None] + h[:, :, None] * _GL_X[None, None, :]
-    ob = _bcast(orb, 2)
-    u = _u_of_v(ob, v_nodes)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        dphi_dv = np.where(ob.real, 2.0, 1.0) / np.sqrt(u - ob.e1)
-        g = ob.inv_b / (u * u * (1.0 - u))
-        integrand = g * dphi_dv
-    total = np.sum(np.sum(integrand * _GL_W, axis=2) * np.abs(h), axis=1)
-    total = np.where(hi > lo, total, 0.0)
-    return total.reshape(shape)
-
-
-def _bcast(orb: Orbit, extra_dims: int = 1) -> Orbit:
-    idx = (slice(None),) + (None,) * extra_dims
-    return Orbit(*(getattr(orb, f)[idx] for f in ("e1", "real", "e2", "e3", "delta", "m", "n")))
+    v_span = np.nan_to_num(np.abs(v_hi - v_lo), nan=0.0, posinf=0.0)
+    n_v = int(np.clip(np.ceil(np.max(v_span, initial=0.0) / v_step), 1, 64))
+    tv = np.linspace(0.0, 1.0, n_v + 1)[1:-1]
+    v_all = np.sort(np.concatenate([v_logit, v_lo + (v_hi - v_lo) * tv[None, :]], axis=1), axis=1)
+    v, h = _gauss_nodes(v_all)
+    if real:
+        u = e2[:, None, None] - delta[:, None, None] * np.sinh(v) ** 2
+        scale = 2.0
+    else:
+        u = m[:, None, None] + n[:, None, None] * np.sinh(v)
+        scale = 1.0
+    inv_b = -e1 * np.sqrt(1.0 - e1)
+    integrand = 1.0 / (u * u * (1.0 - u) * np.sqrt(u - e1[:, None, None]))
+    return scale * inv_b * np.einsum("ijk,k,ij->i", integrand, _GL_W, h)
 
 
 def radial_travel_time(u_a, u_b) -> np.ndarray:

@@ -1,0 +1,218 @@
+"""The lookup table (LUT) of connecting null geodesics for one static observer.
+
+Units: lengths in r_s, c = 1 (times in r_s/c), angles in radians. Conventions as in
+:mod:`lutgen.connect` (observer static at (r_obs, phi = 0); xi from the outward radial direction;
+order 1 sweeps phi, order 2 sweeps 2*pi - phi).
+
+Sampling (seed 000, section 3.1): rows are uniform in the inverse radius x = r_s/r from
+x_min = 1/r_max (row 0) to x_max = 1/r_min (last row), endpoints included; columns are uniform in
+phi from 0 (column 0) to pi (last column), endpoints included. Every node holds, for each order, the
+exact connecting ray (xi, dt, ux, uy) of :func:`lutgen.connect.connect`. ``data`` is float64 of shape
+(2, 4, n_r, n_phi) = (order-1, quantity, row, column) with quantities in the order of ``QUANTITIES``;
+``data32`` is the same in float32, the form a renderer uploads.
+
+:meth:`LUT.lookup` interpolates with tensor-product cubic Lagrange (Catmull-Rom-like, 4x4 nodes,
+one-sided at the edges), which is exact for cubics and so converges like h^4; outside the domain
+(r outside [r_min, r_max], phi outside [0, pi], NaN input) it returns NaN.
+"""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+from .connect import check_observer_radius, connect
+
+QUANTITIES = ("xi", "dt", "ux", "uy")
+FORMAT_VERSION = 1
+SAMPLING = "rows uniform in x = r_s/r from 1/r_max to 1/r_min; columns uniform in phi from 0 to pi; endpoints included"
+
+
+class Lookup(NamedTuple):
+    """Interpolated LUT values: xi (rad), dt (r_s/c), ux, uy (eq. 17); NaN outside the domain."""
+
+    xi: np.ndarray
+    dt: np.ndarray
+    ux: np.ndarray
+    uy: np.ndarray
+
+
+def check_lut_parameters(r_obs, r_min, r_max, n_r, n_phi):
+    """Validate LUT parameters (radii in r_s) and return them as (float, float, float, int, int)."""
+    r_obs = check_observer_radius(r_obs)
+    r_min, r_max = float(r_min), float(r_max)
+    if not (np.isfinite(r_min) and np.isfinite(r_max)):
+        raise ValueError(f"r_min and r_max must be finite, got {r_min}, {r_max}")
+    if not 1.0 < r_min < r_max:
+        raise ValueError(f"need 1 < r_min < r_max (units of r_s), got r_min = {r_min}, r_max = {r_max}")
+    n_r, n_phi = int(n_r), int(n_phi)
+    if n_r < 4 or n_phi < 4:
+        raise ValueError(f"the table needs at least 4x4 nodes, got {n_r}x{n_phi}")
+    return r_obs, r_min, r_max, n_r, n_phi
+
+
+@dataclass(eq=False)
+class LUT:
+    """Lookup table for an observer at ``r_obs`` over r in [r_min, r_max] (units of r_s).
+
+    Build it with :func:`build_lut`, read it with :func:`lutgen.load_lut`.
+    """
+
+    r_obs: float
+    r_min: float
+    r_max: float
+    data: np.ndarray  # float64, (2, 4, n_r, n_phi)
+    _data32: np.ndarray | None = field(default=None, repr=False)
+
+    def __post_init__(self):
+        self.r_obs, self.r_min, self.r_max, _, _ = check_lut_parameters(
+            self.r_obs, self.r_min, self.r_max, self.data.shape[2], self.data.shape[3])
+        if self.data.shape[:2] != (2, len(QUANTITIES)):
+            raise ValueError(f"LUT data must have shape (2, 4, n_r, n_phi), got {self.data.shape}")
+        self.data = np.ascontiguousarray(self.data, dtype=np.float64)
+
+    # -- geometry of the grid ------------------------------------------------------------------
+    @property
+    def n_r(self) -> int:
+        return self.data.shape[2]
+
+    @property
+    def n_phi(self) -> int:
+        return self.data.shape[3]
+
+    @property
+    def x_min(self) -> float:
+        """Smallest inverse radius r_s/r_max (row 0)."""
+        return 1.0 / self.r_max
+
+    @property
+    def x_max(self) -> float:
+        """Largest inverse radius r_s/r_min (last row)."""
+        return 1.0 / self.r_min
+
+    @property
+    def x_nodes(self) -> np.ndarray:
+        """Inverse radii r_s/r of the rows (float64)."""
+        return np.linspace(self.x_min, self.x_max, self.n_r)
+
+    @property
+    def phi_nodes(self) -> np.ndarray:
+        """Angles of the columns in radians (float64)."""
+        return np.linspace(0.0, np.pi, self.n_phi)
+
+    @property
+    def data32(self) -> np.ndarray:
+        """The table in float32, (2, 4, n_r, n_phi), C-contiguous (for rendering/upload)."""
+        if self._data32 is None:
+            self._data32 = self.data.astype(np.float32)
+        return self._data32
+
+    def channel(self, order: int, quantity: str) -> np.ndarray:
+        """One channel (n_r, n_phi) in float64, e.g. ``lut.channel(1, "xi")``."""
+        return self.data[_order_index(order), QUANTITIES.index(quantity)]
+
+    @property
+    def parameters(self) -> dict:
+        return dict(r_obs=self.r_obs, r_min=self.r_min, r_max=self.r_max, n_r=self.n_r, n_phi=self.n_phi)
+
+    def matches(self, r_obs, r_min, r_max, n_r, n_phi) -> bool:
+        """True if this table was built for exactly these parameters."""
+        return self.parameters == dict(r_obs=float(r_obs), r_min=float(r_min), r_max=float(r_max),
+                                       n_r=int(n_r), n_phi=int(n_phi))
+
+    # -- interpolation --------------------------------------------------------------------------
+    def lookup(self, r, phi, order: int = 1) -> Lookup:
+        """Interpolated (xi, dt, ux, uy) at points (r, phi) (broadcast arrays; r in r_s, phi in
+        radians in [0, pi]) for the given order. NaN outside the table's domain."""
+        k = _order_index(order)
+        r, phi = np.broadcast_arrays(np.asarray(r, dtype=np.float64), np.asarray(phi, dtype=np.float64))
+        shape = r.shape
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = 1.0 / r.ravel()
+        p = phi.ravel()
+        gx = (x - self.x_min) / (self.x_max - self.x_min) * (self.n_r - 1)
+        gp = p / np.pi * (self.n_phi - 1)
+        tol = 1e-9
+        inside = (gx >= -tol) & (gx <= self.n_r - 1 + tol) & (gp >= -tol) & (gp <= self.n_phi - 1 + tol)
+        gx = np.where(inside, np.clip(gx, 0.0, self.n_r - 1), 0.0)
+        gp = np.where(inside, np.clip(gp, 0.0, self.n_phi - 1), 0.0)
+        ix, wx = _cubic_stencil(gx, self.n_r)
+        ip, wp = _cubic_stencil(gp, self.n_phi)
+        table = self.data[k]  # (4, n_r, n_phi)
+        flat = table.reshape(len(QUANTITIES), -1)
+        idx = ix[:, :, None] * self.n_phi + ip[:, None, :]  # (N, 4, 4)
+        w = wx[:, :, None] * wp[:, None, :]
+        vals = np.einsum("qnij,nij->qn", flat[:, idx], w)
+        vals[:, ~inside] = np.nan
+        return Lookup(*(v.reshape(shape) for v in vals))
+
+    def save(self, path) -> None:
+        """Write the table to an OpenEXR file (see :mod:`lutgen.lutfile`)."""
+        from .lutfile import save_lut
+
+        save_lut(self, path)
+
+
+def _order_index(order) -> int:
+    if order not in (1, 2):
+        raise ValueError(f"order must be 1 or 2, got {order!r}")
+    return int(order) - 1
+
+
+def _cubic_stencil(g, n):
+    """Indices (N, 4) and cubic Lagrange weights (N, 4) for fractional grid coordinates g in [0, n-1].
+
+    The 4-node stencil is shifted inwards at the edges (one-sided), so no node outside the table is
+    ever used and the weights reproduce cubics exactly everywhere.
+    """
+    i0 = np.clip(np.floor(g).astype(np.int64) - 1, 0, n - 4)
+    t = g - i0  # position inside the stencil, nodes at 0, 1, 2, 3
+    w = np.empty((g.size, 4))
+    w[:, 0] = -(t - 1.0) * (t - 2.0) * (t - 3.0) / 6.0
+    w[:, 1] = t * (t - 2.0) * (t - 3.0) / 2.0
+    w[:, 2] = -t * (t - 1.0) * (t - 3.0) / 2.0
+    w[:, 3] = t * (t - 1.0) * (t - 2.0) / 6.0
+    return i0[:, None] + np.arange(4), w
+
+
+def build_lut(r_obs, r_min, r_max, n_r, n_phi, *, progress: Callable[[int, int], None] | None = None,
+              workers: int | None = None) -> LUT:
+    """Build the table for a static observer at r_obs over r in [r_min, r_max] (units of r_s) with
+    n_r rows (uniform in x = r_s/r) and n_phi columns (uniform in phi over [0, pi]).
+
+    ``progress(done, total)`` is called after each block of rows; ``workers`` threads share the rows
+    (default: the number of CPUs; the elliptic-function kernels release the GIL).
+    """
+    r_obs, r_min, r_max, n_r, n_phi = check_lut_parameters(r_obs, r_min, r_max, n_r, n_phi)
+    x = np.linspace(1.0 / r_max, 1.0 / r_min, n_r)
+    phi = np.linspace(0.0, np.pi, n_phi)
+    data = np.empty((2, len(QUANTITIES), n_r, n_phi))
+    rows_per_block = max(1, min(n_r, 65536 // n_phi))
+    blocks = [(o, s, min(s + rows_per_block, n_r)) for s in range(0, n_r, rows_per_block) for o in (1, 2)]
+    total = len(blocks)
+
+    def work(block):
+        order, a, b = block
+        c = connect(r_obs, 1.0 / x[a:b, None], phi[None, :], order)
+        for q, name in enumerate(QUANTITIES):
+            data[order - 1, q, a:b] = getattr(c, name)
+        return block
+
+    workers = workers or os.cpu_count() or 1
+    done = 0
+    if workers <= 1:
+        results = map(work, blocks)
+        for _ in results:
+            done += 1
+            if progress:
+                progress(done, total)
+    else:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            for _ in pool.map(work, blocks):
+                done += 1
+                if progress:
+                    progress(done, total)
+    return LUT(r_obs=r_obs, r_min=r_min, r_max=r_max, data=data)
