@@ -2,7 +2,7 @@
 
 Pure numpy/scipy (no bpy). Units: lengths in r_s, c = 1 (times in r_s/c), angles in radians.
 """
-from .connect import Connection, check_observer_radius, connect, shadow_half_angle
+from .solver import Connection, check_observer_radius, connect, connect_grid, shadow_half_angle
 
-__all__ = ["Connection", "connect", "shadow_half_angle", "check_observer_radius"]
+__all__ = ["Connection", "connect", "connect_grid", "shadow_half_angle", "check_observer_radius"]
 __version__ = "0.1.0"

@@ -41,7 +41,7 @@ class _Progress:
 
 
 def _cmd_connect(args) -> int:
-    from .connect import connect
+    from .solver import connect
 
     c = connect(args.r_obs, args.r, math.radians(args.phi), args.order)
     out = {"xi_deg": math.degrees(float(c.xi)), "dt": float(c.dt), "ux": float(c.ux), "uy": float(c.uy)}

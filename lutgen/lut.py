@@ -1,13 +1,14 @@
 """The lookup table (LUT) of connecting null geodesics for one static observer.
 
 Units: lengths in r_s, c = 1 (times in r_s/c), angles in radians. Conventions as in
-:mod:`lutgen.connect` (observer static at (r_obs, phi = 0); xi from the outward radial direction;
+:mod:`lutgen.solver` (observer static at (r_obs, phi = 0); xi from the outward radial direction;
 order 1 sweeps phi, order 2 sweeps 2*pi - phi).
 
 Sampling (seed 000, section 3.1): rows are uniform in the inverse radius x = r_s/r from
 x_min = 1/r_max (row 0) to x_max = 1/r_min (last row), endpoints included; columns are uniform in
 phi from 0 (column 0) to pi (last column), endpoints included. Every node holds, for each order, the
-exact connecting ray (xi, dt, ux, uy) of :func:`lutgen.connect.connect`. ``data`` is float64 of shape
+exact connecting ray (xi, dt, ux, uy) of :func:`lutgen.solver.connect` (computed by the grid solver
+:func:`lutgen.solver.connect_grid`). ``data`` is float64 of shape
 (2, 4, n_r, n_phi) = (order-1, quantity, row, column) with quantities in the order of ``QUANTITIES``;
 ``data32`` is the same in float32, the form a renderer uploads.
 
@@ -24,7 +25,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from .connect import check_observer_radius, connect
+from .solver import check_observer_radius, connect_grid
 
 QUANTITIES = ("xi", "dt", "ux", "uy")
 FORMAT_VERSION = 1
@@ -190,29 +191,21 @@ def build_lut(r_obs, r_min, r_max, n_r, n_phi, *, progress: Callable[[int, int],
     x = np.linspace(1.0 / r_max, 1.0 / r_min, n_r)
     phi = np.linspace(0.0, np.pi, n_phi)
     data = np.empty((2, len(QUANTITIES), n_r, n_phi))
-    rows_per_block = max(1, min(n_r, 65536 // n_phi))
-    blocks = [(o, s, min(s + rows_per_block, n_r)) for s in range(0, n_r, rows_per_block) for o in (1, 2)]
-    total = len(blocks)
+    workers = max(1, workers or os.cpu_count() or 1)
+    # blocks of rows: small enough for a lively progress bar and to share between threads
+    rows_per_block = int(np.clip(n_r // (4 * workers), 1, max(1, 131072 // n_phi)))
+    blocks = [(a, min(a + rows_per_block, n_r)) for a in range(0, n_r, rows_per_block)]
 
     def work(block):
-        order, a, b = block
-        c = connect(r_obs, 1.0 / x[a:b, None], phi[None, :], order)
-        for q, name in enumerate(QUANTITIES):
-            data[order - 1, q, a:b] = getattr(c, name)
-        return block
+        a, b = block
+        for order, c in enumerate(connect_grid(r_obs, 1.0 / x[a:b], phi), start=1):
+            for q, name in enumerate(QUANTITIES):
+                data[order - 1, q, a:b] = getattr(c, name)
 
-    workers = workers or os.cpu_count() or 1
     done = 0
-    if workers <= 1:
-        results = map(work, blocks)
-        for _ in results:
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        for _ in pool.map(work, blocks):
             done += 1
             if progress:
-                progress(done, total)
-    else:
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            for _ in pool.map(work, blocks):
-                done += 1
-                if progress:
-                    progress(done, total)
+                progress(done, len(blocks))
     return LUT(r_obs=r_obs, r_min=r_min, r_max=r_max, data=data)

@@ -178,7 +178,7 @@ def sweep_to_turning_point(orb: Orbit) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------
 # Light travel time
 # --------------------------------------------------------------------------------------------------
-_GL_ORDER = 8
+_GL_ORDER = 12
 _GL_X, _GL_W = roots_legendre(_GL_ORDER)
 
 
@@ -186,14 +186,14 @@ def _logit(u):
     return np.log(u) - np.log1p(-u)
 
 
-def travel_time(orb: Orbit, u_a, u_b, *, logit_step: float = 0.5, v_step: float = 1.5) -> np.ndarray:
+def travel_time(orb: Orbit, u_a, u_b, *, logit_step: float = 1.0, v_step: float = 1.5) -> np.ndarray:
     """Coordinate light travel time (units of r_s/c) along one monotone leg between inverse radii
     ``u_a`` and ``u_b`` (either order; for turning orbits both must be <= e2, the periapsis).
 
     dt = integral |dphi| / (b u^2 (1-u)). The substitution u = e2 - delta sinh^2(v) (turning orbits,
     dphi = 2 dv/sqrt(u-e1)) or u = m + n sinh(v) (plunging, dphi = dv/sqrt(u-e1)) makes the
     integrand smooth even next to turning points and for rays that wind around the photon sphere.
-    Quadrature: Gauss-Legendre (order 8) on the union of segments uniform in logit(u) (width at most
+    Quadrature: Gauss-Legendre (order 12) on the union of segments uniform in logit(u) (width at most
     ``logit_step``, for far points and points next to the horizon) and segments uniform in v (width at
     most ``v_step``, for rays that wind near the photon sphere).
     """

@@ -1,4 +1,4 @@
-"""lutgen.connect: the closed-form emitter-observer solver against independent facts.
+"""lutgen.solver: the closed-form emitter-observer solver against independent facts.
 
 Units r_s = 1, c = 1. Independent checks here: Euclidean geometry (flat-space limit), the shadow
 angle of eq. (14), the photon sphere at 1.5 r_s and its Lyapunov exponent, direct numerical
