@@ -1,8 +1,17 @@
 """lutgen: connecting null geodesics in the Schwarzschild spacetime and their lookup tables.
 
-Pure numpy/scipy (no bpy). Units: lengths in r_s, c = 1 (times in r_s/c), angles in radians.
+Pure numpy/scipy (no bpy). Units: lengths in r_s (Schwarzschild radius), c = 1 (times in r_s/c),
+angles in radians. Observer static at (r_obs, phi = 0); xi measured from the outward radial
+direction in the observer's static frame; order 1 sweeps phi, order 2 sweeps 2*pi - phi.
+
+Public API (stable): connect, connect_grid, Connection, shadow_half_angle, build_lut, LUT,
+load_lut, save_lut, LUTFileError; command line ``python -m lutgen``.
 """
+from .exr_io import LUTFileError
+from .lut import LUT, Lookup, build_lut
+from .lutfile import load_lut, save_lut
 from .solver import Connection, check_observer_radius, connect, connect_grid, shadow_half_angle
 
-__all__ = ["Connection", "connect", "connect_grid", "shadow_half_angle", "check_observer_radius"]
+__all__ = ["Connection", "connect", "connect_grid", "shadow_half_angle", "check_observer_radius",
+           "LUT", "Lookup", "build_lut", "load_lut", "save_lut", "LUTFileError"]
 __version__ = "0.1.0"

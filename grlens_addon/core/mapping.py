@@ -1,0 +1,132 @@
+"""Mapping: world-space vertices to the positions of their first- and second-order images.
+
+Units: positions in Blender units (BU); ``r_s`` is the Schwarzschild radius in BU; the LUT works in
+units of r_s (lengths) and r_s/c (times), so a light travel time dt from the LUT is a distance of
+dt * r_s BU (c = 1). Conventions (seed 000, eqs. 15 and 11): for a vertex p (relative to the hole) and
+the camera c (relative to the hole), e1 = c/|c| is the observer's outward radial direction and e2 the
+unit vector of p's component perpendicular to e1, so p has polar coordinates (r, phi) with
+phi in [0, pi] in the plane (e1, e2). The observer sees the order-1 image in the direction
+cos(xi) e1 + sin(xi) e2 and the order-2 image in cos(xi) e1 - sin(xi) e2, both in its static
+orthonormal frame, which grlens identifies with Blender's Euclidean axes at the camera. Each image
+is placed at its light-travel-time distance dt * r_s from the camera.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# A vertex this close to the observer-hole axis (|p_perp| / |p|) has no unique plane: it is seen as
+# an Einstein ring, which a mesh cannot show. Such vertices are flagged and their triangles culled.
+AXIS_EPS = 1e-9
+
+
+@dataclass
+class Scene:
+    """Camera and hole in world space (BU) and the Schwarzschild radius r_s (BU)."""
+
+    camera: np.ndarray  # (3,)
+    hole: np.ndarray  # (3,)
+    r_s: float
+
+    def __post_init__(self):
+        self.camera = np.asarray(self.camera, dtype=np.float64).reshape(3)
+        self.hole = np.asarray(self.hole, dtype=np.float64).reshape(3)
+        self.r_s = float(self.r_s)
+        if not (np.isfinite(self.r_s) and self.r_s > 0):
+            raise ValueError(f"r_s must be a positive number of Blender units, got {self.r_s}")
+        if not (np.all(np.isfinite(self.camera)) and np.all(np.isfinite(self.hole))):
+            raise ValueError("camera and black hole positions must be finite")
+
+    @property
+    def r_obs(self) -> float:
+        """Camera distance from the hole in units of r_s."""
+        return float(np.linalg.norm(self.camera - self.hole) / self.r_s)
+
+    @property
+    def e1(self) -> np.ndarray:
+        """Unit vector from the hole to the camera (the observer's outward radial direction)."""
+        d = self.camera - self.hole
+        return d / np.linalg.norm(d)
+
+
+@dataclass
+class PlaneCoordinates:
+    """Per-vertex plane of (hole, camera, vertex): r (units of r_s), phi (rad), e2 (N, 3), on_axis."""
+
+    r: np.ndarray
+    phi: np.ndarray
+    e2: np.ndarray
+    on_axis: np.ndarray
+
+
+def plane_coordinates(points: np.ndarray, scene: Scene) -> PlaneCoordinates:
+    """Polar coordinates of world-space ``points`` (N, 3; BU) in their planes through hole and camera.
+
+    Non-finite points give NaN coordinates. Points on the observer-hole axis get an arbitrary but
+    deterministic e2 (perpendicular to e1) and ``on_axis`` True.
+    """
+    p = (np.asarray(points, dtype=np.float64) - scene.hole) / scene.r_s
+    e1 = scene.e1
+    along = p @ e1
+    perp = p - along[:, None] * e1
+    n_perp = np.linalg.norm(perp, axis=1)
+    r = np.linalg.norm(p, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        on_axis = n_perp <= AXIS_EPS * r
+        fallback = _any_perpendicular(e1)
+        e2 = np.where(on_axis[:, None], fallback, perp / n_perp[:, None])
+        phi = np.arctan2(n_perp, along)
+    return PlaneCoordinates(r=r, phi=phi, e2=e2, on_axis=on_axis)
+
+
+def _any_perpendicular(e1):
+    a = np.array([0.0, 0.0, 1.0]) if abs(e1[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    v = a - (a @ e1) * e1
+    return v / np.linalg.norm(v)
+
+
+@dataclass
+class Images:
+    """Lensed images of N vertices for one order.
+
+    position: (N, 3) image positions (BU), NaN where there is no image;
+    direction: (N, 3) unit apparent direction from the camera;
+    distance: (N,) light travel distance c*dt (BU) = camera-image distance;
+    valid: (N,) bool, finite image that is not on the axis;
+    plane: the PlaneCoordinates used; xi (rad), dt (r_s/c), ux, uy: the LUT values.
+    """
+
+    position: np.ndarray
+    direction: np.ndarray
+    distance: np.ndarray
+    valid: np.ndarray
+    plane: PlaneCoordinates
+    xi: np.ndarray
+    dt: np.ndarray
+    ux: np.ndarray
+    uy: np.ndarray
+
+
+def map_vertices(points: np.ndarray, scene: Scene, lut, order: int, plane: PlaneCoordinates | None = None) -> Images:
+    """Images of order 1 or 2 of world-space ``points`` (N, 3; BU) seen from ``scene.camera``.
+
+    ``lut`` is a :class:`lutgen.LUT` built for r_obs = scene.r_obs (checked to 1e-9 relative); points
+    outside its radial range, inside the horizon, non-finite or on the axis come back invalid (NaN).
+    """
+    if order not in (1, 2):
+        raise ValueError(f"order must be 1 or 2, got {order!r}")
+    if abs(lut.r_obs / scene.r_obs - 1.0) > 1e-9:
+        raise ValueError(f"the LUT was built for r_obs = {lut.r_obs:.9g} r_s but the camera is at "
+                         f"{scene.r_obs:.9g} r_s from the hole; rebuild the LUT")
+    plane = plane if plane is not None else plane_coordinates(points, scene)
+    look = lut.lookup(plane.r, plane.phi, order)
+    sign = 1.0 if order == 1 else -1.0
+    c, s = np.cos(look.xi), np.sin(look.xi)
+    direction = c[:, None] * scene.e1 + (sign * s)[:, None] * plane.e2
+    distance = look.dt * scene.r_s
+    position = scene.camera + distance[:, None] * direction
+    valid = np.all(np.isfinite(position), axis=1) & ~plane.on_axis
+    position[~valid] = np.nan
+    return Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
+                  xi=look.xi, dt=look.dt, ux=look.ux, uy=look.uy)

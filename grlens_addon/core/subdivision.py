@@ -1,0 +1,195 @@
+"""Adaptive, crack-free subdivision of triangle meshes by the screen-space curvature rho.
+
+Seed 000, eqs. (18)-(19): for an edge with mapped end points q1, q2 and mapped midpoint q12,
+rho = |q12 - (q1 + q2)/2| / |q2 - q1|, and the edge is split into
+N = MaxTessLevel * clamp(a * rho^b, 0, 1) segments. Here q are apparent directions on the camera's
+view sphere (unit vectors), which equals screen space for small fields of view and stays defined for
+points beside or behind the camera.
+
+Crack-free scheme: levels are powers of two (1, 2, 4, ... up to the largest power of two not above
+MaxTessLevel). Each edge has one level, shared by both of its triangles. A triangle is subdivided
+uniformly at its largest edge level; the template vertices on an edge of lower level are snapped
+along that edge to the edge's own grid, so both triangles of an edge put exactly the same vertices
+on it. Vertices are then welded by integer keys (source corner / edge and grid position / triangle
+interior), so the result is watertight whenever the source is; triangles that collapse under
+snapping are dropped. All of this is vectorised per level (at most 7 groups).
+
+Units: positions in Blender units; barycentric coordinates are dimensionless.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+GRID = 64  # finest level: edge positions are stored as integers k/GRID
+
+
+def max_level(max_tess_level: int) -> int:
+    """Largest power of two <= max_tess_level, clipped to [1, GRID]."""
+    m = int(np.clip(max_tess_level, 1, GRID))
+    return 1 << (m.bit_length() - 1)
+
+
+def edge_levels(rho: np.ndarray, max_tess_level: int, a: float, b: float) -> np.ndarray:
+    """Per-edge subdivision levels from rho (eq. 19), rounded up to powers of two.
+
+    NaN rho (an end point without an image) gives level 1: such edges are culled later anyway.
+    """
+    top = max_level(max_tess_level)
+    with np.errstate(invalid="ignore", over="ignore"):
+        n = top * np.clip(a * np.power(np.maximum(rho, 0.0), b), 0.0, 1.0)
+    n = np.nan_to_num(n, nan=1.0)
+    lev = np.exp2(np.ceil(np.log2(np.maximum(n, 1.0)))).astype(np.int64)
+    return np.minimum(lev, top)
+
+
+def rho(d_a: np.ndarray, d_b: np.ndarray, d_mid: np.ndarray) -> np.ndarray:
+    """Eq. (18) on unit apparent directions (E, 3) of the end points and of the mapped midpoint."""
+    chord = np.linalg.norm(d_b - d_a, axis=1)
+    dev = np.linalg.norm(d_mid - 0.5 * (d_a + d_b), axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = dev / chord
+    return np.where(chord > 0, out, 0.0)
+
+
+@dataclass
+class Edges:
+    """Unique undirected edges of a triangle mesh: ``verts`` (E, 2) with verts[:, 0] < verts[:, 1];
+    ``of_tri`` (T, 3): edge k of triangle t joins corner k and corner (k+1) % 3."""
+
+    verts: np.ndarray
+    of_tri: np.ndarray
+
+
+def mesh_edges(tris: np.ndarray) -> Edges:
+    tris = np.asarray(tris, dtype=np.int64)
+    pairs = np.stack([tris, np.roll(tris, -1, axis=1)], axis=2).reshape(-1, 2)
+    lo, hi = pairs.min(axis=1), pairs.max(axis=1)
+    key = lo * (int(tris.max(initial=0)) + 1) + hi
+    uniq, inv = np.unique(key, return_inverse=True)
+    verts = np.empty((uniq.size, 2), dtype=np.int64)
+    verts[inv, 0], verts[inv, 1] = lo, hi
+    return Edges(verts=verts, of_tri=inv.reshape(-1, 3))
+
+
+@lru_cache(maxsize=None)
+def _template(level: int):
+    """Uniform subdivision of the reference triangle: integer coordinates (i, j) of the vertices
+    (barycentrics ((L-i-j), i, j)/L), the small triangles (index triples, counter-clockwise like the
+    source), and for each vertex its edge (0, 1, 2 or -1) and parameter numerator along it."""
+    L = level
+    ij = np.array([(i, j) for j in range(L + 1) for i in range(L + 1 - j)], dtype=np.int64)
+    index = {tuple(v): n for n, v in enumerate(ij)}
+    tris = []
+    for j in range(L):
+        for i in range(L - j):
+            a, b, c = index[(i, j)], index[(i + 1, j)], index[(i, j + 1)]
+            tris.append((a, b, c))
+            if i + j + 2 <= L:
+                tris.append((b, index[(i + 1, j + 1)], c))
+    i, j = ij[:, 0], ij[:, 1]
+    # edge 0: corner0 -> corner1 (j == 0, t = i/L); edge 1: corner1 -> corner2 (i + j == L, t = j/L);
+    # edge 2: corner2 -> corner0 (i == 0, t = (L - j)/L). Corners belong to no edge here.
+    edge = np.full(len(ij), -1)
+    t = np.zeros(len(ij), dtype=np.int64)
+    corner = np.full(len(ij), -1)
+    corner[(i == 0) & (j == 0)] = 0
+    corner[(i == L) & (j == 0)] = 1
+    corner[(i == 0) & (j == L)] = 2
+    inner = corner < 0
+    m0 = inner & (j == 0)
+    m1 = inner & (i + j == L)
+    m2 = inner & (i == 0)
+    edge[m0], t[m0] = 0, i[m0]
+    edge[m1], t[m1] = 1, j[m1]
+    edge[m2], t[m2] = 2, L - j[m2]
+    return ij, np.array(tris, dtype=np.int64).reshape(-1, 3), edge, t, corner
+
+
+@dataclass
+class Subdivided:
+    """A subdivided mesh.
+
+    positions: (V, 3) world positions (BU) of the welded vertices;
+    tris: (F, 3) vertex indices, same winding as the source;
+    source_tri: (F,) index of the source triangle each face comes from;
+    bary: (F, 3, 3) barycentric coordinates of each face corner in its source triangle (for UVs,
+    normals and other corner attributes);
+    vertex_key: (V,) the welding keys (stable for unchanged topology and levels).
+    """
+
+    positions: np.ndarray
+    tris: np.ndarray
+    source_tri: np.ndarray
+    bary: np.ndarray
+    vertex_key: np.ndarray
+
+
+def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.ndarray) -> Subdivided:
+    """Subdivide triangles ``tris`` (T, 3) of vertices ``points`` (N, 3) with per-edge ``levels``
+    (powers of two <= GRID, shape (E,)). See the module docstring for the scheme."""
+    points = np.asarray(points, dtype=np.float64)
+    tris = np.asarray(tris, dtype=np.int64)
+    n_pts, n_edges = len(points), len(edges.verts)
+    tri_level = levels[edges.of_tri].max(axis=1) if len(tris) else np.zeros(0, np.int64)
+    pos_parts, key_parts, face_parts, src_parts, bary_parts = [], [], [], [], []
+    interior_base = n_pts + n_edges * (GRID + 1)
+    offset = 0
+    for L in np.unique(tri_level):
+        sel = np.flatnonzero(tri_level == L)
+        ij, ttris, tedge, tt, tcorner = _template(int(L))
+        nv = len(ij)
+        # barycentrics of the template vertices, then snapped along low-level edges
+        bary = np.empty((sel.size, nv, 3))
+        bary[:, :, 1] = ij[:, 0] / L
+        bary[:, :, 2] = ij[:, 1] / L
+        key = np.empty((sel.size, nv), dtype=np.int64)
+        src = tris[sel]  # (S, 3)
+        # corners
+        for k in range(3):
+            m = tcorner == k
+            key[:, m] = src[:, k][:, None]
+        # interior vertices: unique per triangle
+        m_in = (tcorner < 0) & (tedge < 0)
+        key[:, m_in] = interior_base + (sel[:, None] * (GRID + 1) ** 2 + np.flatnonzero(m_in)[None, :])
+        for k in range(3):
+            m = np.flatnonzero(tedge == k)
+            if m.size == 0:
+                continue
+            e = edges.of_tri[sel, k]  # (S,)
+            lev = levels[e][:, None]
+            t_tri = tt[m][None, :] / L  # along corner k -> corner k+1
+            t_snap = np.floor(t_tri * lev + 0.5) / lev
+            a_corner, b_corner = src[:, k], src[:, (k + 1) % 3]
+            forward = (a_corner < b_corner)[:, None]
+            t_canon = np.where(forward, t_snap, 1.0 - t_snap)  # along the edge from its lower vertex
+            num = np.rint(t_canon * GRID).astype(np.int64)
+            lo_v, hi_v = edges.verts[e, 0][:, None], edges.verts[e, 1][:, None]
+            key[:, m] = np.where(num == 0, lo_v, np.where(num == GRID, hi_v, n_pts + e[:, None] * (GRID + 1) + num))
+            b = np.zeros((sel.size, m.size, 3))
+            b[:, :, k] = 1.0 - t_snap
+            b[:, :, (k + 1) % 3] = t_snap
+            bary[:, m, :] = b
+        bary[:, :, 0] = 1.0 - bary[:, :, 1] - bary[:, :, 2]
+        corners = points[src]  # (S, 3 corners, 3 xyz)
+        pos = np.einsum("svk,skx->svx", bary, corners)
+        pos_parts.append(pos.reshape(-1, 3))
+        key_parts.append(key.reshape(-1))
+        faces = ttris[None, :, :] + (offset + nv * np.arange(sel.size))[:, None, None]
+        face_parts.append(faces.reshape(-1, 3))
+        src_parts.append(np.repeat(sel, len(ttris)))
+        bary_parts.append(bary[np.arange(sel.size)[:, None, None], ttris[None, :, :]].reshape(-1, 3, 3))
+        offset += sel.size * nv
+    if not pos_parts:
+        return Subdivided(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64),
+                          np.zeros((0, 3, 3)), np.zeros(0, np.int64))
+    pos = np.concatenate(pos_parts)
+    keys = np.concatenate(key_parts)
+    faces = np.concatenate(face_parts)
+    uniq, first, inv = np.unique(keys, return_index=True, return_inverse=True)
+    faces = inv[faces]
+    keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
+    return Subdivided(positions=pos[first], tris=faces[keep], source_tri=np.concatenate(src_parts)[keep],
+                      bary=np.concatenate(bary_parts)[keep], vertex_key=uniq)
