@@ -102,7 +102,19 @@ def orbit_from_b(b) -> Orbit:
             4.0 * np.sin(np.arcsin(np.minimum(sq, 1.0)) / 3.0) ** 2,
             -4.0 * np.sinh(np.arcsinh(sq) / 3.0) ** 2,
         )
-    return _from_sigma_e1(sigma, (sigma - 1.0) / 3.0)
+    e1 = (sigma - 1.0) / 3.0
+    # For large b the trigonometric form loses the relative accuracy of e1 ~ -1/b (asin near 1):
+    # polish e1 there with Newton on e1^2 (1 - e1) = 1/b^2 (a simple root, so well conditioned).
+    big = sigma > 0.5
+    if np.any(big):
+        c = 1.0 / (b[big] * b[big]) if b.ndim else 1.0 / (b * b)
+        e = e1[big]
+        for _ in range(3):
+            e = e - (e * e * (1.0 - e) - c) / (e * (2.0 - 3.0 * e))
+        e1 = np.where(big, 0.0, e1)
+        e1[big] = e
+        sigma = np.where(big, 1.0 + 3.0 * e1, sigma)
+    return _from_sigma_e1(sigma, e1)
 
 
 def orbit_from_turning_point(eps) -> Orbit:
