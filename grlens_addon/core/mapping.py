@@ -66,13 +66,13 @@ def plane_coordinates(points: np.ndarray, scene: Scene) -> PlaneCoordinates:
     Non-finite points give NaN coordinates. Points on the observer-hole axis get an arbitrary but
     deterministic e2 (perpendicular to e1) and ``on_axis`` True.
     """
-    p = (np.asarray(points, dtype=np.float64) - scene.hole) / scene.r_s
     e1 = scene.e1
-    along = p @ e1
-    perp = p - along[:, None] * e1
-    n_perp = np.linalg.norm(perp, axis=1)
-    r = np.linalg.norm(p, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        p = (np.asarray(points, dtype=np.float64) - scene.hole) / scene.r_s
+        along = p @ e1
+        perp = p - along[:, None] * e1
+        n_perp = np.linalg.norm(perp, axis=1)
+        r = np.linalg.norm(p, axis=1)
         on_axis = n_perp <= AXIS_EPS * r
         fallback = _any_perpendicular(e1)
         e2 = np.where(on_axis[:, None], fallback, perp / n_perp[:, None])
