@@ -198,7 +198,7 @@ def _logit(u):
     return np.log(u) - np.log1p(-u)
 
 
-def travel_time(orb: Orbit, u_a, u_b, *, logit_step: float = 1.0, v_step: float = 1.5) -> np.ndarray:
+def travel_time(orb: Orbit, u_a, u_b, *, logit_step: float = 0.75, v_step: float = 1.5) -> np.ndarray:
     """Coordinate light travel time (units of r_s/c) along one monotone leg between inverse radii
     ``u_a`` and ``u_b`` (either order; for turning orbits both must be <= e2, the periapsis).
 
@@ -257,28 +257,44 @@ def _leg_time_steep(lo, hi, e1, logit_step):
 
 
 def _leg_time(real, lo, hi, e1, e2, delta, m, n, logit_step, v_step):
+    """Travel time of regularised legs, elements grouped by how many segments they need."""
     if real:
-        v_of_u = lambda u: np.arcsinh(np.sqrt(np.maximum(e2[:, None] - u, 0.0) / delta[:, None]))  # noqa: E731
+        def v_of_u(u, k):
+            return np.arcsinh(np.sqrt(np.maximum(e2[k, None] - u, 0.0) / delta[k, None]))
     else:
-        v_of_u = lambda u: np.arcsinh((u - m[:, None]) / n[:, None])  # noqa: E731
-    u_break = 1.0 / (1.0 + np.exp(-_logit_breaks(lo, hi, logit_step)))
-    u_break[:, 0], u_break[:, -1] = lo, hi
-    v_logit = v_of_u(u_break)
-    v_lo, v_hi = v_logit[:, :1], v_logit[:, -1:]
-    v_span = np.nan_to_num(np.abs(v_hi - v_lo), nan=0.0, posinf=0.0)
-    n_v = int(np.clip(np.ceil(np.max(v_span, initial=0.0) / v_step), 1, 64))
-    tv = np.linspace(0.0, 1.0, n_v + 1)[1:-1]
-    v_all = np.sort(np.concatenate([v_logit, v_lo + (v_hi - v_lo) * tv[None, :]], axis=1), axis=1)
-    v, h = _gauss_nodes(v_all)
-    if real:
-        u = e2[:, None, None] - delta[:, None, None] * np.sinh(v) ** 2
-        scale = 2.0
-    else:
-        u = m[:, None, None] + n[:, None, None] * np.sinh(v)
-        scale = 1.0
+        def v_of_u(u, k):
+            return np.arcsinh((u - m[k, None]) / n[k, None])
+    every = np.arange(lo.size)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        l_span = np.nan_to_num(_logit(hi) - _logit(lo), nan=0.0, posinf=0.0, neginf=0.0)
+        ends = v_of_u(np.stack([lo, hi], axis=1), every)
+    v_span = np.nan_to_num(np.abs(ends[:, 1] - ends[:, 0]), nan=0.0, posinf=0.0)
+    n_l = np.clip(np.ceil(l_span / logit_step), 1, 128).astype(np.int64)
+    n_v = np.clip(np.ceil(v_span / v_step), 1, 64).astype(np.int64)
+    group = n_l * 1000 + n_v
+    out = np.empty(lo.size)
     inv_b = -e1 * np.sqrt(1.0 - e1)
-    integrand = 1.0 / (u * u * (1.0 - u) * np.sqrt(u - e1[:, None, None]))
-    return scale * inv_b * np.einsum("ijk,k,ij->i", integrand, _GL_W, h)
+    for g in np.unique(group):
+        k = np.flatnonzero(group == g)
+        nl, nv = int(g // 1000), int(g % 1000)
+        t = np.linspace(0.0, 1.0, nl + 1)
+        lam = _logit(lo[k])[:, None] + l_span[k, None] * t[None, :]
+        u_break = 1.0 / (1.0 + np.exp(-lam))
+        u_break[:, 0], u_break[:, -1] = lo[k], hi[k]
+        v_logit = v_of_u(u_break, k)
+        if nv > 1:
+            v_lo, v_hi = v_logit[:, :1], v_logit[:, -1:]
+            tv = np.linspace(0.0, 1.0, nv + 1)[1:-1]
+            v_logit = np.sort(np.concatenate([v_logit, v_lo + (v_hi - v_lo) * tv[None, :]], axis=1), axis=1)
+        v, h = _gauss_nodes(v_logit)
+        sh = np.sinh(v)
+        if real:
+            u = e2[k, None, None] - delta[k, None, None] * sh * sh
+        else:
+            u = m[k, None, None] + n[k, None, None] * sh
+        integrand = 1.0 / (u * u * (1.0 - u) * np.sqrt(u - e1[k, None, None]))
+        out[k] = (2.0 if real else 1.0) * inv_b[k] * np.einsum("ijk,k,ij->i", integrand, _GL_W, np.abs(h))
+    return out
 
 
 def radial_travel_time(u_a, u_b) -> np.ndarray:
