@@ -262,10 +262,12 @@ def _family_sweep(uo, u, q):
     b_eval = np.maximum(b, _B_TINY)
     orb = _orb.orbit_from_b(b_eval)
     f_u, f_o = _orb.sweep(orb, u), _orb.sweep(orb, uo)
-    with np.errstate(invalid="ignore"):
-        direct = np.abs(f_u - f_o) * (b / b_eval)
-        turn = 2.0 * _orb.sweep_to_turning_point(orb) - f_u - f_o
-    return np.where(turning, turn, direct)
+    out = np.abs(f_u - f_o) * (b / b_eval)
+    turning = np.broadcast_to(turning, out.shape)
+    if turning.any():
+        half = _orb.sweep_to_turning_point(orb.subset(turning))
+        out[turning] = 2.0 * half - f_u[turning] - f_o[turning]
+    return out
 
 
 def connect_grid(r_obs, r, phi) -> tuple[Connection, Connection]:
@@ -324,7 +326,7 @@ def _solve_family(uo, u, targets):
     km = np.clip(k - 1, 0, _N_SAMPLES - 4)
     xs = qs[km[..., None] + np.arange(4)]
     ys = samples[rows[..., None], km[..., None] + np.arange(4)] - targets[None, :, None]
-    guess = _inverse_lagrange(xs, ys)
+    guess, slope = _inverse_lagrange(xs, ys)
     bad = ~np.isfinite(guess) | (guess <= lo) | (guess >= hi)
     lin = lo - flo * (hi - lo) / np.where(fhi - flo > 0, fhi - flo, 1.0)
     guess = np.where(bad, lin, guess)
@@ -332,29 +334,38 @@ def _solve_family(uo, u, targets):
     uu = np.broadcast_to(u[:, None], (n_r, m))
     tt = np.broadcast_to(targets[None, :], (n_r, m))
     q = _polish(lambda x, idx: _family_sweep(uo, uu.ravel()[idx], x) - tt.ravel()[idx],
-                lo.ravel(), hi.ravel(), flo.ravel(), fhi.ravel(), guess.ravel())
+                lo.ravel(), hi.ravel(), flo.ravel(), fhi.ravel(), guess.ravel(),
+                slope0=np.where(bad, np.nan, slope).ravel())
     q = q.reshape(n_r, m)
     q[np.broadcast_to(exact0, q.shape)] = 0.0
     return q
 
 
 def _inverse_lagrange(xs, ys):
-    """x where the cubic through (ys, xs) (inverse interpolation) passes y = 0; (..., 4) inputs."""
+    """Inverse cubic interpolation through 4 points (ys, xs) per element ((..., 4) inputs): the x where
+    it passes y = 0, and its slope dx/dy there (NaN where it is undefined)."""
     x = np.zeros(xs.shape[:-1])
+    dx = np.zeros(xs.shape[:-1])
     with np.errstate(divide="ignore", invalid="ignore"):
         for i in range(4):
             w = np.ones(xs.shape[:-1])
+            dsum = np.zeros(xs.shape[:-1])
             for j in range(4):
                 if i != j:
                     w = w * (0.0 - ys[..., j]) / (ys[..., i] - ys[..., j])
+                    dsum = dsum + 1.0 / (0.0 - ys[..., j])
             x = x + w * xs[..., i]
-    return x
+            dx = dx + w * dsum * xs[..., i]
+    return x, dx
 
 
-def _polish(f, lo, hi, flo, fhi, x0, *, xtol=1e-14, maxiter=40):
+def _polish(f, lo, hi, flo, fhi, x0, *, slope0=None, xtol=1e-14, ftol=4e-15, maxiter=100):
     """Safeguarded secant (regula falsi with bisection fallback) for increasing f on brackets.
 
     f(x, idx) evaluates the elements ``idx``; lo/hi bracket the roots with f(lo) <= 0 <= f(hi).
+    ``slope0`` (optional): an estimate of dx/df at the root, used for the first (Newton-like) step.
+    Stops when the step or the bracket is below ``xtol`` (relative to max(1, |x|)) or |f| <= ``ftol``
+    (the swept angles carry ~1e-15 rad of rounding, so closer is noise).
     """
     x = x0.copy()
     lo, hi, flo, fhi = lo.copy(), hi.copy(), flo.copy(), fhi.copy()
@@ -365,7 +376,7 @@ def _polish(f, lo, hi, flo, fhi, x0, *, xtol=1e-14, maxiter=40):
         if idx.size == 0:
             break
         fx = f(x[idx], idx)
-        done = (fx == 0.0) | ~np.isfinite(fx)
+        done = (np.abs(fx) <= ftol) | ~np.isfinite(fx)
         # shrink the bracket
         neg = fx < 0
         lo[idx[neg]], flo[idx[neg]] = x[idx[neg]], fx[neg]
@@ -376,6 +387,9 @@ def _polish(f, lo, hi, flo, fhi, x0, *, xtol=1e-14, maxiter=40):
         fp = np.where(np.isfinite(f_prev[idx]), f_prev[idx], np.where(neg, fhi[idx], flo[idx]))
         with np.errstate(divide="ignore", invalid="ignore"):
             xn = x[idx] - fx * (x[idx] - xp) / (fx - fp)
+            if it == 0 and slope0 is not None:
+                newton = x[idx] - fx * slope0[idx]
+                xn = np.where(np.isfinite(newton), newton, xn)
         mid = 0.5 * (lo[idx] + hi[idx])
         outside = ~np.isfinite(xn) | (xn <= lo[idx]) | (xn >= hi[idx])
         if it >= 6:  # slow progress: alternate with bisection
