@@ -51,6 +51,7 @@ import io
 import json
 import os
 import struct
+import sys
 import tempfile
 import zlib
 from collections.abc import Iterable, Mapping
@@ -114,7 +115,7 @@ def write_exr(path, channels: Mapping[str, np.ndarray], metadata: Mapping[str, s
     import OpenEXR
 
     path = os.fspath(path)
-    stored, shape = _encode_channels(channels)
+    stored, _ = _encode_channels(channels)
     canonical = _canonical_metadata(metadata)
     attributes, str_ints = _encode_metadata(canonical)
     crcs = {"channels": {name: _crc32(a) for name, a in stored.items()},
@@ -129,7 +130,8 @@ def write_exr(path, channels: Mapping[str, np.ndarray], metadata: Mapping[str, s
     header.update(attributes)
 
     directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp", dir=directory)
+    # hidden temporary file next to the target (same file system, so os.replace is atomic)
+    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path)[:100] + ".", suffix=".tmp", dir=directory)
     try:
         os.close(fd)
         try:
@@ -329,9 +331,7 @@ def _replay_other_output(text):
     for line in text.splitlines(keepends=True):
         (warnings if line.startswith(_LIB_PIXEL_WARNING) else others).append(line)
     if others:
-        with contextlib.suppress(Exception):
-            import sys
-
+        with contextlib.suppress(Exception):  # sys.stdout may be None (e.g. pythonw)
             sys.stdout.write("".join(others))
     return [w.strip() for w in warnings]
 
