@@ -102,7 +102,7 @@ def test_subdivision_is_watertight_for_any_levels(seed):
     directions (consistent winding), Euler characteristic 2, area unchanged."""
     P, T = _octahedron()
     E = subdivision.mesh_edges(T)
-    levels = 2 ** np.random.default_rng(seed).integers(0, 7, len(E.verts))
+    levels = np.random.default_rng(seed).integers(1, 65, len(E.verts))
     S = subdivision.subdivide(P, T, E, levels)
     directed, undirected = _directed_edge_counts(S.tris)
     assert directed.max() == 1 and np.all(undirected == 2)
@@ -118,9 +118,13 @@ def test_subdivision_is_watertight_for_any_levels(seed):
 
 
 def test_subdivision_levels_and_rho():
-    assert subdivision.max_level(64) == 64 and subdivision.max_level(50) == 32 and subdivision.max_level(0) == 1
     lv = subdivision.edge_levels(np.array([0.0, 1e-4, 0.01, 0.05, 1.0, np.nan]), 64, 5.0, 0.75)
-    assert list(lv) == [1, 1, 16, 64, 64, 1]  # 64*5*rho^0.75 -> 0.3, 10.1, 33.8, 320
+    assert list(lv) == [1, 1, 11, 34, 64, 1]  # ceil(64 * min(1, 5 rho^0.75)): 0.3, 10.1, 33.8, 320
+    assert list(subdivision.edge_levels(np.array([1.0]), 200, 5.0, 0.75)) == [64]  # capped at 64
+    # an edge spanning 3.5 pixels never gets more than 4 segments
+    capped = subdivision.edge_levels(np.array([1.0, 1.0]), 64, 5.0, 0.75, chord=np.array([3.5e-3, 0.0]),
+                                     pixel_angle=1e-3)
+    assert list(capped) == [4, 1]
     # a straight mapping has rho = 0; a circle arc through 90 degrees has rho = (1 - cos45)/(2 sin45)
     a, b = np.array([[1.0, 0, 0]]), np.array([[0.0, 1, 0]])
     assert subdivision.rho(a, b, 0.5 * (a + b))[0] == 0

@@ -6,13 +6,16 @@ N = MaxTessLevel * clamp(a * rho^b, 0, 1) segments. Here q are apparent directio
 view sphere (unit vectors), which equals screen space for small fields of view and stays defined for
 points beside or behind the camera.
 
-Crack-free scheme: levels are powers of two (1, 2, 4, ... up to the largest power of two not above
-MaxTessLevel). Each edge has one level, shared by both of its triangles. A triangle is subdivided
-uniformly at its largest edge level; the template vertices on an edge of lower level are snapped
-along that edge to the edge's own grid, so both triangles of an edge put exactly the same vertices
-on it. Vertices are then welded by integer keys (source corner / edge and grid position / triangle
+Levels are capped by the edge's size on screen: an edge never gets more segments than the pixels it
+spans (``pixel_angle``), so images smaller than a pixel are not subdivided at all.
+
+Crack-free scheme: each edge has one level (1 .. 64), shared by both of its triangles. A triangle
+is subdivided uniformly at its largest edge level L; the template vertices on an edge of level
+l <= L are snapped along that edge to the nearest point of the edge's own l-grid (every l-grid
+point is hit because L >= l), so both triangles of an edge put exactly the same vertices on it.
+Vertices are then welded by integer keys (source corner / edge and l-grid index / triangle
 interior), so the result is watertight whenever the source is; triangles that collapse under
-snapping are dropped. All of this is vectorised per level (at most 7 groups).
+snapping are dropped. All of this is vectorised per level.
 
 Units: positions in Blender units; barycentric coordinates are dimensionless.
 """
@@ -23,26 +26,28 @@ from functools import lru_cache
 
 import numpy as np
 
-GRID = 64  # finest level: edge positions are stored as integers k/GRID
+GRID = 64  # largest level (GPU tessellators' usual maximum, as in seed 000)
 
 
-def max_level(max_tess_level: int) -> int:
-    """Largest power of two <= max_tess_level, clipped to [1, GRID]."""
-    m = int(np.clip(max_tess_level, 1, GRID))
-    return 1 << (m.bit_length() - 1)
-
-
-def edge_levels(rho: np.ndarray, max_tess_level: int, a: float, b: float) -> np.ndarray:
-    """Per-edge subdivision levels from rho (eq. 19), rounded up to powers of two.
-
+def edge_levels(rho: np.ndarray, max_tess_level: int, a: float, b: float,
+                chord: np.ndarray | None = None, pixel_angle: float | None = None) -> np.ndarray:
+    """Per-edge subdivision levels: ceil(MaxTessLevel * clamp(a rho^b, 0, 1)) (eq. 19), at least 1,
+    at most min(max_tess_level, 64), and at most the number of pixels the edge's image spans
+    (``chord`` and ``pixel_angle`` in radians on the view sphere) when those are given.
     NaN rho (an end point without an image) gives level 1: such edges are culled later anyway.
     """
-    top = max_level(max_tess_level)
+    top = int(np.clip(max_tess_level, 1, GRID))
     with np.errstate(invalid="ignore", over="ignore"):
         n = top * np.clip(a * np.power(np.maximum(rho, 0.0), b), 0.0, 1.0)
-    n = np.nan_to_num(n, nan=1.0)
-    lev = np.exp2(np.ceil(np.log2(np.maximum(n, 1.0)))).astype(np.int64)
-    return np.minimum(lev, top)
+        n = np.nan_to_num(np.ceil(n), nan=1.0)
+        if chord is not None and pixel_angle:
+            n = np.minimum(n, np.nan_to_num(np.ceil(chord / pixel_angle), nan=1.0))
+    return np.clip(n, 1, top).astype(np.int64)
+
+
+def chord_angle(d_a: np.ndarray, d_b: np.ndarray) -> np.ndarray:
+    """Angle (radians) between unit directions (E, 3): an edge's image size on the view sphere."""
+    return 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(d_b - d_a, axis=1), 0.0, 1.0))
 
 
 def rho(d_a: np.ndarray, d_b: np.ndarray, d_mid: np.ndarray) -> np.ndarray:
@@ -129,7 +134,7 @@ class Subdivided:
 
 def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.ndarray) -> Subdivided:
     """Subdivide triangles ``tris`` (T, 3) of vertices ``points`` (N, 3) with per-edge ``levels``
-    (powers of two <= GRID, shape (E,)). See the module docstring for the scheme."""
+    (integers 1 .. GRID, shape (E,)). See the module docstring for the scheme."""
     points = np.asarray(points, dtype=np.float64)
     tris = np.asarray(tris, dtype=np.int64)
     n_pts, n_edges = len(points), len(edges.verts)
@@ -165,9 +170,9 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
             a_corner, b_corner = src[:, k], src[:, (k + 1) % 3]
             forward = (a_corner < b_corner)[:, None]
             t_canon = np.where(forward, t_snap, 1.0 - t_snap)  # along the edge from its lower vertex
-            num = np.rint(t_canon * GRID).astype(np.int64)
+            num = np.rint(t_canon * lev).astype(np.int64)  # index on the edge's own grid
             lo_v, hi_v = edges.verts[e, 0][:, None], edges.verts[e, 1][:, None]
-            key[:, m] = np.where(num == 0, lo_v, np.where(num == GRID, hi_v, n_pts + e[:, None] * (GRID + 1) + num))
+            key[:, m] = np.where(num == 0, lo_v, np.where(num == lev, hi_v, n_pts + e[:, None] * (GRID + 1) + num))
             b = np.zeros((sel.size, m.size, 3))
             b[:, :, k] = 1.0 - t_snap
             b[:, :, (k + 1) % 3] = t_snap
