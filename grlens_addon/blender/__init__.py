@@ -1,0 +1,1 @@
+"""The bpy layer of grlens (imports bpy)."""

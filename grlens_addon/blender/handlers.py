@@ -1,0 +1,73 @@
+"""Handlers: rebuild on frame changes (viewport, F12, animation renders, background mode) and after
+interactive edits of lensed objects, the camera or the hole.
+
+Thin and @persistent (they survive file loads); a re-entrancy flag (reset in finally) keeps our own
+mesh updates from triggering another rebuild. Never calls bpy.ops.
+"""
+import bpy
+from bpy.app.handlers import persistent
+
+_busy = False
+
+
+def _run(scene, depsgraph=None):
+    global _busy
+    if _busy or scene is None or not hasattr(scene, "grlens"):
+        return None
+    _busy = True
+    try:
+        from .rebuild import rebuild_scene
+
+        report = rebuild_scene(scene, depsgraph)
+        if report["status"].startswith("grlens:") and bpy.app.background:
+            print(report["status"])
+        for w in report["warnings"]:
+            print(f"grlens: {w}")
+        return report
+    finally:
+        _busy = False
+
+
+def request_rebuild(scene):
+    """Called by property updates: rebuild now if auto update is on."""
+    if scene is not None and scene.grlens.auto_update:
+        _run(scene)
+
+
+@persistent
+def on_frame_change(scene, depsgraph=None):
+    if scene.grlens.auto_update:
+        _run(scene, depsgraph)
+
+
+def _relevant(scene, update):
+    idb = update.id
+    if isinstance(idb, bpy.types.Object):
+        if idb.grlens.order in (1, 2):
+            return False
+        return idb.grlens.enabled or idb == scene.camera or idb == scene.grlens.black_hole or idb == scene.grlens.light
+    return isinstance(idb, bpy.types.Mesh) and not idb.get("grlens_topology")
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph):
+    if _busy or not scene.grlens.auto_update or depsgraph.mode == "RENDER":
+        return
+    if any(_relevant(scene, u) for u in depsgraph.updates):
+        _run(scene, depsgraph)
+
+
+HANDLERS = ((bpy.app.handlers.frame_change_post, on_frame_change),
+            (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update))
+
+
+def attach():
+    for lst, fn in HANDLERS:
+        if fn not in lst:
+            lst.append(fn)
+
+
+def detach():
+    for lst, fn in HANDLERS:
+        while fn in lst:
+            lst.remove(fn)

@@ -1,0 +1,53 @@
+"""Sidebar panel (3D viewport > N panel > grlens)."""
+import bpy
+
+
+class VIEW3D_PT_grlens(bpy.types.Panel):
+    bl_label = "grlens"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "grlens"
+
+    def draw(self, context):
+        layout = self.layout
+        g = context.scene.grlens
+        col = layout.column()
+        col.prop(g, "black_hole")
+        col.prop(g, "r_s")
+        obj = context.object
+        if obj is not None and obj.type == "MESH" and obj.grlens.order == 0:
+            col.prop(obj.grlens, "enabled", text=f"Lens '{obj.name}'")
+        col.separator()
+        col.prop(g, "show_order_1")
+        col.prop(g, "show_order_2")
+        box = layout.box()
+        box.label(text="Subdivision and culling")
+        box.prop(g, "max_tess_level")
+        row = box.row(align=True)
+        row.prop(g, "tess_a")
+        row.prop(g, "tess_b")
+        box.prop(g, "cull_ratio")
+        box = layout.box()
+        box.label(text="Lookup table (radii in r_s)")
+        row = box.row(align=True)
+        row.prop(g, "lut_r_min")
+        row.prop(g, "lut_r_max")
+        row = box.row(align=True)
+        row.prop(g, "lut_n_r")
+        row.prop(g, "lut_n_phi")
+        box = layout.box()
+        box.prop(g, "use_gr_illumination")
+        sub = box.column()
+        sub.enabled = g.use_gr_illumination
+        sub.prop(g, "light")
+        sub.prop(g, "light_intensity")
+        layout.prop(g, "auto_update")
+        row = layout.row(align=True)
+        row.operator("grlens.rebuild", icon="FILE_REFRESH")
+        row.operator("grlens.clear", icon="X")
+        layout.operator("grlens.demo_scene", icon="SPHERE")
+        if g.status:
+            layout.label(text=g.status, icon="ERROR" if g.status.startswith("grlens:") else "INFO")
+
+
+CLASSES = (VIEW3D_PT_grlens,)

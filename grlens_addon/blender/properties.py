@@ -1,0 +1,88 @@
+"""Public scripting contract: ``scene.grlens`` and ``obj.grlens`` (keep names stable).
+
+Units: ``r_s`` in Blender units (BU); LUT radii in units of r_s; light intensity I0 in BU^2 (so that
+the irradiance attribute is I0 / (c dt)^2 with c dt in BU).
+"""
+import bpy
+from bpy.props import BoolProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+
+
+def _changed(self, context):
+    from . import handlers
+
+    handlers.request_rebuild(context.scene if context else None)
+
+
+class GRLENS_SceneSettings(bpy.types.PropertyGroup):
+    black_hole: PointerProperty(
+        name="Black Hole", type=bpy.types.Object, update=_changed,
+        description="Object whose location is the centre of the black hole (usually an empty)")
+    r_s: FloatProperty(
+        name="Schwarzschild Radius", default=1.0, min=1e-6, soft_max=100.0, unit="LENGTH", update=_changed,
+        description="Schwarzschild radius r_s of the black hole, in scene length units")
+    lut_r_min: FloatProperty(
+        name="LUT r min", default=1.05, min=1.000001, soft_max=10.0, update=_changed,
+        description="Smallest radius covered by the lookup table, in units of r_s (> 1: outside the horizon)")
+    lut_r_max: FloatProperty(
+        name="LUT r max", default=40.0, min=1.1, soft_max=1000.0, update=_changed,
+        description="Largest radius covered by the lookup table, in units of r_s; parts farther out are culled")
+    lut_n_r: IntProperty(
+        name="LUT rows", default=256, min=16, max=4096, update=_changed,
+        description="Lookup table rows (uniform in r_s/r)")
+    lut_n_phi: IntProperty(
+        name="LUT columns", default=512, min=16, max=8192, update=_changed,
+        description="Lookup table columns (uniform in the angle phi from 0 to 180 degrees)")
+    max_tess_level: IntProperty(
+        name="Max Tess Level", default=64, min=1, max=64, update=_changed,
+        description="Largest number of segments an edge is split into (eq. 19 of Mueller et al. 2021)")
+    tess_a: FloatProperty(
+        name="Tess a", default=5.0, min=0.0, soft_max=50.0, update=_changed,
+        description="Factor a of the tessellation heuristic N = MaxTessLevel * clamp(a rho^b, 0, 1)")
+    tess_b: FloatProperty(
+        name="Tess b", default=0.75, min=0.01, soft_max=4.0, update=_changed,
+        description="Exponent b of the tessellation heuristic N = MaxTessLevel * clamp(a rho^b, 0, 1)")
+    cull_ratio: FloatProperty(
+        name="Cull Ratio", default=8.0, min=1.0, soft_max=100.0, update=_changed,
+        description="Drop image triangles whose circumference exceeds this many times the undistorted one "
+                    "(triangles straddling the observer-hole axis, which belong to an Einstein ring)")
+    show_order_1: BoolProperty(name="First-order Images", default=True, update=_changed,
+                               description="Show the images seen along the direct ray")
+    show_order_2: BoolProperty(name="Second-order Images", default=True, update=_changed,
+                               description="Show the images seen along the ray around the other side of the hole")
+    use_gr_illumination: BoolProperty(
+        name="GR Illumination", default=False, update=_changed,
+        description="Compute the irradiance of a point light along both connecting geodesics into the "
+                    "'grlens_irradiance' attribute (use the 'grlens GR Illumination' node group)")
+    light: PointerProperty(name="Light", type=bpy.types.Object, update=_changed,
+                           description="Point light (any object; its location is used) for GR illumination")
+    light_intensity: FloatProperty(name="Light Intensity", default=1000.0, min=0.0, update=_changed,
+                                   description="I0 of eq. 21: irradiance = I0 max(0, n.d) / (c dt)^2, c dt in scene units")
+    auto_update: BoolProperty(name="Auto Update", default=True,
+                              description="Rebuild the images on frame changes and edits")
+    status: StringProperty(name="Status", default="", options={"SKIP_SAVE"},
+                           description="Outcome of the last rebuild (read only)")
+
+
+class GRLENS_ObjectSettings(bpy.types.PropertyGroup):
+    enabled: BoolProperty(name="Lens This Object", default=False, update=_changed,
+                          description="Replace what the camera sees of this object by its lensed images")
+    source: PointerProperty(type=bpy.types.Object, name="Source",
+                            description="For image objects made by grlens: the object they show (read only)")
+    order: IntProperty(name="Image Order", default=0, min=0, max=2,
+                       description="For image objects made by grlens: 1 or 2 (read only)")
+    saved_visible_camera: BoolProperty(default=True, options={"HIDDEN"},
+                                       description="The source's own camera visibility, restored when disabled")
+
+
+CLASSES = (GRLENS_SceneSettings, GRLENS_ObjectSettings)
+
+
+def attach():
+    bpy.types.Scene.grlens = PointerProperty(type=GRLENS_SceneSettings)
+    bpy.types.Object.grlens = PointerProperty(type=GRLENS_ObjectSettings)
+
+
+def detach():
+    for owner in (bpy.types.Scene, bpy.types.Object):
+        if hasattr(owner, "grlens"):
+            del owner.grlens

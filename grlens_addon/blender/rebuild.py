@@ -1,0 +1,203 @@
+"""Per-frame rebuild: evaluated source meshes -> image objects ``<name>.GR1`` / ``<name>.GR2``.
+
+Runs the numeric core (``grlens_addon.core.pipeline``) for every object with ``obj.grlens.enabled``
+and uploads the results into mesh objects in the ``grlens`` collection. Source objects and their
+meshes are never modified (only their camera visibility is switched off while they are lensed, and
+restored when they are not). Units: Blender units; r_s from ``scene.grlens.r_s``.
+"""
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+
+from ..core import mapping, pipeline
+from . import lutcache, upload
+
+COLLECTION = "grlens"
+
+
+class RebuildError(Exception):
+    """A scene-level problem that prevents any image (missing hole or camera, camera inside...)."""
+
+
+def _collection(scene):
+    coll = bpy.data.collections.get(COLLECTION)
+    if coll is None:
+        coll = bpy.data.collections.new(COLLECTION)
+    if coll.name not in scene.collection.children:
+        scene.collection.children.link(coll)
+    return coll
+
+
+def is_image_object(obj) -> bool:
+    return obj.grlens.order in (1, 2)
+
+
+def sources(scene):
+    return [o for o in scene.objects if o.type == "MESH" and o.grlens.enabled and not is_image_object(o)]
+
+
+def _extract(obj_eval) -> pipeline.SourceMesh:
+    """World-space triangles, corner UVs, material indices and corner normals of an evaluated object."""
+    me = obj_eval.to_mesh()
+    try:
+        me.calc_loop_triangles()
+        n_v, n_t = len(me.vertices), len(me.loop_triangles)
+        co = np.empty(3 * n_v, dtype=np.float32)
+        me.vertices.foreach_get("co", co)
+        mw = np.array(obj_eval.matrix_world, dtype=np.float64)
+        pos = co.reshape(-1, 3).astype(np.float64) @ mw[:3, :3].T + mw[:3, 3]
+        tris = np.empty(3 * n_t, dtype=np.int32)
+        me.loop_triangles.foreach_get("vertices", tris)
+        loops = np.empty(3 * n_t, dtype=np.int32)
+        me.loop_triangles.foreach_get("loops", loops)
+        mat = np.empty(n_t, dtype=np.int32)
+        me.loop_triangles.foreach_get("material_index", mat)
+        corner_uv = None
+        if me.uv_layers.active is not None and len(me.loops):
+            uv = np.empty(2 * len(me.loops), dtype=np.float32)
+            me.uv_layers.active.uv.foreach_get("vector", uv)
+            corner_uv = uv.reshape(-1, 2)[loops].reshape(-1, 3, 2).astype(np.float64)
+        normals = None
+        if len(me.loops):
+            cn = np.empty(3 * len(me.loops), dtype=np.float32)
+            me.corner_normals.foreach_get("vector", cn)
+            nrm = np.linalg.inv(mw[:3, :3]).T
+            n = cn.reshape(-1, 3)[loops].astype(np.float64) @ nrm.T
+            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+            normals = n.reshape(-1, 3, 3)
+        return pipeline.SourceMesh(pos, tris.reshape(-1, 3).astype(np.int64), corner_uv,
+                                   mat.astype(np.int64), normals)
+    finally:
+        obj_eval.to_mesh_clear()
+
+
+def _pixel_angle(scene, cam):
+    """Radians per pixel on the view sphere for the scene's camera and render resolution."""
+    r = scene.render
+    px = max(r.resolution_x * r.resolution_percentage / 100.0, r.resolution_y * r.resolution_percentage / 100.0, 1.0)
+    fov = cam.data.angle if cam.data.type != "ORTHO" else math.radians(60.0)
+    return fov / px
+
+
+def scene_geometry(scene, depsgraph):
+    """(mapping.Scene, settings.core Settings, camera object) or RebuildError."""
+    g = scene.grlens
+    cam = scene.camera
+    if cam is None:
+        raise RebuildError("the scene has no camera")
+    if g.black_hole is None:
+        raise RebuildError("no black hole object is set (scene.grlens.black_hole)")
+    cam_eval = cam.evaluated_get(depsgraph)
+    hole_eval = g.black_hole.evaluated_get(depsgraph)
+    geo = mapping.Scene(np.array(cam_eval.matrix_world.translation), np.array(hole_eval.matrix_world.translation), g.r_s)
+    r_obs = geo.r_obs
+    if r_obs <= 1.0:
+        raise RebuildError(f"the camera is inside the event horizon (r = {r_obs:.4g} r_s)")
+    if r_obs <= 1.5:
+        raise RebuildError(f"the camera is inside the photon sphere (r = {r_obs:.4g} r_s); grlens needs r > 1.5 r_s")
+    orders = tuple(o for o, on in ((1, g.show_order_1), (2, g.show_order_2)) if on)
+    settings = pipeline.Settings(max_tess_level=g.max_tess_level, tess_a=g.tess_a, tess_b=g.tess_b,
+                                 cull_ratio=g.cull_ratio, orders=orders,
+                                 pixel_angle=_pixel_angle(scene, cam_eval))
+    return geo, settings, cam_eval
+
+
+def _image_object(scene, src, order):
+    name = f"{src.name}.GR{order}"
+    obj = bpy.data.objects.get(name)
+    if obj is not None and (obj.type != "MESH" or obj.grlens.source != src or obj.grlens.order != order):
+        obj = None  # a user's object of that name: leave it alone
+        name = f"{src.name}.GR{order}.grlens"
+        obj = bpy.data.objects.get(name)
+    if obj is None:
+        mesh = bpy.data.meshes.new(name)
+        obj = bpy.data.objects.new(name, mesh)
+        obj.grlens.source = src
+        obj.grlens.order = order
+        _collection(scene).objects.link(obj)
+    elif obj.name not in _collection(scene).objects:
+        _collection(scene).objects.link(obj)
+    return obj
+
+
+def remove_image_object(obj):
+    mesh = obj.data
+    bpy.data.objects.remove(obj, do_unlink=True)
+    if mesh is not None and mesh.users == 0:
+        bpy.data.meshes.remove(mesh)
+
+
+def _set_source_visibility(src, lensed: bool):
+    if lensed and src.get("grlens_hidden") is None:
+        src.grlens.saved_visible_camera = src.visible_camera
+        src["grlens_hidden"] = 1
+        src.visible_camera = False
+    elif not lensed and src.get("grlens_hidden") is not None:
+        src.visible_camera = src.grlens.saved_visible_camera
+        del src["grlens_hidden"]
+
+
+def rebuild_scene(scene, depsgraph=None) -> dict:
+    """Rebuild every image object of ``scene`` for its current frame. Returns a report dict
+    {"status": str, "objects": {name: {order: (vertices, faces, culled)}}, "warnings": [...]}."""
+    depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+    report = {"status": "", "objects": {}, "warnings": []}
+    srcs = sources(scene)
+    wanted = set()
+    try:
+        if not srcs:
+            raise RebuildError("no object is marked for lensing (obj.grlens.enabled)")
+        geo, settings, cam = scene_geometry(scene, depsgraph)
+        g = scene.grlens
+        lut = lutcache.get_lut(geo.r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
+        light = None
+        if g.use_gr_illumination:
+            if g.light is None:
+                report["warnings"].append("GR illumination is on but no light object is set")
+            else:
+                lpos = np.array(g.light.evaluated_get(depsgraph).matrix_world.translation)
+                r_light = float(np.linalg.norm(lpos - geo.hole) / geo.r_s)
+                if r_light <= 1.5:
+                    report["warnings"].append(f"the light is inside the photon sphere (r = {r_light:.3g} r_s)")
+                else:
+                    light = pipeline.Light(lpos, g.light_intensity,
+                                           lutcache.get_lut(r_light, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi))
+        for src in srcs:
+            src_eval = src.evaluated_get(depsgraph)
+            mesh = _extract(src_eval)
+            images = pipeline.build_images(mesh, geo, lut, settings, light)
+            mats = [slot.material for slot in src.material_slots]
+            entry = {}
+            for order, img in images.items():
+                obj = _image_object(scene, src, order)
+                upload.upload(obj.data, img, mats)
+                wanted.add(obj.name)
+                entry[order] = (len(img.positions), len(img.tris), img.report.total_culled())
+                bad = img.report.extra.get("bad_source_triangles", 0)
+                if bad and order == settings.orders[0]:
+                    report["warnings"].append(f"{src.name}: skipped {bad} degenerate or non-finite triangles")
+            report["objects"][src.name] = entry
+            _set_source_visibility(src, True)
+        report["status"] = f"{len(srcs)} object(s) lensed, r_obs = {geo.r_obs:.4g} r_s"
+    except RebuildError as exc:
+        report["status"] = f"grlens: {exc}"
+    except ValueError as exc:  # bad numbers from the scene (r_s, NaN transforms, LUT parameters)
+        report["status"] = f"grlens: {exc}"
+    # image objects not rebuilt now: keep (empty) those of enabled sources while the scene is invalid,
+    # remove those of sources that are gone or disabled and of orders switched off
+    failed = report["status"].startswith("grlens:")
+    for obj in list(bpy.data.objects):
+        if is_image_object(obj) and obj.name not in wanted:
+            src = obj.grlens.source
+            if failed and src is not None and src.grlens.enabled:
+                obj.data.clear_geometry()
+            else:
+                remove_image_object(obj)
+    for o in scene.objects:
+        if o.type == "MESH" and not is_image_object(o) and not o.grlens.enabled:
+            _set_source_visibility(o, False)
+    scene.grlens.status = report["status"]
+    return report

@@ -1,0 +1,65 @@
+"""Mesh upload: numpy image meshes into Blender mesh data-blocks (fast foreach_set paths).
+
+Units: positions in Blender units, written in world space (image objects have identity transforms).
+Attributes written: UV map ``UVMap`` (corner), ``light_travel_time`` (point, float: c*dt in scene
+length units), ``grlens_irradiance`` (corner, float; only with GR illumination), material indices.
+"""
+import hashlib
+
+import numpy as np
+
+
+def _attr(mesh, name, type_, domain):
+    a = mesh.attributes.get(name)
+    if a is None or a.data_type != type_ or a.domain != domain:
+        if a is not None:
+            mesh.attributes.remove(a)
+        a = mesh.attributes.new(name, type_, domain)
+    return a
+
+
+def same_topology(mesh, img) -> bool:
+    return (len(mesh.vertices) == len(img.positions) and len(mesh.polygons) == len(img.tris)
+            and mesh.get("grlens_topology") == _topology_key(img))
+
+
+def _topology_key(img) -> str:
+    return hashlib.blake2b(np.ascontiguousarray(img.tris, dtype=np.int64).tobytes(), digest_size=8).hexdigest()
+
+
+def upload(mesh, img, materials) -> None:
+    """Write ``img`` (a core.pipeline.ImageMesh) into ``mesh``. If the topology is unchanged only the
+    vertex positions and per-vertex/corner values are rewritten."""
+    pos = np.ascontiguousarray(img.positions, dtype=np.float32).ravel()
+    if not same_topology(mesh, img):
+        mesh.clear_geometry()
+        n_v, n_f = len(img.positions), len(img.tris)
+        mesh.vertices.add(n_v)
+        mesh.loops.add(3 * n_f)
+        mesh.polygons.add(n_f)
+        mesh.attributes["position"].data.foreach_set("vector", pos)
+        mesh.attributes[".corner_vert"].data.foreach_set(
+            "value", np.ascontiguousarray(img.tris, dtype=np.int32).ravel())
+        mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * n_f, 3, dtype=np.int32))
+        if n_f:
+            mesh.polygons.foreach_set("material_index", np.ascontiguousarray(img.material, dtype=np.int32))
+            mesh.polygons.foreach_set("use_smooth", np.ones(n_f, dtype=bool))
+        mesh["grlens_topology"] = _topology_key(img)
+        mesh.update()
+    else:
+        mesh.attributes["position"].data.foreach_set("vector", pos)
+        mesh.update_tag()
+    if img.corner_uv is not None:
+        uv = mesh.uv_layers.get("UVMap") or mesh.uv_layers.new(name="UVMap")
+        uv.uv.foreach_set("vector", np.ascontiguousarray(img.corner_uv, dtype=np.float32).ravel())
+    _attr(mesh, "light_travel_time", "FLOAT", "POINT").data.foreach_set(
+        "value", np.ascontiguousarray(img.light_travel_time, dtype=np.float32))
+    if img.irradiance is not None:
+        _attr(mesh, "grlens_irradiance", "FLOAT", "CORNER").data.foreach_set(
+            "value", np.ascontiguousarray(img.irradiance, dtype=np.float32).ravel())
+    elif mesh.attributes.get("grlens_irradiance") is not None:
+        mesh.attributes.remove(mesh.attributes["grlens_irradiance"])
+    if list(mesh.materials) != list(materials):
+        mesh.materials.clear()
+        for m in materials:
+            mesh.materials.append(m)
