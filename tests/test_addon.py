@@ -71,10 +71,10 @@ def test_demo_scene_builds_both_orders_and_leaves_source_alone():
         assert np.all(np.isfinite(ltt)) and ltt.min() > 30  # c*dt > the 40 BU camera distance minus the orbit
     after = np.array([v.co[:] for v in sphere.data.vertices])
     assert np.array_equal(before, after) and len(sphere.data.polygons) == n_poly
-    assert sphere.visible_camera is False
-    # disabling restores the source's camera visibility and removes its images
+    assert sphere.visible_camera is False and sphere.hide_render is True
+    # disabling restores the source's visibility and removes its images
     sphere.grlens.enabled = False
-    assert sphere.visible_camera is True and not _image_objects()
+    assert sphere.visible_camera is True and sphere.hide_render is False and not _image_objects()
 
 
 def test_images_follow_the_frame():

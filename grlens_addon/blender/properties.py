@@ -72,6 +72,8 @@ class GRLENS_ObjectSettings(bpy.types.PropertyGroup):
                        description="For image objects made by grlens: 1 or 2 (read only)")
     saved_visible_camera: BoolProperty(default=True, options={"HIDDEN"},
                                        description="The source's own camera visibility, restored when disabled")
+    saved_hide_render: BoolProperty(default=False, options={"HIDDEN"},
+                                    description="The source's own render visibility, restored when disabled")
 
 
 CLASSES = (GRLENS_SceneSettings, GRLENS_ObjectSettings)

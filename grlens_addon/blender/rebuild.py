@@ -3,7 +3,8 @@
 Runs the numeric core (``grlens_addon.core.pipeline``) for every object with ``obj.grlens.enabled``
 and uploads the results into mesh objects in the ``grlens`` collection. Source objects and their
 meshes are never modified (only their camera visibility is switched off while they are lensed, and
-restored when they are not). Units: Blender units; r_s from ``scene.grlens.r_s``.
+restored when they are not: see _set_source_visibility). Units: Blender units; r_s from
+``scene.grlens.r_s``.
 """
 from __future__ import annotations
 
@@ -131,13 +132,28 @@ def remove_image_object(obj):
 
 
 def _set_source_visibility(src, lensed: bool):
+    """Hide a lensed source from renders (hide_render: every engine, Workbench included, which has no
+    per-object camera visibility) and from the camera; restore the user's settings when it is not."""
     if lensed and src.get("grlens_hidden") is None:
         src.grlens.saved_visible_camera = src.visible_camera
+        src.grlens.saved_hide_render = src.hide_render
         src["grlens_hidden"] = 1
         src.visible_camera = False
+        src.hide_render = True
     elif not lensed and src.get("grlens_hidden") is not None:
         src.visible_camera = src.grlens.saved_visible_camera
+        src.hide_render = src.grlens.saved_hide_render
         del src["grlens_hidden"]
+
+
+def _source_depsgraph(depsgraph):
+    """The depsgraph that evaluates the (render-hidden) sources at the current frame: the view layer's
+    own depsgraph, updated when a render depsgraph is being used (render-hidden objects are not in
+    the render depsgraph). Sources therefore use their modifiers' viewport settings."""
+    view_dg = depsgraph.view_layer.depsgraph
+    if depsgraph.mode == "RENDER":
+        view_dg.update()
+    return view_dg
 
 
 def rebuild_scene(scene, depsgraph=None) -> dict:
@@ -165,8 +181,9 @@ def rebuild_scene(scene, depsgraph=None) -> dict:
                 else:
                     light = pipeline.Light(lpos, g.light_intensity,
                                            lutcache.get_lut(r_light, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi))
+        src_dg = _source_depsgraph(depsgraph)
         for src in srcs:
-            src_eval = src.evaluated_get(depsgraph)
+            src_eval = src.evaluated_get(src_dg)
             mesh = _extract(src_eval)
             images = pipeline.build_images(mesh, geo, lut, settings, light)
             mats = [slot.material for slot in src.material_slots]
