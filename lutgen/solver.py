@@ -359,13 +359,13 @@ def _inverse_lagrange(xs, ys):
     return x, dx
 
 
-def _polish(f, lo, hi, flo, fhi, x0, *, slope0=None, xtol=1e-14, ftol=4e-15, maxiter=100):
+def _polish(f, lo, hi, flo, fhi, x0, *, slope0=None, xtol=1e-13, ftol=1e-14, maxiter=100):
     """Safeguarded secant (regula falsi with bisection fallback) for increasing f on brackets.
 
     f(x, idx) evaluates the elements ``idx``; lo/hi bracket the roots with f(lo) <= 0 <= f(hi).
     ``slope0`` (optional): an estimate of dx/df at the root, used for the first (Newton-like) step.
     Stops when the step or the bracket is below ``xtol`` (relative to max(1, |x|)) or |f| <= ``ftol``
-    (the swept angles carry ~1e-15 rad of rounding, so closer is noise).
+    (the swept angles, up to 2 pi, carry ~1e-14 rad of rounding, so closer is noise).
     """
     x = x0.copy()
     lo, hi, flo, fhi = lo.copy(), hi.copy(), flo.copy(), fhi.copy()
