@@ -235,7 +235,7 @@ def _finish(r_obs, u, uo, phi, order, b, eps, branch):
 # --------------------------------------------------------------------------------------------------
 # Grids: one observer, rows of constant r, many angles (the lookup table's shape)
 # --------------------------------------------------------------------------------------------------
-_N_SAMPLES = 96   # samples of the ray family per row
+_N_SAMPLES = 768   # samples of the ray family per row
 _Q_MAX = 36.0     # family parameter range, q in [0, _Q_MAX] (see _family)
 
 
