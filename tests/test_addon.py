@@ -151,3 +151,19 @@ def test_order_switch_and_clear():
     assert set(_image_objects()) == {"OrbitingSphere.GR1"}
     bpy.ops.grlens.clear()
     assert not _image_objects() and sphere.visible_camera and not sphere.grlens.enabled
+
+
+def test_unchanged_objects_are_not_rebuilt():
+    scene, sphere = _small_demo()
+    scene.grlens.auto_update = False  # only the explicit calls below rebuild
+    _place(sphere, 90)
+    from grlens_addon.blender.rebuild import rebuild_scene
+
+    first = rebuild_scene(scene)
+    assert isinstance(first["objects"]["OrbitingSphere"], dict)
+    again = rebuild_scene(scene)
+    assert again["objects"]["OrbitingSphere"] == "unchanged"
+    scene.grlens.tess_a = 4.0  # a setting changed: rebuilt
+    assert isinstance(rebuild_scene(scene)["objects"]["OrbitingSphere"], dict)
+    _place(sphere, 80)  # the object moved: rebuilt
+    assert isinstance(rebuild_scene(scene)["objects"]["OrbitingSphere"], dict)

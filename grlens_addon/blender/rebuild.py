@@ -8,6 +8,7 @@ restored when they are not: see _set_source_visibility). Units: Blender units; r
 """
 from __future__ import annotations
 
+import hashlib
 import math
 
 import bpy
@@ -156,6 +157,19 @@ def _source_depsgraph(depsgraph):
     return view_dg
 
 
+def _input_key(mesh, geo, settings, lut, light, mats) -> str:
+    """Digest of everything an image depends on: world-space geometry and attributes, camera, hole,
+    r_s, settings, LUT parameters, light and material slots. Equal digests give identical images."""
+    h = hashlib.blake2b(digest_size=16)
+    for a in (mesh.positions, mesh.tris, mesh.corner_uv, mesh.material, mesh.corner_normals,
+              geo.camera, geo.hole):
+        h.update(b"|" if a is None else np.ascontiguousarray(a).tobytes())
+    h.update(repr((geo.r_s, settings, tuple(sorted(lut.parameters.items())), [m.name if m else None for m in mats],
+                   None if light is None else (tuple(light.position), light.intensity,
+                                               tuple(sorted(light.lut.parameters.items()))))).encode())
+    return h.hexdigest()
+
+
 def rebuild_scene(scene, depsgraph=None) -> dict:
     """Rebuild every image object of ``scene`` for its current frame. Returns a report dict
     {"status": str, "objects": {name: {order: (vertices, faces, culled)}}, "warnings": [...]}."""
@@ -185,19 +199,25 @@ def rebuild_scene(scene, depsgraph=None) -> dict:
         for src in srcs:
             src_eval = src.evaluated_get(src_dg)
             mesh = _extract(src_eval)
-            images = pipeline.build_images(mesh, geo, lut, settings, light)
             mats = [slot.material for slot in src.material_slots]
+            key = _input_key(mesh, geo, settings, lut, light, mats)
+            objs = {order: _image_object(scene, src, order) for order in settings.orders}
+            wanted.update(o.name for o in objs.values())
+            _set_source_visibility(src, True)
+            if all(o.get("grlens_input") == key for o in objs.values()):
+                report["objects"][src.name] = "unchanged"  # same geometry, camera and settings: skip
+                continue
+            images = pipeline.build_images(mesh, geo, lut, settings, light)
             entry = {}
             for order, img in images.items():
-                obj = _image_object(scene, src, order)
+                obj = objs[order]
                 upload.upload(obj.data, img, mats)
-                wanted.add(obj.name)
+                obj["grlens_input"] = key
                 entry[order] = (len(img.positions), len(img.tris), img.report.total_culled())
                 bad = img.report.extra.get("bad_source_triangles", 0)
                 if bad and order == settings.orders[0]:
                     report["warnings"].append(f"{src.name}: skipped {bad} degenerate or non-finite triangles")
             report["objects"][src.name] = entry
-            _set_source_visibility(src, True)
         report["status"] = f"{len(srcs)} object(s) lensed, r_obs = {geo.r_obs:.4g} r_s"
     except RebuildError as exc:
         report["status"] = f"grlens: {exc}"
