@@ -167,3 +167,26 @@ def test_unchanged_objects_are_not_rebuilt():
     assert isinstance(rebuild_scene(scene)["objects"]["OrbitingSphere"], dict)
     _place(sphere, 80)  # the object moved: rebuilt
     assert isinstance(rebuild_scene(scene)["objects"]["OrbitingSphere"], dict)
+
+
+def test_gr_illumination_attribute_and_node_group():
+    scene, sphere = _small_demo()
+    _place(sphere, 90)
+    light = bpy.data.objects.new("Lamp", None)
+    light.location = (39.39, 0.0, 6.95)  # seed 000, section 4.3 (r = 20 r_s with r_s = 2)
+    scene.collection.objects.link(light)
+    g = scene.grlens
+    g.light = light
+    g.use_gr_illumination = True
+    bpy.ops.grlens.rebuild()
+    from grlens_addon.blender.shading import GROUP_NAME
+
+    assert GROUP_NAME in bpy.data.node_groups
+    mesh = bpy.data.objects["OrbitingSphere.GR1"].data
+    a = mesh.attributes["grlens_irradiance"]
+    assert a.domain == "CORNER"
+    vals = np.empty(len(mesh.loops), np.float32)
+    a.data.foreach_get("value", vals)
+    assert np.all(np.isfinite(vals)) and vals.max() > 0 and vals.min() == 0  # lit side and dark side
+    g.use_gr_illumination = False
+    assert "grlens_irradiance" not in bpy.data.objects["OrbitingSphere.GR1"].data.attributes

@@ -15,7 +15,7 @@ import bpy
 import numpy as np
 
 from ..core import mapping, pipeline
-from . import lutcache, upload
+from . import lutcache, shading, upload
 
 COLLECTION = "grlens"
 
@@ -185,6 +185,7 @@ def rebuild_scene(scene, depsgraph=None) -> dict:
         lut = lutcache.get_lut(geo.r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
         light = None
         if g.use_gr_illumination:
+            shading.ensure_node_group()
             if g.light is None:
                 report["warnings"].append("GR illumination is on but no light object is set")
             else:
