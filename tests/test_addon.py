@@ -190,3 +190,25 @@ def test_gr_illumination_attribute_and_node_group():
     assert np.all(np.isfinite(vals)) and vals.max() > 0 and vals.min() == 0  # lit side and dark side
     g.use_gr_illumination = False
     assert "grlens_irradiance" not in bpy.data.objects["OrbitingSphere.GR1"].data.attributes
+
+
+def test_image_materials_are_copies_with_aovs_and_the_users_material_is_untouched():
+    scene, sphere = _small_demo()
+    _place(sphere, 90)
+    mat = bpy.data.materials.new("Mine")
+    mat.use_nodes = True
+    sphere.data.materials.append(mat)
+    n_nodes = len(mat.node_tree.nodes)
+    bpy.ops.grlens.rebuild()
+    img = bpy.data.objects["OrbitingSphere.GR1"]
+    used = img.data.materials[0]
+    assert used.name == "Mine (grlens)" and used != mat
+    assert len(mat.node_tree.nodes) == n_nodes  # the user's material is not edited
+    assert sum(n.bl_idname == "ShaderNodeOutputAOV" for n in used.node_tree.nodes) == 2
+    assert {a.name for a in scene.view_layers[0].aovs} >= {"light_travel_time", "image_order"}
+    assert "grlens_order" in img.data.attributes
+    # editing the user's material refreshes the copy
+    mat.node_tree.nodes.new("ShaderNodeTexChecker")
+    bpy.ops.grlens.rebuild()
+    used = bpy.data.objects["OrbitingSphere.GR1"].data.materials[0]
+    assert any(n.bl_idname == "ShaderNodeTexChecker" for n in used.node_tree.nodes)

@@ -61,3 +61,37 @@ def test_sphere_behind_the_hole_is_an_einstein_ring(engine, tmp_path):
     assert len(sectors) == 16  # light all around the hole
     assert not lit[int(cy) - 2:int(cy) + 3, int(cx) - 2:int(cx) + 3].any()  # dark centre (shadow)
     assert np.percentile(rad, 90) / np.percentile(rad, 10) < 2.0  # a ring, not a filled disc
+
+
+def test_cycles_writes_light_travel_time_and_order_aovs(tmp_path):
+    """Multilayer EXR from Cycles: the light_travel_time AOV holds c*dt of the image surfaces (for the
+    sphere beside the hole, between the first-order image's ~40 BU and the second-order's ~60 BU),
+    image_order holds 1 or 2, and the background holds 0."""
+    import OpenEXR
+
+    out = tmp_path / "side.exr"
+    p = subprocess.run([sys.executable, SCRIPT, "CYCLES", "sphere_side", str(out)], capture_output=True,
+                       text=True, timeout=600)
+    assert out.exists(), p.stdout[-2000:] + p.stderr[-2000:]
+    f = OpenEXR.File(str(out), separate_channels=True)
+    chans = {}
+    for part in f.parts:
+        chans.update({name: np.asarray(ch.pixels) for name, ch in part.channels.items()})
+    ltt = next(v for k, v in chans.items() if "light_travel_time" in k)
+    order = next(v for k, v in chans.items() if "image_order" in k)
+    from lutgen import connect
+
+    lo = float(connect(20.0, 3.5, np.pi / 2, 1).dt) * 2.0 * 0.9  # nearest first-order point, r_s = 2
+    hi = float(connect(20.0, 2.5, np.pi / 2, 2).dt) * 2.0 * 1.1  # farthest second-order point
+    # AOVs are averaged over each pixel's samples, so edge pixels mix in the background's 0: check
+    # pixels whose whole 3x3 neighbourhood lies inside one image
+    from scipy import ndimage
+
+    full = np.zeros(order.shape, bool)
+    for k in (1.0, 2.0):
+        inside = order == k
+        full |= ndimage.binary_erosion(inside, structure=np.ones((3, 3)))
+    assert full.sum() > 20
+    assert lo < ltt[full].min() and ltt[full].max() < hi
+    assert np.all((order >= 0) & (order <= 2))
+    assert np.all(ltt[order == 0] == 0)

@@ -197,10 +197,12 @@ def rebuild_scene(scene, depsgraph=None) -> dict:
                     light = pipeline.Light(lpos, g.light_intensity,
                                            lutcache.get_lut(r_light, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi))
         src_dg = _source_depsgraph(depsgraph)
+        shading.ensure_view_layer_aovs(scene)
         for src in srcs:
             src_eval = src.evaluated_get(src_dg)
             mesh = _extract(src_eval)
-            mats = [slot.material for slot in src.material_slots]
+            mats = [shading.image_material(slot.material) for slot in src.material_slots] or \
+                [shading.image_material(None)]
             key = _input_key(mesh, geo, settings, lut, light, mats)
             objs = {order: _image_object(scene, src, order) for order in settings.orders}
             wanted.update(o.name for o in objs.values())
@@ -213,6 +215,7 @@ def rebuild_scene(scene, depsgraph=None) -> dict:
             for order, img in images.items():
                 obj = objs[order]
                 upload.upload(obj.data, img, mats)
+                upload.set_order(obj.data, order)
                 obj["grlens_input"] = key
                 entry[order] = (len(img.positions), len(img.tris), img.report.total_culled())
                 bad = img.report.extra.get("bad_source_triangles", 0)

@@ -47,3 +47,85 @@ def ensure_node_group():
     for i, node in enumerate((gin, attr, scale, emit, gout)):
         node.location = (200 * i, 0)
     return tree
+
+
+# --------------------------------------------------------------------------------------------------
+# Render passes: light travel time and image order as AOVs
+# --------------------------------------------------------------------------------------------------
+AOVS = (("light_travel_time", "light_travel_time"), ("image_order", "grlens_order"))
+"""(AOV name, mesh attribute) pairs written by image materials."""
+
+COPY_SUFFIX = " (grlens)"
+
+
+def ensure_view_layer_aovs(scene):
+    """Value AOVs ``light_travel_time`` and ``image_order`` on every view layer of ``scene``
+    (Cycles and Eevee write them; Workbench writes no AOV)."""
+    for vl in scene.view_layers:
+        names = {a.name for a in vl.aovs}
+        for aov, _ in AOVS:
+            if aov not in names:
+                a = vl.aovs.add()
+                a.name = aov
+                a.type = "VALUE"
+
+
+def _digest(mat) -> str:
+    """A cheap fingerprint of a material's node tree (node types, names, links, input defaults)."""
+    if mat is None or not mat.use_nodes or mat.node_tree is None:
+        return repr((getattr(mat, "name", None), tuple(getattr(mat, "diffuse_color", ()))))
+    parts = []
+    for n in mat.node_tree.nodes:
+        vals = []
+        for i in n.inputs:
+            v = getattr(i, "default_value", None)
+            try:
+                v = tuple(v)
+            except TypeError:
+                pass
+            vals.append((i.identifier, v))
+        parts.append((n.bl_idname, n.name, tuple(vals)))
+    links = [(l.from_node.name, l.from_socket.identifier, l.to_node.name, l.to_socket.identifier)
+             for l in mat.node_tree.links]
+    return repr((sorted(parts, key=repr), sorted(links)))
+
+
+def _add_aov_nodes(tree):
+    for aov, attribute in AOVS:
+        a = tree.nodes.new("ShaderNodeAttribute")
+        a.attribute_type = "GEOMETRY"
+        a.attribute_name = attribute
+        a.label = f"grlens {attribute}"
+        out = tree.nodes.new("ShaderNodeOutputAOV")
+        if hasattr(out, "aov_name"):
+            out.aov_name = aov
+        else:
+            out.name = aov
+        out.label = f"grlens AOV {aov}"
+        tree.links.new(a.outputs["Fac"], out.inputs["Value"])
+
+
+def image_material(mat):
+    """The material image objects use in place of ``mat`` (None: an empty slot): a copy of it with
+    the grlens AOV outputs added. The user's material is never edited; the copy is refreshed when
+    the original changes."""
+    key = "(none)" if mat is None else mat.name
+    name = f"{key}{COPY_SUFFIX}"
+    digest = _digest(mat)
+    old = bpy.data.materials.get(name)
+    if old is not None and old.get("grlens_digest") == digest:
+        return old
+    if mat is None:
+        copy = bpy.data.materials.new(name + ".new")
+        copy.use_nodes = True
+    else:
+        copy = mat.copy()
+        copy.use_nodes = True
+    _add_aov_nodes(copy.node_tree)
+    copy["grlens_digest"] = digest
+    copy["grlens_material_copy"] = 1
+    if old is not None:  # the original changed: every image mesh switches to the fresh copy
+        old.user_remap(copy)
+        bpy.data.materials.remove(old)
+    copy.name = name
+    return copy

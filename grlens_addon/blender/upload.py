@@ -2,7 +2,8 @@
 
 Units: positions in Blender units, written in world space (image objects have identity transforms).
 Attributes written: UV map ``UVMap`` (corner), ``light_travel_time`` (point, float: c*dt in scene
-length units), ``grlens_irradiance`` (corner, float; only with GR illumination), material indices.
+length units), ``grlens_order`` (point, float: 1 or 2), ``grlens_irradiance`` (corner, float; only
+with GR illumination), material indices.
 """
 import hashlib
 
@@ -63,3 +64,9 @@ def upload(mesh, img, materials) -> None:
         mesh.materials.clear()
         for m in materials:
             mesh.materials.append(m)
+
+
+def set_order(mesh, order: int) -> None:
+    """Point attribute ``grlens_order`` (1.0 or 2.0) for the image-order AOV."""
+    a = _attr(mesh, "grlens_order", "FLOAT", "POINT")
+    a.data.foreach_set("value", np.full(len(mesh.vertices), float(order), dtype=np.float32))

@@ -4,6 +4,8 @@ Usage: python render_check.py ENGINE SCENE OUT.png
 ENGINE: CYCLES | BLENDER_WORKBENCH | EEVEE (the engine id differs between 4.2/4.5 and 5.0).
 SCENE: triangle_behind (seed 000, section 4.1, at p2 = (-5, 0.5, -0.5), r_s = 2, camera at 40 BU)
        sphere_behind (section 4.2: sphere of radius 0.5 r_s at 3 r_s directly behind the hole)
+       sphere_side (the same sphere at 90 degrees from the axis)
+An OUT path ending in .exr writes a multilayer OpenEXR with the grlens AOVs.
 Both use an emission material so that no light is needed; the world is black. The image is 160x90
 (vertical field of view 20 deg, matching the paper's camera); the hole's centre projects to the
 image centre.
@@ -52,12 +54,13 @@ def main(engine, which, out):
         p = (-5.0, 0.5, -0.5)
         verts = [p, (p[0], p[1] + 3.0, p[2]), (p[0], p[1], p[2] + 3.0)]
         mesh.from_pydata(verts, [], [(0, 1, 2)])
-    elif which == "sphere_behind":
+    elif which in ("sphere_behind", "sphere_side"):
         import bmesh
 
         bm = bmesh.new()
         bmesh.ops.create_uvsphere(bm, u_segments=36, v_segments=18, radius=0.5 * r_s)
-        bmesh.ops.translate(bm, verts=bm.verts, vec=(-3 * r_s, 0.0, 0.01 * r_s))
+        where = (-3 * r_s, 0.0, 0.01 * r_s) if which == "sphere_behind" else (0.0, 3 * r_s, 0.01 * r_s)
+        bmesh.ops.translate(bm, verts=bm.verts, vec=where)
         bm.to_mesh(mesh)
         bm.free()
     else:
@@ -86,6 +89,13 @@ def main(engine, which, out):
         scene.display.shading.single_color = (1, 1, 1)
     g.auto_update = True
     bpy.ops.grlens.rebuild()
+    if out.endswith(".exr"):  # multilayer EXR with the grlens AOVs
+        fmt = r.image_settings
+        if bpy.app.version >= (5, 0, 0):
+            fmt.media_type = "MULTI_LAYER_IMAGE"
+            fmt.use_exr_interleave = True
+        fmt.file_format = "OPEN_EXR_MULTILAYER"
+        fmt.color_depth = "32"
     r.filepath = out
     bpy.ops.render.render(write_still=True)
     print("GRLENS_STATUS", g.status)
