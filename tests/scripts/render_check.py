@@ -73,8 +73,13 @@ def main(engine, which, out):
     g.black_hole, g.r_s = hole, r_s
     g.max_tess_level = 16
     obj.grlens.enabled = True
-    scene.world = bpy.data.worlds.new("Black")
-    scene.world.color = (0, 0, 0)
+    world = bpy.data.worlds.new("Black")
+    world.color = (0, 0, 0)
+    world.use_nodes = True  # 5.0 worlds always use nodes: make the background black there too
+    for node in world.node_tree.nodes:
+        if node.bl_idname == "ShaderNodeBackground":
+            node.inputs["Strength"].default_value = 0.0
+    scene.world = world
     r = scene.render
     r.resolution_x, r.resolution_y, r.resolution_percentage = 160, 90, 100
     if engine == "EEVEE":
