@@ -212,3 +212,25 @@ def test_image_materials_are_copies_with_aovs_and_the_users_material_is_untouche
     bpy.ops.grlens.rebuild()
     used = bpy.data.objects["OrbitingSphere.GR1"].data.materials[0]
     assert any(n.bl_idname == "ShaderNodeTexChecker" for n in used.node_tree.nodes)
+
+
+def test_save_and_reload_keep_settings_images_and_handlers(tmp_path):
+    scene, sphere = _small_demo()
+    _place(sphere, 90)
+    bpy.ops.grlens.rebuild()
+    n_before = len(bpy.data.objects["OrbitingSphere.GR1"].data.polygons)
+    path = str(tmp_path / "scene.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    assert scene.grlens.black_hole.name == "BlackHole" and scene.grlens.r_s == 2.0
+    sphere = bpy.data.objects["OrbitingSphere"]
+    assert sphere.grlens.enabled and sphere.hide_render
+    assert set(_image_objects()) == {"OrbitingSphere.GR1", "OrbitingSphere.GR2"}
+    assert len(bpy.data.objects["OrbitingSphere.GR1"].data.polygons) == n_before
+    # the persistent frame handler still runs after loading: moving the sphere and changing frame rebuilds
+    before = np.array([v.co[:] for v in bpy.data.objects["OrbitingSphere.GR1"].data.vertices])
+    _place(sphere, 60)
+    scene.frame_set(scene.frame_current + 1)
+    after = np.array([v.co[:] for v in bpy.data.objects["OrbitingSphere.GR1"].data.vertices])
+    assert before.shape != after.shape or not np.allclose(before, after)
