@@ -96,3 +96,16 @@ def test_cycles_writes_light_travel_time_and_order_aovs(tmp_path):
     assert lo < ltt[full].min() and ltt[full].max() < hi
     assert np.all((order >= 0) & (order <= 2))
     assert np.all(ltt[order == 0] == 0)
+
+
+def test_animation_render_rebuilds_every_frame(tmp_path):
+    """render(animation=True), the loop of `blender -b file.blend -a`: each frame shows that frame's
+    images (the sphere moves 30 degrees along its orbit between the two frames)."""
+    out = tmp_path / "anim"
+    p = subprocess.run([sys.executable, SCRIPT, "BLENDER_WORKBENCH", "demo_animation", str(out)],
+                       capture_output=True, text=True, timeout=600)
+    frames = [tmp_path / f"anim_{f:04d}.png" for f in (1, 31)]
+    assert all(f.exists() for f in frames), p.stdout[-2000:] + p.stderr[-2000:]
+    a, b = (np.asarray(Image.open(f).convert("L"), dtype=np.float64) for f in frames)
+    assert (a > 40).sum() > 20 and (b > 40).sum() > 20
+    assert np.abs(a - b).mean() > 0.5  # the images moved

@@ -5,6 +5,7 @@ ENGINE: CYCLES | BLENDER_WORKBENCH | EEVEE (the engine id differs between 4.2/4.
 SCENE: triangle_behind (seed 000, section 4.1, at p2 = (-5, 0.5, -0.5), r_s = 2, camera at 40 BU)
        sphere_behind (section 4.2: sphere of radius 0.5 r_s at 3 r_s directly behind the hole)
        sphere_side (the same sphere at 90 degrees from the axis)
+       demo_animation (grlens.demo_scene, frames 1 and 31 rendered as an animation)
 An OUT path ending in .exr writes a multilayer OpenEXR with the grlens AOVs.
 Both use an emission material so that no light is needed; the world is black. The image is 160x90
 (vertical field of view 20 deg, matching the paper's camera); the hole's centre projects to the
@@ -35,9 +36,25 @@ def emission_material():
     return mat
 
 
+def render_demo_animation(engine, out):
+    """The demo scene's orbit, frames 1 and 31, rendered as an animation (the `blender -b -a` loop):
+    the frame handler must rebuild the images for each frame. Writes OUT_0001.png, OUT_0031.png."""
+    bpy.ops.grlens.demo_scene(r_s=2.0)
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end, scene.frame_step = 1, 31, 30
+    r = scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = 160, 90, 100
+    r.engine = engine
+    r.filepath = out + "_"
+    bpy.ops.render.render(animation=True)
+    print("GRLENS_STATUS", scene.grlens.status)
+
+
 def main(engine, which, out):
     grlens_addon.register()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    if which == "demo_animation":
+        return render_demo_animation(engine, out)
     scene = bpy.context.scene
     r_s = 2.0
     hole = bpy.data.objects.new("BlackHole", None)
