@@ -234,3 +234,13 @@ def test_save_and_reload_keep_settings_images_and_handlers(tmp_path):
     scene.frame_set(scene.frame_current + 1)
     after = np.array([v.co[:] for v in bpy.data.objects["OrbitingSphere.GR1"].data.vertices])
     assert before.shape != after.shape or not np.allclose(before, after)
+
+
+def test_no_data_block_growth_over_frames():
+    """Image meshes and material copies are reused frame after frame: no orphan growth."""
+    scene, sphere = _small_demo()
+    scene.frame_set(2)
+    counts = (len(bpy.data.meshes), len(bpy.data.materials), len(bpy.data.objects))
+    for f in range(3, 40, 3):  # along the orbit, away from the ring configurations
+        scene.frame_set(f)
+        assert (len(bpy.data.meshes), len(bpy.data.materials), len(bpy.data.objects)) == counts
