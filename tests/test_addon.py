@@ -244,3 +244,30 @@ def test_no_data_block_growth_over_frames():
     for f in range(3, 40, 3):  # along the orbit, away from the ring configurations
         scene.frame_set(f)
         assert (len(bpy.data.meshes), len(bpy.data.materials), len(bpy.data.objects)) == counts
+
+
+def test_packed_lut_is_saved_and_used_exactly(tmp_path):
+    from grlens_addon.blender import lutcache
+
+    scene, sphere = _small_demo()
+    assert bpy.ops.grlens.pack_lut() == {"FINISHED"}
+    g = scene.grlens
+    key = (20.0, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
+    built = lutcache.get_lut(*key)
+    path = str(tmp_path / "packed.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    lutcache.clear()
+    import lutgen
+
+    calls = []
+    real = lutgen.build_lut
+    lutgen.build_lut = lambda *a, **k: calls.append(a) or real(*a, **k)
+    try:
+        loaded = lutcache.get_lut(*key)
+    finally:
+        lutgen.build_lut = real
+    assert not calls  # read from the file, not built
+    assert np.array_equal(loaded.data, built.data)
+    assert bpy.ops.grlens.unpack_luts() == {"FINISHED"}
+    assert lutcache.STORE not in bpy.data.texts

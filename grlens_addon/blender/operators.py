@@ -1,5 +1,5 @@
 """Operators (public scripting contract): ``bpy.ops.grlens.rebuild()``, ``bpy.ops.grlens.clear()``,
-``bpy.ops.grlens.demo_scene()``."""
+``bpy.ops.grlens.demo_scene()``, ``bpy.ops.grlens.pack_lut()``, ``bpy.ops.grlens.unpack_luts()``."""
 import math
 
 import bpy
@@ -107,4 +107,44 @@ class GRLENS_OT_demo_scene(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (GRLENS_OT_rebuild, GRLENS_OT_clear, GRLENS_OT_demo_scene)
+class GRLENS_OT_pack_lut(bpy.types.Operator):
+    """Store the lookup table for the current camera distance and settings in the .blend file, so that
+    other processes (render farms) load it instead of building it"""
+
+    bl_idname = "grlens.pack_lut"
+    bl_label = "Pack LUT into .blend"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        from . import lutcache
+        from .rebuild import RebuildError, scene_geometry
+
+        scene = context.scene
+        g = scene.grlens
+        try:
+            geo, _, _ = scene_geometry(scene, context.evaluated_depsgraph_get())
+        except (RebuildError, ValueError) as exc:
+            self.report({"ERROR"}, f"grlens: {exc}")
+            return {"CANCELLED"}
+        lut = lutcache.get_lut(geo.r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
+        lutcache.pack(lut)
+        self.report({"INFO"}, f"packed the {lut.n_r}x{lut.n_phi} LUT for r_obs = {lut.r_obs:.6g} r_s")
+        return {"FINISHED"}
+
+
+class GRLENS_OT_unpack_luts(bpy.types.Operator):
+    """Remove all lookup tables packed into the .blend file"""
+
+    bl_idname = "grlens.unpack_luts"
+    bl_label = "Remove Packed LUTs"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        from . import lutcache
+
+        n = lutcache.unpack_all()
+        self.report({"INFO"}, f"removed {n} packed LUT(s)")
+        return {"FINISHED"}
+
+
+CLASSES = (GRLENS_OT_rebuild, GRLENS_OT_clear, GRLENS_OT_demo_scene, GRLENS_OT_pack_lut, GRLENS_OT_unpack_luts)
