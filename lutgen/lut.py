@@ -125,10 +125,15 @@ class LUT:
                                        n_r=int(n_r), n_phi=int(n_phi))
 
     # -- interpolation --------------------------------------------------------------------------
-    def lookup(self, r, phi, order: int = 1) -> Lookup:
+    def lookup(self, r, phi, order: int = 1, quantities=QUANTITIES) -> Lookup:
         """Interpolated (xi, dt, ux, uy) at points (r, phi) (broadcast arrays; r in r_s, phi in
-        radians in [0, pi]) for the given order. NaN outside the table's domain."""
+        radians in [0, pi]) for the given order. NaN outside the table's domain. Only the
+        ``quantities`` asked for are interpolated; the others come back as None."""
         k = _order_index(order)
+        unknown = set(quantities) - set(QUANTITIES)
+        if unknown:
+            raise ValueError(f"unknown quantities {sorted(unknown)}; choose from {QUANTITIES}")
+        qi = [QUANTITIES.index(q) for q in quantities]
         r, phi = np.broadcast_arrays(np.asarray(r, dtype=np.float64), np.asarray(phi, dtype=np.float64))
         shape = r.shape
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -142,13 +147,13 @@ class LUT:
         gp = np.where(inside, np.clip(gp, 0.0, self.n_phi - 1), 0.0)
         ix, wx = _cubic_stencil(gx, self.n_r)
         ip, wp = _cubic_stencil(gp, self.n_phi)
-        table = self.data[k]  # (4, n_r, n_phi)
-        flat = table.reshape(len(QUANTITIES), -1)
+        flat = self.data[k].reshape(len(QUANTITIES), -1)[qi]  # (Q, n_r * n_phi)
         idx = ix[:, :, None] * self.n_phi + ip[:, None, :]  # (N, 4, 4)
         w = wx[:, :, None] * wp[:, None, :]
         vals = np.einsum("qnij,nij->qn", flat[:, idx], w)
         vals[:, ~inside] = np.nan
-        return Lookup(*(v.reshape(shape) for v in vals))
+        got = dict(zip(quantities, (v.reshape(shape) for v in vals)))
+        return Lookup(*(got.get(q) for q in QUANTITIES))
 
     def save(self, path) -> None:
         """Write the table to an OpenEXR file (see :mod:`lutgen.lutfile`)."""

@@ -98,3 +98,13 @@ def test_matches_and_progress():
     lut = build_lut(10.0, 1.5, 9.0, 16, 32, progress=lambda d, t: calls.append((d, t)))
     assert calls[-1][0] == calls[-1][1] and len(calls) >= 1
     assert lut.matches(10, 1.5, 9, 16, 32) and not lut.matches(10, 1.5, 9, 16, 33)
+
+
+def test_lookup_of_some_quantities(lut):
+    full = lut.lookup(np.array([2.0, 5.0]), np.array([0.3, 2.0]), 2)
+    part = lut.lookup(np.array([2.0, 5.0]), np.array([0.3, 2.0]), 2, quantities=("dt", "uy"))
+    assert part.xi is None and part.ux is None
+    np.testing.assert_array_equal(part.dt, full.dt)
+    np.testing.assert_array_equal(part.uy, full.uy)
+    with pytest.raises(ValueError):
+        lut.lookup(2.0, 0.3, 1, quantities=("zeta",))

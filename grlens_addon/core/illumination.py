@@ -36,7 +36,7 @@ def irradiance(points, normals, light, hole, r_s, lut, intensity=1.0, orders=(1,
     total = np.zeros(len(plane.r))
     parts = {}
     for order in orders:
-        look = lut.lookup(plane.r, plane.phi, order)
+        look = lut.lookup(plane.r, plane.phi, order, quantities=("dt", "ux", "uy"))
         u_r = look.ux * c + look.uy * s  # dr/dlambda
         r_uphi = -look.ux * s + look.uy * c  # r dphi/dlambda
         with np.errstate(invalid="ignore", divide="ignore"):

@@ -94,7 +94,8 @@ class Images:
     direction: (N, 3) unit apparent direction from the camera;
     distance: (N,) light travel distance c*dt (BU) = camera-image distance;
     valid: (N,) bool, finite image that is not on the axis;
-    plane: the PlaneCoordinates used; xi (rad), dt (r_s/c), ux, uy: the LUT values.
+    plane: the PlaneCoordinates used; xi (rad), dt (r_s/c): the LUT values (ux, uy are not looked up
+    for mapping and are None).
     """
 
     position: np.ndarray
@@ -120,7 +121,7 @@ def map_vertices(points: np.ndarray, scene: Scene, lut, order: int, plane: Plane
         raise ValueError(f"the LUT was built for r_obs = {lut.r_obs:.9g} r_s but the camera is at "
                          f"{scene.r_obs:.9g} r_s from the hole; rebuild the LUT")
     plane = plane if plane is not None else plane_coordinates(points, scene)
-    look = lut.lookup(plane.r, plane.phi, order)
+    look = lut.lookup(plane.r, plane.phi, order, quantities=("xi", "dt"))
     sign = 1.0 if order == 1 else -1.0
     c, s = np.cos(look.xi), np.sin(look.xi)
     direction = c[:, None] * scene.e1 + (sign * s)[:, None] * plane.e2
