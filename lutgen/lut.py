@@ -147,12 +147,13 @@ class LUT:
         gp = np.where(inside, np.clip(gp, 0.0, self.n_phi - 1), 0.0)
         ix, wx = _cubic_stencil(gx, self.n_r)
         ip, wp = _cubic_stencil(gp, self.n_phi)
-        flat = self.data[k].reshape(len(QUANTITIES), -1)[qi]  # (Q, n_r * n_phi)
-        idx = ix[:, :, None] * self.n_phi + ip[:, None, :]  # (N, 4, 4)
+        idx = ix[:, :, None] * self.n_phi + ip[:, None, :]  # (N, 4, 4) flat indices into a channel
         w = wx[:, :, None] * wp[:, None, :]
-        vals = np.einsum("qnij,nij->qn", flat[:, idx], w)
-        vals[:, ~inside] = np.nan
-        got = dict(zip(quantities, (v.reshape(shape) for v in vals)))
+        got = {}
+        for q, i in zip(quantities, qi):
+            v = np.einsum("nij,nij->n", self.data[k, i].reshape(-1).take(idx), w)  # a view, no copy
+            v[~inside] = np.nan
+            got[q] = v.reshape(shape)
         return Lookup(*(got.get(q) for q in QUANTITIES))
 
     def save(self, path) -> None:

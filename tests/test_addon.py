@@ -271,3 +271,36 @@ def test_packed_lut_is_saved_and_used_exactly(tmp_path):
     assert np.array_equal(loaded.data, built.data)
     assert bpy.ops.grlens.unpack_luts() == {"FINISHED"}
     assert lutcache.STORE not in bpy.data.texts
+
+
+def test_observer_camera_and_frustum():
+    """scene.grlens.observer lenses that camera's view, whichever camera renders; images are culled
+    against the observer's frustum; tess_max_error = 0 subdivides at least as much as the default."""
+    scene, sphere = _small_demo()
+    _place(sphere, 150)
+    bpy.ops.grlens.rebuild()
+    n_default = len(bpy.data.objects["OrbitingSphere.GR1"].data.polygons)
+    scene.grlens.tess_max_error = 0.0
+    bpy.ops.grlens.rebuild()
+    assert len(bpy.data.objects["OrbitingSphere.GR1"].data.polygons) >= n_default
+    scene.grlens.tess_max_error = 0.25
+    observer = scene.camera
+    # an external camera becomes the render camera; the images stay those seen by the observer
+    ext_data = bpy.data.cameras.new("External")
+    ext = bpy.data.objects.new("External", ext_data)
+    scene.collection.objects.link(ext)
+    ext.location = (0.0, -60.0, 20.0)
+    scene.grlens.observer = observer
+    scene.camera = ext
+    bpy.ops.grlens.rebuild()
+    pts = np.array([v.co[:] for v in bpy.data.objects["OrbitingSphere.GR1"].data.vertices])
+    ltt = np.empty(len(pts), np.float32)
+    bpy.data.objects["OrbitingSphere.GR1"].data.attributes["light_travel_time"].data.foreach_get("value", ltt)
+    np.testing.assert_allclose(np.linalg.norm(pts - np.array(observer.location), axis=1), ltt, rtol=1e-5)
+    # turn the observer away from the sphere: its images leave the frustum and are culled
+    scene.grlens.observer = None
+    scene.camera = observer
+    observer.rotation_euler = (math.radians(90), 0.0, math.radians(-90))  # looking along +x, away
+    bpy.ops.grlens.rebuild()
+    assert len(bpy.data.objects["OrbitingSphere.GR1"].data.polygons) == 0
+    assert len(bpy.data.objects["OrbitingSphere.GR2"].data.polygons) == 0

@@ -179,3 +179,89 @@ def test_illumination_back_side_gets_only_light_around_the_hole(lut):
     n = np.array([[1.0, 0.0, 0.0]])  # facing the hole/light side
     tot, parts = illumination.irradiance(p, n, light, HOLE, R_S, lut)
     assert parts[1][0] > 0 and parts[2][0] > 0 and parts[2][0] < parts[1][0]
+
+
+def test_error_cap_keeps_sub_edges_within_tolerance():
+    """Circular arcs (radius R pixels, opening angle theta): the level chosen with max_error_px keeps
+    each straight piece within the tolerance of the arc (up to the s/n^2 approximation), and is
+    never above the paper's level (eq. 19) or the edge's pixel count."""
+    pixel = 1e-3  # radians per pixel
+    tol = 0.25
+    for R_px in (20.0, 200.0, 2000.0):
+        for theta in np.radians([5.0, 20.0, 60.0, 90.0]):
+            chord_px = 2 * R_px * np.sin(theta / 2)
+            sagitta_px = R_px * (1 - np.cos(theta / 2))
+            rho = np.array([sagitta_px / chord_px])
+            n = subdivision.edge_levels(rho, 64, 5.0, 0.75, np.array([chord_px * pixel]), pixel, tol)[0]
+            paper = subdivision.edge_levels(rho, 64, 5.0, 0.75)[0]
+            assert n <= paper and n <= np.ceil(chord_px)
+            if n < paper:  # the cap was active: the pieces are within tolerance, one level less is not
+                piece = R_px * (1 - np.cos(theta / (2 * n)))
+                assert piece <= 1.25 * tol
+                if n > 1:
+                    assert R_px * (1 - np.cos(theta / (2 * (n - 1)))) > 0.75 * tol
+
+
+def _sphere(centre, radius=0.5 * R_S, segments=24, rings=12):
+    th = np.linspace(0, np.pi, rings + 1)[1:-1]
+    ph = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    T, P = np.meshgrid(th, ph, indexing="ij")
+    ring = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1).reshape(-1, 3)
+    pts = np.vstack([[0, 0, 1], ring, [0, 0, -1]]) * radius + centre
+    idx = lambda i, j: 1 + i * segments + (j % segments)  # noqa: E731
+    tris = [(0, idx(0, j), idx(0, j + 1)) for j in range(segments)]
+    for i in range(rings - 2):
+        for j in range(segments):
+            tris += [(idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)), (idx(i, j), idx(i + 1, j + 1), idx(i, j + 1))]
+    tris += [(len(pts) - 1, idx(rings - 2, j + 1), idx(rings - 2, j)) for j in range(segments)]
+    return pts, np.array(tris)
+
+
+def test_pipeline_images_are_the_exact_images_of_their_source_points(lut):
+    """Every vertex of both image meshes (corners and the subdivision's new vertices, which reuse or
+    redo the LUT lookup) shows its source point: direction and distance agree with lutgen.connect."""
+    from grlens_addon.core import pipeline
+
+    pts, tris = _sphere(np.array([-3.0 * R_S * np.cos(0.4), 3.0 * R_S * np.sin(0.4), 0.02]))
+    scene = mapping.Scene(CAMERA, HOLE, R_S)
+    settings = pipeline.Settings(pixel_angle=np.radians(19.0) / 1080)  # fine pixels: real subdivision
+    out = pipeline.build_images(pipeline.SourceMesh(pts, tris), scene, lut, settings)
+    e1 = scene.e1
+    for order, img in out.items():
+        assert len(img.tris) > len(tris)  # subdivided
+        assert len(img.source_position) == len(img.positions) > len(pts)
+        p = img.source_position
+        r = np.linalg.norm(p, axis=1) / R_S
+        phi = np.arccos(np.clip(p @ e1 / np.linalg.norm(p, axis=1), -1, 1))
+        c = connect(20.0, r, phi, order)
+        ang = np.arccos(np.clip((img.positions - CAMERA) @ e1 / img.light_travel_time, -1, 1))
+        np.testing.assert_allclose(ang, c.xi, atol=2e-5)
+        np.testing.assert_allclose(img.light_travel_time, c.dt * R_S, rtol=2e-5)
+
+
+def test_pipeline_skips_off_screen_and_sub_pixel_work(lut):
+    """Source triangles mapped wholly outside a frustum plane are not subdivided (counted as
+    outside_frustum); a second-order image smaller than a pixel is not built (counted as below_pixel)."""
+    from grlens_addon.core import pipeline
+
+    pts, tris = _sphere(np.array([-3.0 * R_S, 1.0 * R_S, 0.02]))
+    scene = mapping.Scene(CAMERA, HOLE, R_S)
+    settings = pipeline.Settings(pixel_angle=np.radians(19.0) / 1080)
+    full = pipeline.build_images(pipeline.SourceMesh(pts, tris), scene, lut, settings)
+    # keep only what is seen at z >= 0 from the camera (a plane through the camera)
+    planes = np.array([[0.0, 0.0, 1.0, 0.0]])
+    half = pipeline.build_images(pipeline.SourceMesh(pts, tris), scene, lut, settings, frustum_planes=planes)
+    for order in (1, 2):
+        assert half[order].report.outside_frustum > 0
+        assert 0 < len(half[order].tris) < len(full[order].tris)
+        assert np.all(half[order].positions[half[order].tris][:, :, 2].max(axis=1) >= 0)
+        # everything kept is exactly what the full build has there
+        f = full[order]
+        inside = (f.positions[f.tris][:, :, 2] >= 0).all(axis=1)
+        assert inside.sum() <= len(half[order].tris)
+    # a tiny far sphere at a coarse resolution: order 2 is below a pixel, order 1 is not
+    tiny_pts, tiny_tris = _sphere(np.array([-15.0 * R_S, 6.0 * R_S, 0.0]), radius=0.01 * R_S)
+    coarse = pipeline.Settings(pixel_angle=np.radians(19.0) / 120)
+    out = pipeline.build_images(pipeline.SourceMesh(tiny_pts, tiny_tris), scene, lut, coarse)
+    assert len(out[2].tris) == 0 and out[2].report.below_pixel == len(tiny_tris)
+    assert out[1].report.below_pixel == 0 and len(out[1].tris) > 0  # order 1 always built

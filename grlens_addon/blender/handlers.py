@@ -45,7 +45,8 @@ def _relevant(scene, update):
     if isinstance(idb, bpy.types.Object):
         if idb.grlens.order in (1, 2):
             return False
-        return idb.grlens.enabled or idb == scene.camera or idb == scene.grlens.black_hole or idb == scene.grlens.light
+        g = scene.grlens
+        return idb.grlens.enabled or idb in (scene.camera, g.observer, g.black_hole, g.light)
     return isinstance(idb, bpy.types.Mesh) and not idb.get("grlens_topology")
 
 

@@ -14,6 +14,7 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         col = layout.column()
         col.prop(g, "black_hole")
         col.prop(g, "r_s")
+        col.prop(g, "observer")
         obj = context.object
         if obj is not None and obj.type == "MESH" and obj.grlens.order == 0:
             col.prop(obj.grlens, "enabled", text=f"Lens '{obj.name}'")
@@ -26,6 +27,7 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         row = box.row(align=True)
         row.prop(g, "tess_a")
         row.prop(g, "tess_b")
+        box.prop(g, "tess_max_error")
         box.prop(g, "cull_ratio")
         box = layout.box()
         box.label(text="Lookup table (radii in r_s)")

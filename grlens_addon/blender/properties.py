@@ -17,6 +17,10 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
     black_hole: PointerProperty(
         name="Black Hole", type=bpy.types.Object, update=_changed,
         description="Object whose location is the centre of the black hole (usually an empty)")
+    observer: PointerProperty(
+        name="Observer", type=bpy.types.Object, update=_changed,
+        description="Camera whose view is lensed (the static observer); empty: the scene's active camera. "
+                    "Render through another camera to see the image meshes from outside")
     r_s: FloatProperty(
         name="Schwarzschild Radius", default=1.0, min=1e-6, soft_max=100.0, unit="LENGTH", update=_changed,
         description="Schwarzschild radius r_s of the black hole, in scene length units")
@@ -41,6 +45,10 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
     tess_b: FloatProperty(
         name="Tess b", default=0.75, min=0.01, soft_max=4.0, update=_changed,
         description="Exponent b of the tessellation heuristic N = MaxTessLevel * clamp(a rho^b, 0, 1)")
+    tess_max_error: FloatProperty(
+        name="Tess Max Error", default=0.25, min=0.0, soft_min=0.01, soft_max=4.0, update=_changed,
+        description="Screen-space tolerance in pixels: edges are split no more than needed to keep their straight "
+                    "pieces this close to the curved image (0: eq. 19 alone, capped only by the edge's pixel length)")
     cull_ratio: FloatProperty(
         name="Cull Ratio", default=8.0, min=1.0, soft_max=100.0, update=_changed,
         description="Drop image triangles whose circumference exceeds this many times the undistorted one "

@@ -76,20 +76,53 @@ def _extract(obj_eval) -> pipeline.SourceMesh:
         obj_eval.to_mesh_clear()
 
 
+def observer_camera(scene):
+    """The camera whose view is lensed: ``scene.grlens.observer`` if set, else the active camera."""
+    obs = scene.grlens.observer
+    return obs if obs is not None else scene.camera
+
+
 def _pixel_angle(scene, cam):
-    """Radians per pixel on the view sphere for the scene's camera and render resolution."""
+    """Radians per pixel on the view sphere for the observer camera and the render resolution."""
     r = scene.render
     px = max(r.resolution_x * r.resolution_percentage / 100.0, r.resolution_y * r.resolution_percentage / 100.0, 1.0)
-    fov = cam.data.angle if cam.data.type != "ORTHO" else math.radians(60.0)
-    return fov / px
+    if cam.type != "CAMERA" or cam.data.type != "PERSP":
+        return math.radians(60.0) / px  # orthographic/panoramic or not a camera: a generous estimate
+    return cam.data.angle / px
+
+
+FRUSTUM_MARGIN = 0.05
+"""Extra field of view kept around the frustum (fraction of its half-angles), so that image
+triangles whose curved edges bulge into the view are not culled by their straight edges."""
+
+
+def frustum_planes(scene, cam):
+    """(4, 4) world-space side planes (n, d), n . x + d >= 0 inside, of a perspective observer camera
+    (widened by FRUSTUM_MARGIN), or None for other cameras (nothing is culled by the frustum then)."""
+    if cam.type != "CAMERA" or cam.data.type != "PERSP":
+        return None
+    frame = [np.array(v) for v in cam.data.view_frame(scene=scene)]  # camera space, z = -distance
+    corners = np.array([[v[0] * (1 + FRUSTUM_MARGIN), v[1] * (1 + FRUSTUM_MARGIN), v[2]] for v in frame])
+    mw = np.array(cam.matrix_world, dtype=np.float64)
+    rot, origin = mw[:3, :3], mw[:3, 3]
+    world = corners @ rot.T  # directions from the camera
+    centre = world.mean(axis=0)
+    planes = []
+    for i in range(4):
+        n = np.cross(world[i], world[(i + 1) % 4])
+        if n @ centre < 0:
+            n = -n
+        n /= np.linalg.norm(n)
+        planes.append([*n, -n @ origin])
+    return np.array(planes)
 
 
 def scene_geometry(scene, depsgraph):
-    """(mapping.Scene, settings.core Settings, camera object) or RebuildError."""
+    """(mapping.Scene, core Settings, evaluated observer camera) or RebuildError."""
     g = scene.grlens
-    cam = scene.camera
+    cam = observer_camera(scene)
     if cam is None:
-        raise RebuildError("the scene has no camera")
+        raise RebuildError("the scene has no camera (set scene.camera or scene.grlens.observer)")
     if g.black_hole is None:
         raise RebuildError("no black hole object is set (scene.grlens.black_hole)")
     cam_eval = cam.evaluated_get(depsgraph)
@@ -103,7 +136,8 @@ def scene_geometry(scene, depsgraph):
     orders = tuple(o for o, on in ((1, g.show_order_1), (2, g.show_order_2)) if on)
     settings = pipeline.Settings(max_tess_level=g.max_tess_level, tess_a=g.tess_a, tess_b=g.tess_b,
                                  cull_ratio=g.cull_ratio, orders=orders,
-                                 pixel_angle=_pixel_angle(scene, cam_eval))
+                                 pixel_angle=_pixel_angle(scene, cam_eval),
+                                 max_error_px=g.tess_max_error or None)
     return geo, settings, cam_eval
 
 
@@ -157,12 +191,12 @@ def _source_depsgraph(depsgraph):
     return view_dg
 
 
-def _input_key(mesh, geo, settings, lut, light, mats) -> str:
+def _input_key(mesh, geo, settings, lut, light, mats, planes) -> str:
     """Digest of everything an image depends on: world-space geometry and attributes, camera, hole,
     r_s, settings, LUT parameters, light and material slots. Equal digests give identical images."""
     h = hashlib.blake2b(digest_size=16)
     for a in (mesh.positions, mesh.tris, mesh.corner_uv, mesh.material, mesh.corner_normals,
-              geo.camera, geo.hole):
+              geo.camera, geo.hole, planes):
         h.update(b"|" if a is None else np.ascontiguousarray(a).tobytes())
     h.update(repr((geo.r_s, settings, tuple(sorted(lut.parameters.items())), [m.name if m else None for m in mats],
                    None if light is None else (tuple(light.position), light.intensity,
@@ -181,6 +215,7 @@ def rebuild_scene(scene, depsgraph=None) -> dict:
         if not srcs:
             raise RebuildError("no object is marked for lensing (obj.grlens.enabled)")
         geo, settings, cam = scene_geometry(scene, depsgraph)
+        planes = frustum_planes(scene, cam)
         g = scene.grlens
         lut = lutcache.get_lut(geo.r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
         light = None
@@ -203,14 +238,14 @@ def rebuild_scene(scene, depsgraph=None) -> dict:
             mesh = _extract(src_eval)
             mats = [shading.image_material(slot.material) for slot in src.material_slots] or \
                 [shading.image_material(None)]
-            key = _input_key(mesh, geo, settings, lut, light, mats)
+            key = _input_key(mesh, geo, settings, lut, light, mats, planes)
             objs = {order: _image_object(scene, src, order) for order in settings.orders}
             wanted.update(o.name for o in objs.values())
             _set_source_visibility(src, True)
             if all(o.get("grlens_input") == key for o in objs.values()):
                 report["objects"][src.name] = "unchanged"  # same geometry, camera and settings: skip
                 continue
-            images = pipeline.build_images(mesh, geo, lut, settings, light)
+            images = pipeline.build_images(mesh, geo, lut, settings, light, planes)
             entry = {}
             for order, img in images.items():
                 obj = objs[order]

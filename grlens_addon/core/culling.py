@@ -3,7 +3,7 @@
 Seed 000, section 3.2: a triangle that straddles the observer-hole axis is mapped onto both sides of
 the hole (its images belong to an Einstein ring, which a mesh cannot show); it is recognised by the
 ratio of the circumference of its image to that of the undistorted triangle, both measured as
-angles on the camera's view sphere (radians, so independent of the camera's lens). Triangles with a
+chords on the camera's unit view sphere (dimensionless, so independent of the camera's lens). Triangles with a
 vertex without an image (outside the LUT's radial range, inside the horizon, non-finite, exactly on
 the axis) are dropped, as are triangles entirely outside the camera frustum and triangles whose
 source is degenerate (zero circumference).
@@ -23,21 +23,25 @@ class CullReport:
     degenerate_source: int = 0
     einstein_ring: int = 0
     outside_frustum: int = 0
+    below_pixel: int = 0  # whole image smaller than a pixel: not built
     kept: int = 0
     extra: dict = field(default_factory=dict)
 
     def total_culled(self) -> int:
-        return self.invalid_vertex + self.degenerate_source + self.einstein_ring + self.outside_frustum
+        return (self.invalid_vertex + self.degenerate_source + self.einstein_ring + self.outside_frustum
+                + self.below_pixel)
 
 
 def _circumference(d, tris):
-    """Sum of the angles (radians) between the unit directions of consecutive corners."""
+    """Perimeter of each triangle on the unit view sphere, as the sum of its corners' chord lengths
+    (dimensionless; equal to the sum of the angles in radians to second order for small triangles)."""
     a, b, c = d[tris[:, 0]], d[tris[:, 1]], d[tris[:, 2]]
 
-    def ang(u, v):
-        return 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(u - v, axis=1), 0.0, 1.0))
+    def chord(u, v):
+        w = u - v
+        return np.sqrt(np.einsum("ij,ij->i", w, w))
 
-    return ang(a, b) + ang(b, c) + ang(c, a)
+    return chord(a, b) + chord(b, c) + chord(c, a)
 
 
 def unit_directions(points, camera):

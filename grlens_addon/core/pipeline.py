@@ -42,6 +42,7 @@ class Settings:
     cull_ratio: float = 4.0
     orders: tuple = (1, 2)
     pixel_angle: float | None = None  # radians per pixel on the view sphere (caps subdivision)
+    max_error_px: float | None = 0.25  # screen-space tolerance of the curved edges, pixels (with pixel_angle)
 
 
 @dataclass
@@ -49,7 +50,9 @@ class ImageMesh:
     """One lensed image mesh.
 
     positions (V, 3) BU; tris (F, 3); corner_uv (F, 3, 2) or None; material (F,);
-    light_travel_time (V,) c*dt in BU; irradiance (F, 3) per corner or None; report: culling counts.
+    light_travel_time (V,) c*dt in BU; irradiance (F, 3) per corner or None; report: culling counts;
+    source_tri (F,) the source triangle of each face; source_position (V, 3) BU: the undistorted
+    world point each image vertex shows.
     """
 
     order: int
@@ -61,6 +64,7 @@ class ImageMesh:
     irradiance: np.ndarray | None
     report: culling.CullReport
     source_tri: np.ndarray = field(repr=False, default=None)
+    source_position: np.ndarray = field(repr=False, default=None)
 
 
 @dataclass
@@ -91,7 +95,14 @@ def clean_source(src: SourceMesh) -> tuple[SourceMesh, int]:
 
 def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                  light: Light | None = None, frustum_planes=None) -> dict[int, ImageMesh]:
-    """Image meshes of the requested orders for one source mesh (see the module docstring)."""
+    """Image meshes of the requested orders for one source mesh (see the module docstring).
+
+    ``frustum_planes`` (K, 4), rows (n, d) with n . x + d >= 0 inside (world space, BU): image
+    triangles outside are dropped, and source triangles whose corners and edge midpoints all map
+    outside one plane are dropped before they are subdivided. An image whose extent on the view sphere
+    is below one pixel (``settings.pixel_angle``) is not built at all if it is a second-order image
+    (reported as ``below_pixel``); first-order images are always built, so small objects stay visible.
+    """
     src, n_bad = clean_source(src)
     out = {}
     if len(src.tris) == 0:
@@ -99,26 +110,37 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             out[order] = _empty(order, n_bad)
         return out
     edges = subdivision.mesh_edges(src.tris)
-    plane_v = mapping.plane_coordinates(src.positions, scene)
-    mids = 0.5 * (src.positions[edges.verts[:, 0]] + src.positions[edges.verts[:, 1]])
-    plane_m = mapping.plane_coordinates(mids, scene)
+    n_pts = len(src.positions)
+    ev0, ev1 = edges.verts[:, 0], edges.verts[:, 1]
+    # source vertices and edge midpoints share one plane computation and one LUT lookup per order
+    coarse_pts = np.concatenate([src.positions, 0.5 * (src.positions[ev0] + src.positions[ev1])])
+    coarse_plane = mapping.plane_coordinates(coarse_pts, scene)
+    planes = None if frustum_planes is None or not len(frustum_planes) else np.asarray(frustum_planes, np.float64)
     for order in settings.orders:
-        img_v = mapping.map_vertices(src.positions, scene, lut, order, plane_v)
-        img_m = mapping.map_vertices(mids, scene, lut, order, plane_m)
-        d_a, d_b = img_v.direction[edges.verts[:, 0]], img_v.direction[edges.verts[:, 1]]
-        rho = subdivision.rho(d_a, d_b, img_m.direction)
+        coarse = mapping.map_vertices(coarse_pts, scene, lut, order, coarse_plane)
+        if order == 2 and _below_pixel(coarse, settings.pixel_angle):
+            out[order] = _empty(order, n_bad, below_pixel=len(src.tris))
+            continue
+        d = coarse.direction
+        d_a, d_b = d[ev0], d[ev1]
+        rho = subdivision.rho(d_a, d_b, d[n_pts:])
         levels = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
-                                         subdivision.chord_angle(d_a, d_b), settings.pixel_angle)
-        sub = subdivision.subdivide(src.positions, src.tris, edges, levels)
-        img = mapping.map_vertices(sub.positions, scene, lut, order)
+                                         subdivision.chord_angle(d_a, d_b), settings.pixel_angle,
+                                         settings.max_error_px)
+        tri_sel = _inside_frustum(coarse, src.tris, edges, n_pts, planes)
+        n_pre = len(src.tris) - len(tri_sel)
+        sub = subdivision.subdivide(src.positions, src.tris[tri_sel],
+                                    subdivision.Edges(edges.verts, edges.of_tri[tri_sel]), levels)
+        img = _map_subdivided(sub, n_pts, coarse, scene, lut, order)
         keep, report = culling.cull(sub.tris, img.direction, img.valid, sub.positions, scene.camera,
-                                    settings.cull_ratio, frustum_planes, img.position)
+                                    settings.cull_ratio, planes, img.position)
+        report.outside_frustum += n_pre
         report.extra["bad_source_triangles"] = n_bad
         tris = sub.tris[keep]
         used = np.unique(tris)
         remap = np.full(len(sub.positions), -1, dtype=np.int64)
         remap[used] = np.arange(used.size)
-        src_tri = sub.source_tri[keep]
+        src_tri = tri_sel[sub.source_tri[keep]]
         bary = sub.bary[keep]
         corner_uv = None
         if src.corner_uv is not None:
@@ -134,12 +156,66 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         out[order] = ImageMesh(order=order, positions=img.position[used], tris=remap[tris],
                                corner_uv=corner_uv, material=src.material[src_tri],
                                light_travel_time=img.distance[used], irradiance=irr, report=report,
-                               source_tri=src_tri)
+                               source_tri=src_tri, source_position=sub.positions[used])
     return out
 
 
-def _empty(order, n_bad):
+def _below_pixel(coarse: mapping.Images, pixel_angle) -> bool:
+    """True if all valid image points lie within one pixel (radians on the view sphere) of each other:
+    the image is too small to matter (checked on the source vertices and edge midpoints)."""
+    if not pixel_angle:
+        return False
+    d = coarse.direction[coarse.valid]
+    if len(d) == 0:
+        return False  # nothing valid: culling reports why
+    centre = d.mean(axis=0)
+    centre /= max(np.linalg.norm(centre), 1e-300)
+    return bool(np.max(subdivision.chord_angle(d, np.broadcast_to(centre, d.shape))) * 2.0 < pixel_angle)
+
+
+def _inside_frustum(coarse: mapping.Images, tris, edges, n_pts, planes) -> np.ndarray:
+    """Indices of the source triangles to subdivide: all of them, or without a frustum those whose
+    three corners and three edge midpoints all map outside one frustum plane (invalid points count as
+    inside, so culling reports them under their own reason)."""
+    if planes is None:
+        return np.arange(len(tris))
+    with np.errstate(invalid="ignore"):
+        side = coarse.position @ planes[:, :3].T + planes[:, 3]  # (N + E, K)
+    out = side < 0  # NaN (no image) -> False
+    six = np.concatenate([tris, n_pts + edges.of_tri], axis=1)  # (T, 6)
+    return np.flatnonzero(~out[six].all(axis=1).any(axis=1))
+
+
+def _map_subdivided(sub, n_pts, coarse: mapping.Images, scene, lut, order) -> mapping.Images:
+    """Images of the subdivided vertices; source corners (welding keys < n_pts) reuse the coarse
+    mapping, only the new vertices are looked up."""
+    is_corner = sub.vertex_key < n_pts
+    if is_corner.all():
+        idx = sub.vertex_key
+        return mapping.Images(position=coarse.position[idx], direction=coarse.direction[idx],
+                              distance=coarse.distance[idx], valid=coarse.valid[idx], plane=None,
+                              xi=coarse.xi[idx], dt=coarse.dt[idx], ux=None, uy=None)
+    new = mapping.map_vertices(sub.positions[~is_corner], scene, lut, order)
+    n = len(sub.positions)
+    position = np.empty((n, 3))
+    direction = np.empty((n, 3))
+    distance = np.empty(n)
+    valid = np.empty(n, dtype=bool)
+    xi = np.empty(n)
+    dt = np.empty(n)
+    idx = sub.vertex_key[is_corner]
+    for dst, a, b in ((position, coarse.position, new.position), (direction, coarse.direction, new.direction),
+                      (distance, coarse.distance, new.distance), (valid, coarse.valid, new.valid),
+                      (xi, coarse.xi, new.xi), (dt, coarse.dt, new.dt)):
+        dst[is_corner] = a[idx]
+        dst[~is_corner] = b
+    return mapping.Images(position=position, direction=direction, distance=distance, valid=valid, plane=None,
+                          xi=xi, dt=dt, ux=None, uy=None)
+
+
+def _empty(order, n_bad, below_pixel=0):
     rep = culling.CullReport()
     rep.extra["bad_source_triangles"] = n_bad
+    rep.below_pixel = below_pixel
     return ImageMesh(order, np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, np.zeros(0, np.int64),
-                     np.zeros(0), None, rep, np.zeros(0, np.int64))
+                     np.zeros(0), None, rep, np.zeros(0, np.int64), np.zeros((0, 3)))

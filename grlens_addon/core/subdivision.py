@@ -6,8 +6,9 @@ N = MaxTessLevel * clamp(a * rho^b, 0, 1) segments. Here q are apparent directio
 view sphere (unit vectors), which equals screen space for small fields of view and stays defined for
 points beside or behind the camera.
 
-Levels are capped by the edge's size on screen: an edge never gets more segments than the pixels it
-spans (``pixel_angle``), so images smaller than a pixel are not subdivided at all.
+Levels are capped by the edge's size on screen (see :func:`edge_levels`): an edge never gets more
+segments than the pixels it spans, nor more than keep its straight pieces within a screen-space
+tolerance of the curved image, so images smaller than a pixel are not subdivided at all.
 
 Crack-free scheme: each edge has one level (1 .. 64), shared by both of its triangles. A triangle
 is subdivided uniformly at its largest edge level L; the template vertices on an edge of level
@@ -30,18 +31,34 @@ GRID = 64  # largest level (GPU tessellators' usual maximum, as in seed 000)
 
 
 def edge_levels(rho: np.ndarray, max_tess_level: int, a: float, b: float,
-                chord: np.ndarray | None = None, pixel_angle: float | None = None) -> np.ndarray:
-    """Per-edge subdivision levels: ceil(MaxTessLevel * clamp(a rho^b, 0, 1)) (eq. 19), at least 1,
-    at most min(max_tess_level, 64), and at most the number of pixels the edge's image spans
-    (``chord`` and ``pixel_angle`` in radians on the view sphere) when those are given.
+                chord: np.ndarray | None = None, pixel_angle: float | None = None,
+                max_error_px: float | None = None) -> np.ndarray:
+    """Per-edge subdivision levels (integers 1 .. min(max_tess_level, 64), shape of ``rho``).
+
+    The level is eq. (19), ceil(MaxTessLevel * clamp(a rho^b, 0, 1)), at least 1, and, when ``chord``
+    (the edge's image size on the view sphere, radians) and ``pixel_angle`` (radians per pixel) are
+    given, never more than needed on screen:
+
+    * at most the number of pixels the edge spans (sub-edges are at least a pixel long), so images
+      smaller than a pixel are not subdivided at all;
+    * with ``max_error_px``: at most ceil(sqrt(s / max_error_px)), where s = rho * chord is the
+      sagitta of the edge's image in pixels (the distance of the mapped midpoint from the straight
+      chord). An arc cut into n pieces deviates from its chords by about s / n^2, so this is the
+      smallest level that keeps the straight sub-edges within ``max_error_px`` of the curved image.
+
     NaN rho (an end point without an image) gives level 1: such edges are culled later anyway.
     """
     top = int(np.clip(max_tess_level, 1, GRID))
-    with np.errstate(invalid="ignore", over="ignore"):
-        n = top * np.clip(a * np.power(np.maximum(rho, 0.0), b), 0.0, 1.0)
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        r = np.maximum(rho, 0.0)
+        n = top * np.clip(a * np.power(r, b), 0.0, 1.0)
         n = np.nan_to_num(np.ceil(n), nan=1.0)
         if chord is not None and pixel_angle:
-            n = np.minimum(n, np.nan_to_num(np.ceil(chord / pixel_angle), nan=1.0))
+            chord_px = chord / pixel_angle
+            n = np.minimum(n, np.nan_to_num(np.ceil(chord_px), nan=1.0))
+            if max_error_px:
+                sagitta_px = r * chord_px
+                n = np.minimum(n, np.nan_to_num(np.ceil(np.sqrt(sagitta_px / max_error_px)), nan=1.0))
     return np.clip(n, 1, top).astype(np.int64)
 
 
@@ -139,6 +156,9 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     tris = np.asarray(tris, dtype=np.int64)
     n_pts, n_edges = len(points), len(edges.verts)
     tri_level = levels[edges.of_tri].max(axis=1) if len(tris) else np.zeros(0, np.int64)
+    if len(tris) and tri_level.max() == 1:  # nothing to split: the source itself
+        return Subdivided(positions=points, tris=tris.copy(), source_tri=np.arange(len(tris)),
+                          bary=np.broadcast_to(np.eye(3), (len(tris), 3, 3)), vertex_key=np.arange(n_pts))
     pos_parts, key_parts, face_parts, src_parts, bary_parts = [], [], [], [], []
     interior_base = n_pts + n_edges * (GRID + 1)
     offset = 0
