@@ -25,7 +25,8 @@ Units and conventions
   phi_c + pi, with phi_c in [0, pi). Crossing ``order`` k is at Phi = phi_c + (k - 1) pi. This is the
   add-on's image order: the disc point there has polar angle phi_c (order 1, plane vector e2 = s) or
   pi - phi_c (order 2, e2 = -s) in its own plane through hole and observer, and order 1 (2) is the
-  LUT ray sweeping phi (2 pi - phi).
+  LUT ray sweeping phi (2 pi - phi). (For an observer in the disc plane, i = 90 deg exactly,
+  phi_c = 0 is the observer's own position: use an inclination just below 90 deg.)
 * 1 + z is computed in the local static frame at the crossing (independently of the conserved-
   quantity formula of the add-on): special-relativistic Doppler factor gamma (1 - beta v.k) of the
   gas (local speed beta = 1/sqrt(2 (r - 1)) along a x q) against the photon's local direction of
@@ -161,7 +162,6 @@ def radius_at_sweep(r_obs, theta, sweep) -> np.ndarray:
             u[cplx] = e1 + A * (1.0 - cn) / (1.0 + cn)
             f_hor = _orb.sweep(orb.subset(cplx), 1.0)
             valid[cplx] = (fc >= f_zero[cplx]) & (fc <= f_hor)
-        # a ray aimed exactly at the hole's centre does not sweep; a tangent-free float guard
         u = np.where(valid & (u > 0.0), u, np.nan)
     out[idx] = 1.0 / u
     return out.reshape(shape)
