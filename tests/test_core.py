@@ -265,3 +265,35 @@ def test_pipeline_skips_off_screen_and_sub_pixel_work(lut):
     out = pipeline.build_images(pipeline.SourceMesh(tiny_pts, tiny_tris), scene, lut, coarse)
     assert len(out[2].tris) == 0 and out[2].report.below_pixel == len(tiny_tris)
     assert out[1].report.below_pixel == 0 and len(out[1].tris) > 0  # order 1 always built
+
+
+def test_axis_geometry_straddling_and_span():
+    cam, hole = CAMERA, HOLE  # axis = x axis
+    pts = np.array([[-5.0, -1, -1], [-5, 1, -1], [-5, 0, 1],  # behind the hole, around the axis
+                    [5.0, -1, -1], [5, 1, -1], [5, 0, 1],  # in front of the hole, around the axis
+                    [-5.0, 1, 0], [-5, 2, 0], [-5, 0, 1]])  # beside the axis: covers 90 degrees
+    tris = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8]])
+    s1, span = culling.axis_geometry(pts, tris, cam, hole, 1)
+    s2, _ = culling.axis_geometry(pts, tris, cam, hole, 2)
+    assert list(s1) == [True, False, False] and list(s2) == [True, True, False]
+    np.testing.assert_allclose(span, [np.pi, np.pi, np.pi / 2])
+
+
+def test_fine_mesh_behind_the_hole_keeps_its_ring(lut):
+    """Behind the hole a fine mesh is magnified everywhere, yet only the triangles at the axis are
+    culled: the ring stays closed, and no kept triangle spans a wide arc (no chord across the shadow)."""
+    from grlens_addon.core import pipeline
+
+    scene = mapping.Scene(CAMERA, HOLE, R_S)
+    settings = pipeline.Settings(pixel_angle=np.radians(19.0) / 360)
+    for segments, rings in ((24, 12), (96, 48)):
+        pts, tris = _sphere(np.array([-3.0 * R_S, 0.0, 0.01 * R_S]), segments=segments, rings=rings)
+        out = pipeline.build_images(pipeline.SourceMesh(pts, tris), scene, lut, settings)
+        for order, img in out.items():
+            assert 0 < img.report.einstein_ring < 0.05 * len(img.tris)
+            d = img.positions - CAMERA
+            az = np.arctan2(d[:, 2], d[:, 1])  # position angle around the hole's direction (-x)
+            assert len(np.unique(((az + np.pi) / (2 * np.pi) * 32).astype(int) % 32)) == 32
+            a = az[img.tris]
+            diff = np.abs(np.angle(np.exp(1j * (a[:, :, None] - a[:, None, :])))).max(axis=(1, 2))
+            assert diff.max() < np.radians(60.0)

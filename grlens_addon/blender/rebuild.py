@@ -83,12 +83,17 @@ def observer_camera(scene):
 
 
 def _pixel_angle(scene, cam):
-    """Radians per pixel on the view sphere for the observer camera and the render resolution."""
+    """Radians per pixel on the view sphere for the observer camera and the render resolution (the
+    camera's actual frame, so sensor fit and aspect ratio are taken into account)."""
     r = scene.render
-    px = max(r.resolution_x * r.resolution_percentage / 100.0, r.resolution_y * r.resolution_percentage / 100.0, 1.0)
+    px_x = max(r.resolution_x * r.resolution_percentage / 100.0, 1.0)
+    px_y = max(r.resolution_y * r.resolution_percentage / 100.0, 1.0)
     if cam.type != "CAMERA" or cam.data.type != "PERSP":
-        return math.radians(60.0) / px  # orthographic/panoramic or not a camera: a generous estimate
-    return cam.data.angle / px
+        return math.radians(60.0) / max(px_x, px_y)  # orthographic/panoramic: a generous estimate
+    frame = np.array([tuple(v) for v in cam.data.view_frame(scene=scene)])  # camera space, z < 0
+    half_x = np.max(np.abs(frame[:, 0])) / np.max(np.abs(frame[:, 2]))
+    half_y = np.max(np.abs(frame[:, 1])) / np.max(np.abs(frame[:, 2]))
+    return min(2.0 * math.atan(half_x) / px_x, 2.0 * math.atan(half_y) / px_y)
 
 
 FRUSTUM_MARGIN = 0.05

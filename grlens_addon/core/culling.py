@@ -51,13 +51,68 @@ def unit_directions(points, camera):
         return v / np.linalg.norm(v, axis=1)[:, None]
 
 
-def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_planes=None, image_points=None):
+AZIMUTH_SPAN_MAX = np.radians(30.0)
+"""Largest angle around the observer-hole axis (radians) that a strongly magnified triangle may
+cover. Around the Einstein ring the mapping turns azimuth about the axis into position angle along
+the ring, so a triangle covering more than this is drawn with chords that cut visibly across the
+ring (and, close to the axis, across the shadow); with a circumference ratio above ``cull_ratio``
+such triangles are culled."""
+
+
+def axis_geometry(source_points, tris, camera, hole, order):
+    """Per triangle: (straddles, span).
+
+    ``straddles`` (F,) bool: the observer-hole axis passes through the triangle on a half where that
+    order's images form an Einstein ring, so no mesh can show it. The axis is the line through
+    ``hole`` and ``camera`` (BU); a triangle is crossed when the origin lies inside the projection of
+    its corners onto the plane perpendicular to the axis (same sign of the three edge functions;
+    touching counts). The crossing point's coordinate along the axis decides the half: behind the
+    hole (phi = pi) both orders are rings; in front of the hole (phi = 0) only order 2 is (its ray
+    sweeps 2 pi), the order-1 image there is regular.
+
+    ``span`` (F,) radians: the angle around the axis the triangle covers (pi for triangles containing
+    the axis in projection).
+    """
+    tris = np.asarray(tris, dtype=np.int64)
+    e1 = camera - hole
+    e1 = e1 / np.linalg.norm(e1)
+    a = np.array([0.0, 0.0, 1.0]) if abs(e1[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    u = a - (a @ e1) * e1
+    u /= np.linalg.norm(u)
+    v = np.cross(e1, u)
+    p = np.asarray(source_points, dtype=np.float64) - hole
+    x, y, z = p @ u, p @ v, p @ e1
+    xa, xb, xc = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
+    ya, yb, yc = y[tris[:, 0]], y[tris[:, 1]], y[tris[:, 2]]
+    # twice the signed areas of (origin, b, c), (origin, c, a), (origin, a, b): barycentrics of the axis
+    la, lb, lc = xb * yc - xc * yb, xc * ya - xa * yc, xa * yb - xb * ya
+    with np.errstate(invalid="ignore", divide="ignore"):
+        inside = ((la >= 0) & (lb >= 0) & (lc >= 0)) | ((la <= 0) & (lb <= 0) & (lc <= 0))
+        total = la + lb + lc
+        along = (la * z[tris[:, 0]] + lb * z[tris[:, 1]] + lc * z[tris[:, 2]]) / np.where(total != 0, total, np.nan)
+
+        def angle(x1, y1, x2, y2):  # angle between the projected corners, seen from the axis
+            return np.abs(np.arctan2(x1 * y2 - y1 * x2, x1 * x2 + y1 * y2))
+
+        span = np.maximum(np.maximum(angle(xa, ya, xb, yb), angle(xb, yb, xc, yc)), angle(xc, yc, xa, ya))
+    crossed = inside & (total != 0)  # edge-on projections have no crossing point
+    span = np.where(inside, np.pi, span)
+    straddles = crossed & (along < 0) if order == 1 else crossed
+    return straddles, span
+
+
+def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_planes=None, image_points=None,
+         hole=None, order=None):
     """Mask of image triangles to keep, and a :class:`CullReport`.
 
     tris (F, 3) index the per-vertex arrays: image_dirs (V, 3) unit apparent directions of the images,
     valid (V,) bool, source_points (V, 3) the undistorted world positions (BU). ``cull_ratio``: drop a
     triangle whose image circumference exceeds cull_ratio times the undistorted one (seed 000 uses a
-    customisable threshold; larger keeps more). ``frustum_planes`` (K, 4): rows (n, d) with
+    customisable threshold; larger keeps more). With ``hole`` (BU) and ``order`` given, triangles the
+    axis passes through are always dropped, and the ratio drops only triangles that also cover more
+    than AZIMUTH_SPAN_MAX around the axis (see :func:`axis_geometry`): near the Einstein ring regular
+    triangles are magnified by large factors too (a fine mesh behind the hole would lose its whole
+    ring to the ratio alone), but only wide or straddling ones have a wrong image. ``frustum_planes`` (K, 4): rows (n, d) with
     n . x + d >= 0 inside, applied to ``image_points`` (V, 3).
     """
     tris = np.asarray(tris, dtype=np.int64)
@@ -73,6 +128,10 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = _circumference(image_dirs, tris) / src_c
     ring = keep & ~(ratio <= cull_ratio)
+    if hole is not None and order is not None:
+        straddles, span = axis_geometry(source_points, tris, np.asarray(camera, np.float64),
+                                        np.asarray(hole, np.float64), order)
+        ring = keep & (straddles | (ring & (span > AZIMUTH_SPAN_MAX)))
     rep.einstein_ring = int(ring.sum())
     keep &= ~ring
     if frustum_planes is not None and image_points is not None and len(frustum_planes):

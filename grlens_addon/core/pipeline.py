@@ -10,6 +10,7 @@ Units: positions in Blender units (BU); light travel time as a length c*dt in BU
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -84,10 +85,12 @@ def clean_source(src: SourceMesh) -> tuple[SourceMesh, int]:
     ok = finite[tris].all(axis=1) if len(tris) else np.zeros(0, bool)
     ok &= (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 2] != tris[:, 0])
 
-    def sel(a):
-        return None if a is None else np.asarray(a)[ok]
+    all_ok = bool(ok.all())
 
-    cleaned = SourceMesh(pos, tris[ok], sel(src.corner_uv),
+    def sel(a):
+        return None if a is None else (np.asarray(a) if all_ok else np.asarray(a)[ok])
+
+    cleaned = SourceMesh(pos, sel(tris), sel(src.corner_uv),
                          sel(src.material) if src.material is not None else np.zeros(int(ok.sum()), np.int64),
                          sel(src.corner_normals))
     return cleaned, int((~ok).sum())
@@ -109,45 +112,48 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         for order in settings.orders:
             out[order] = _empty(order, n_bad)
         return out
-    edges = subdivision.mesh_edges(src.tris)
+    edges = _edges_of(src.tris)
     n_pts = len(src.positions)
     ev0, ev1 = edges.verts[:, 0], edges.verts[:, 1]
-    # source vertices and edge midpoints share one plane computation and one LUT lookup per order
-    coarse_pts = np.concatenate([src.positions, 0.5 * (src.positions[ev0] + src.positions[ev1])])
-    coarse_plane = mapping.plane_coordinates(coarse_pts, scene)
+    mids = 0.5 * (src.positions[ev0] + src.positions[ev1])
+    plane_v = mapping.plane_coordinates(src.positions, scene)
     planes = None if frustum_planes is None or not len(frustum_planes) else np.asarray(frustum_planes, np.float64)
     for order in settings.orders:
-        coarse = mapping.map_vertices(coarse_pts, scene, lut, order, coarse_plane)
-        if order == 2 and _below_pixel(coarse, settings.pixel_angle):
+        img_v = mapping.map_vertices(src.positions, scene, lut, order, plane_v)
+        d_a, d_b = img_v.direction[ev0], img_v.direction[ev1]
+        chord = subdivision.chord_angle(d_a, d_b)
+        # edge midpoints are mapped only where a level above 1 is possible: an edge whose image spans
+        # at most one pixel keeps level 1 whatever its curvature (see subdivision.edge_levels)
+        probe = np.flatnonzero(~(chord <= settings.pixel_angle)) if settings.pixel_angle else np.arange(len(ev0))
+        img_m = mapping.map_vertices(mids[probe], scene, lut, order)
+        if order == 2 and _below_pixel(img_v, img_m, settings.pixel_angle):
             out[order] = _empty(order, n_bad, below_pixel=len(src.tris))
             continue
-        d = coarse.direction
-        d_a, d_b = d[ev0], d[ev1]
-        rho = subdivision.rho(d_a, d_b, d[n_pts:])
+        rho = np.zeros(len(ev0))
+        rho[probe] = subdivision.rho(d_a[probe], d_b[probe], img_m.direction)
         levels = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
-                                         subdivision.chord_angle(d_a, d_b), settings.pixel_angle,
-                                         settings.max_error_px)
-        tri_sel = _inside_frustum(coarse, src.tris, edges, n_pts, planes)
+                                         chord, settings.pixel_angle, settings.max_error_px)
+        tri_sel = _inside_frustum(img_v, img_m, probe, src.tris, edges, planes)
         n_pre = len(src.tris) - len(tri_sel)
         sub = subdivision.subdivide(src.positions, src.tris[tri_sel],
                                     subdivision.Edges(edges.verts, edges.of_tri[tri_sel]), levels)
-        img = _map_subdivided(sub, n_pts, coarse, scene, lut, order)
+        img = _map_subdivided(sub, n_pts, img_v, scene, lut, order)
         keep, report = culling.cull(sub.tris, img.direction, img.valid, sub.positions, scene.camera,
-                                    settings.cull_ratio, planes, img.position)
+                                    settings.cull_ratio, planes, img.position, scene.hole, order)
         report.outside_frustum += n_pre
         report.extra["bad_source_triangles"] = n_bad
         tris = sub.tris[keep]
-        used = np.unique(tris)
+        used = _used_vertices(tris, len(sub.positions))
         remap = np.full(len(sub.positions), -1, dtype=np.int64)
         remap[used] = np.arange(used.size)
         src_tri = tri_sel[sub.source_tri[keep]]
-        bary = sub.bary[keep]
+        bary = None if sub.identity else sub.bary[keep]
         corner_uv = None
         if src.corner_uv is not None:
-            corner_uv = np.einsum("fck,fkx->fcx", bary, src.corner_uv[src_tri])
+            corner_uv = _interpolate(bary, src.corner_uv[src_tri], sub.identity)
         irr = None
         if light is not None and src.corner_normals is not None:
-            n = np.einsum("fck,fkx->fcx", bary, src.corner_normals[src_tri])
+            n = _interpolate(bary, src.corner_normals[src_tri], sub.identity)
             n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-300)
             pts = sub.positions[tris].reshape(-1, 3)
             e, _ = illumination.irradiance(pts, n.reshape(-1, 3), light.position, scene.hole, scene.r_s,
@@ -160,12 +166,44 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
     return out
 
 
-def _below_pixel(coarse: mapping.Images, pixel_angle) -> bool:
-    """True if all valid image points lie within one pixel (radians on the view sphere) of each other:
-    the image is too small to matter (checked on the source vertices and edge midpoints)."""
+_EDGE_CACHE: dict = {}
+_EDGE_CACHE_SIZE = 8
+
+
+def _edges_of(tris) -> subdivision.Edges:
+    """subdivision.mesh_edges, remembered for the last few topologies (animated meshes usually keep
+    theirs from frame to frame; the key is a digest of the index array)."""
+    key = hashlib.blake2b(np.ascontiguousarray(tris).tobytes(), digest_size=16).digest() + bytes(str(tris.shape), "ascii")
+    edges = _EDGE_CACHE.get(key)
+    if edges is None:
+        edges = subdivision.mesh_edges(tris)
+        if len(_EDGE_CACHE) >= _EDGE_CACHE_SIZE:
+            _EDGE_CACHE.pop(next(iter(_EDGE_CACHE)))
+        _EDGE_CACHE[key] = edges
+    return edges
+
+
+def _used_vertices(tris, n_vertices) -> np.ndarray:
+    """Sorted indices of the vertices referenced by ``tris`` (like np.unique, without sorting)."""
+    mask = np.zeros(n_vertices, dtype=bool)
+    mask[tris.ravel()] = True
+    return np.flatnonzero(mask)
+
+
+def _interpolate(bary, corner_values, identity: bool):
+    """Corner values (F, 3, K) of the faces from their source triangles' corner values (F, 3, K) and
+    the faces' barycentric coordinates (F, 3, 3); unchanged when the subdivision was the identity."""
+    if identity:
+        return np.array(corner_values, dtype=np.float64)
+    return np.matmul(bary, corner_values)
+
+
+def _below_pixel(img_v: mapping.Images, img_m: mapping.Images, pixel_angle) -> bool:
+    """True if all valid image points (source vertices and probed edge midpoints) lie within one
+    pixel (radians on the view sphere) of each other: the image is too small to matter."""
     if not pixel_angle:
         return False
-    d = coarse.direction[coarse.valid]
+    d = np.concatenate([img_v.direction[img_v.valid], img_m.direction[img_m.valid]])
     if len(d) == 0:
         return False  # nothing valid: culling reports why
     centre = d.mean(axis=0)
@@ -173,20 +211,24 @@ def _below_pixel(coarse: mapping.Images, pixel_angle) -> bool:
     return bool(np.max(subdivision.chord_angle(d, np.broadcast_to(centre, d.shape))) * 2.0 < pixel_angle)
 
 
-def _inside_frustum(coarse: mapping.Images, tris, edges, n_pts, planes) -> np.ndarray:
-    """Indices of the source triangles to subdivide: all of them, or without a frustum those whose
-    three corners and three edge midpoints all map outside one frustum plane (invalid points count as
-    inside, so culling reports them under their own reason)."""
+def _inside_frustum(img_v: mapping.Images, img_m: mapping.Images, probe, tris, edges, planes) -> np.ndarray:
+    """Indices of the source triangles to subdivide: all of them, or with a frustum those not having
+    their three corners and three edge midpoints all mapped outside one frustum plane. Midpoints not
+    probed (edges within a pixel) are taken as the mean of their end points' images; points without
+    an image count as inside, so culling reports them under their own reason."""
     if planes is None:
         return np.arange(len(tris))
+    mid = 0.5 * (img_v.position[edges.verts[:, 0]] + img_v.position[edges.verts[:, 1]])
+    mid[probe] = img_m.position
     with np.errstate(invalid="ignore"):
-        side = coarse.position @ planes[:, :3].T + planes[:, 3]  # (N + E, K)
-    out = side < 0  # NaN (no image) -> False
-    six = np.concatenate([tris, n_pts + edges.of_tri], axis=1)  # (T, 6)
-    return np.flatnonzero(~out[six].all(axis=1).any(axis=1))
+        out_v = (img_v.position @ planes[:, :3].T + planes[:, 3]) < 0  # (N, K); NaN -> False
+        out_m = (mid @ planes[:, :3].T + planes[:, 3]) < 0  # (E, K)
+    outside = out_v[tris].all(axis=1) & out_m[edges.of_tri].all(axis=1)  # (T, K)
+    return np.flatnonzero(~outside.any(axis=1))
 
 
 def _map_subdivided(sub, n_pts, coarse: mapping.Images, scene, lut, order) -> mapping.Images:
+    # coarse: the images of the source vertices (indexed by welding keys < n_pts)
     """Images of the subdivided vertices; source corners (welding keys < n_pts) reuse the coarse
     mapping, only the new vertices are looked up."""
     is_corner = sub.vertex_key < n_pts

@@ -139,7 +139,8 @@ class Subdivided:
     source_tri: (F,) index of the source triangle each face comes from;
     bary: (F, 3, 3) barycentric coordinates of each face corner in its source triangle (for UVs,
     normals and other corner attributes);
-    vertex_key: (V,) the welding keys (stable for unchanged topology and levels).
+    vertex_key: (V,) the welding keys (stable for unchanged topology and levels);
+    identity: True when nothing was split (all levels 1): positions, tris and bary are the source's.
     """
 
     positions: np.ndarray
@@ -147,6 +148,7 @@ class Subdivided:
     source_tri: np.ndarray
     bary: np.ndarray
     vertex_key: np.ndarray
+    identity: bool = False
 
 
 def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.ndarray) -> Subdivided:
@@ -158,12 +160,18 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     tri_level = levels[edges.of_tri].max(axis=1) if len(tris) else np.zeros(0, np.int64)
     if len(tris) and tri_level.max() == 1:  # nothing to split: the source itself
         return Subdivided(positions=points, tris=tris.copy(), source_tri=np.arange(len(tris)),
-                          bary=np.broadcast_to(np.eye(3), (len(tris), 3, 3)), vertex_key=np.arange(n_pts))
-    pos_parts, key_parts, face_parts, src_parts, bary_parts = [], [], [], [], []
+                          bary=np.broadcast_to(np.eye(3), (len(tris), 3, 3)), vertex_key=np.arange(n_pts),
+                          identity=True)
+    face_parts, src_parts, bary_parts, other_key_parts, other_pos_parts = [], [], [], [], []
     interior_base = n_pts + n_edges * (GRID + 1)
-    offset = 0
     for L in np.unique(tri_level):
         sel = np.flatnonzero(tri_level == L)
+        src = tris[sel]  # (S, 3)
+        if L == 1:  # unsplit triangles: their corners are source vertices, keyed by their indices
+            face_parts.append(src)
+            src_parts.append(sel)
+            bary_parts.append(np.broadcast_to(np.eye(3), (sel.size, 3, 3)))
+            continue
         ij, ttris, tedge, tt, tcorner = _template(int(L))
         nv = len(ij)
         # barycentrics of the template vertices, then snapped along low-level edges
@@ -171,9 +179,7 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
         bary[:, :, 1] = ij[:, 0] / L
         bary[:, :, 2] = ij[:, 1] / L
         key = np.empty((sel.size, nv), dtype=np.int64)
-        src = tris[sel]  # (S, 3)
-        # corners
-        for k in range(3):
+        for k in range(3):  # corners
             m = tcorner == k
             key[:, m] = src[:, k][:, None]
         # interior vertices: unique per triangle
@@ -198,23 +204,35 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
             b[:, :, (k + 1) % 3] = t_snap
             bary[:, m, :] = b
         bary[:, :, 0] = 1.0 - bary[:, :, 1] - bary[:, :, 2]
-        corners = points[src]  # (S, 3 corners, 3 xyz)
-        pos = np.einsum("svk,skx->svx", bary, corners)
-        pos_parts.append(pos.reshape(-1, 3))
-        key_parts.append(key.reshape(-1))
-        faces = ttris[None, :, :] + (offset + nv * np.arange(sel.size))[:, None, None]
-        face_parts.append(faces.reshape(-1, 3))
+        # positions are needed only for the new vertices (corners are the source's own points)
+        other = key >= n_pts
+        rows = np.nonzero(other)[0]
+        other_key_parts.append(key[other])
+        other_pos_parts.append(np.einsum("mk,mkx->mx", bary[other], points[src[rows]]))
+        face_parts.append(key[:, ttris].reshape(-1, 3))
         src_parts.append(np.repeat(sel, len(ttris)))
-        bary_parts.append(bary[np.arange(sel.size)[:, None, None], ttris[None, :, :]].reshape(-1, 3, 3))
-        offset += sel.size * nv
-    if not pos_parts:
+        bary_parts.append(bary[:, ttris].reshape(-1, 3, 3))
+    if not face_parts:
         return Subdivided(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64),
                           np.zeros((0, 3, 3)), np.zeros(0, np.int64))
-    pos = np.concatenate(pos_parts)
-    keys = np.concatenate(key_parts)
-    faces = np.concatenate(face_parts)
-    uniq, first, inv = np.unique(keys, return_index=True, return_inverse=True)
-    faces = inv[faces]
+    face_keys = np.concatenate(face_parts)
+    # weld: corner keys (< n_pts) are source vertex indices; the others are merged by np.unique.
+    # Vertices come out sorted by key (corners first), so equal inputs give equal meshes.
+    used = np.zeros(n_pts, dtype=bool)
+    corner_face = face_keys < n_pts
+    used[face_keys[corner_face]] = True
+    corners = np.flatnonzero(used)
+    if other_key_parts:
+        okeys = np.concatenate(other_key_parts)
+        uniq, first = np.unique(okeys, return_index=True)
+        other_pos = np.concatenate(other_pos_parts)[first]
+    else:
+        uniq, other_pos = np.zeros(0, np.int64), np.zeros((0, 3))
+    index = np.full(n_pts, -1, dtype=np.int64)
+    index[corners] = np.arange(corners.size)
+    faces = np.where(corner_face, index[np.minimum(face_keys, n_pts - 1)],
+                     corners.size + np.searchsorted(uniq, face_keys))
     keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
-    return Subdivided(positions=pos[first], tris=faces[keep], source_tri=np.concatenate(src_parts)[keep],
-                      bary=np.concatenate(bary_parts)[keep], vertex_key=uniq)
+    return Subdivided(positions=np.concatenate([points[corners], other_pos]), tris=faces[keep],
+                      source_tri=np.concatenate(src_parts)[keep], bary=np.concatenate(bary_parts)[keep],
+                      vertex_key=np.concatenate([corners, uniq]))

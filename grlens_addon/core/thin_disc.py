@@ -182,6 +182,35 @@ def vertex_redshift(points, hole, camera, r_s, axis, xi, e2, order: int, prograd
     return redshift_factor(r, l_z, r_obs, prograde)
 
 
+def vertex_redshift_from_direction(points, hole, camera, r_s, axis, direction, prograde: bool = True):
+    """Per-vertex 1 + z from the image's apparent direction alone (mapping.Images.direction), any order.
+
+    The photon's angular momentum is conserved, so it can be read off where it arrives: at the camera
+    (position r_obs e1 from the hole, r_s units) it travels along -direction in the static frame, so
+    L = r_obs e1 x (-direction) / sqrt(1 - 1/r_obs) (per unit conserved energy). This equals
+    :func:`vertex_redshift` (direction = cos(xi) e1 +- sin(xi) e2 for order 1 / 2) and needs neither
+    xi nor e2. Arguments as there; ``direction`` (N, 3) unit vectors; NaN directions give NaN.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    hole = np.asarray(hole, dtype=np.float64).reshape(3)
+    camera = np.asarray(camera, dtype=np.float64).reshape(3)
+    r_s = float(r_s)
+    axis = np.asarray(axis, dtype=np.float64).reshape(3)
+    axis = axis / np.linalg.norm(axis)
+    d = camera - hole
+    r_obs = np.linalg.norm(d) / r_s
+    e1 = d / np.linalg.norm(d)
+    p = (points - hole) / r_s
+    r = np.linalg.norm(p, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        p_hat = p / r[:, None]
+        normal = axis - (p_hat @ axis)[:, None] * p_hat
+        normal /= np.linalg.norm(normal, axis=1)[:, None]
+        L = -(r_obs / np.sqrt(1.0 - 1.0 / r_obs)) * np.cross(e1, np.asarray(direction, dtype=np.float64))
+        l_z = np.einsum("ij,ij->i", L, normal)
+    return redshift_factor(r, l_z, r_obs, prograde)
+
+
 def observed_flux(r, one_plus_z, r_in: float = R_ISCO) -> np.ndarray:
     """Observed bolometric flux F(r) / (1 + z)^4 in units of F0 (r in r_s). NaN 1 + z gives NaN."""
     return page_thorne_flux(r, r_in) / np.asarray(one_plus_z, dtype=np.float64) ** 4
