@@ -264,6 +264,8 @@ def test_vertex_redshift_matches_reference(lut120, prograde):
         img = mapping.map_vertices(pts, scene, lut120, order)
         assert np.all(img.valid)
         z_vertex = td.vertex_redshift(pts, hole, camera, r_s, axis, img.xi, img.plane.e2, order, prograde)
+        z_dir = td.vertex_redshift_from_direction(pts, hole, camera, r_s, axis, img.direction, prograde)
+        np.testing.assert_allclose(z_dir, z_vertex, rtol=1e-12)
         n_sky = img.direction @ Q  # components along (e_o, e_right, e_up)
         theta = np.arccos(np.clip(-n_sky[:, 0], -1, 1))
         alpha = np.arctan2(n_sky[:, 2], n_sky[:, 1])

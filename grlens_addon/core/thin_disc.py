@@ -26,7 +26,9 @@ Units and conventions
   b = r_obs sin(xi) / sqrt(1 - 1/r_obs). The plane (e1, e2) has normal n = e1 x e2 and polar angle
   phi increasing from e1 towards e2. Order 1 light travels from phi (the vertex) back to phi = 0 (the
   camera), i.e. with dphi/dt < 0: L = -b n. Order 2 light passes the hole on the other side and
-  travels from phi - 2 pi up to 0, dphi/dt > 0: L = +b n.
+  travels from phi - 2 pi up to 0, dphi/dt > 0: L = +b n. Both amount to L = r_obs e1 x (-d) /
+  sqrt(1 - 1/r_obs) with d the apparent (image) direction at the camera, L evaluated where the
+  photon arrives (:func:`vertex_redshift_from_direction`).
 * Page-Thorne flux F(r) in units of F0 = 3 G M Mdot / (8 pi r_s^3) (the seed's normalisation; Mdot
   the accretion rate): zero at and inside the inner edge r_in (zero-torque boundary, default the ISCO
   3 r_s). With the ISCO edge the maximum is F = 9.1666e-4 F0 at r = 4.7745 r_s (9.549 M).
