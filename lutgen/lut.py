@@ -129,7 +129,12 @@ class LUT:
         """Interpolated (xi, dt, ux, uy) at points (r, phi) (broadcast arrays; r in r_s, phi in
         radians in [0, pi]) for the given order. NaN outside the table's domain. Only the
         ``quantities`` asked for are interpolated; the others come back as None."""
-        k = _order_index(order)
+        return self.lookup_orders(r, phi, (order,), quantities)[order]
+
+    def lookup_orders(self, r, phi, orders=(1, 2), quantities=QUANTITIES) -> dict:
+        """Like :meth:`lookup` for several orders at once: {order: Lookup}. The interpolation stencil
+        (which depends on (r, phi) only) is computed once and shared by the orders."""
+        ks = {order: _order_index(order) for order in orders}
         unknown = set(quantities) - set(QUANTITIES)
         if unknown:
             raise ValueError(f"unknown quantities {sorted(unknown)}; choose from {QUANTITIES}")
@@ -149,12 +154,16 @@ class LUT:
         ip, wp = _cubic_stencil(gp, self.n_phi)
         idx = ix[:, :, None] * self.n_phi + ip[:, None, :]  # (N, 4, 4) flat indices into a channel
         w = wx[:, :, None] * wp[:, None, :]
-        got = {}
-        for q, i in zip(quantities, qi):
-            v = np.einsum("nij,nij->n", self.data[k, i].reshape(-1).take(idx), w)  # a view, no copy
-            v[~inside] = np.nan
-            got[q] = v.reshape(shape)
-        return Lookup(*(got.get(q) for q in QUANTITIES))
+        outside = ~inside
+        result = {}
+        for order, k in ks.items():
+            got = {}
+            for q, i in zip(quantities, qi):
+                v = np.einsum("nij,nij->n", self.data[k, i].reshape(-1).take(idx), w)  # a view, no copy
+                v[outside] = np.nan
+                got[q] = v.reshape(shape)
+            result[order] = Lookup(*(got.get(q) for q in QUANTITIES))
+        return result
 
     def save(self, path) -> None:
         """Write the table to an OpenEXR file (see :mod:`lutgen.lutfile`)."""

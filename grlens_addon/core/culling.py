@@ -101,6 +101,17 @@ def axis_geometry(source_points, tris, camera, hole, order):
     return straddles, span
 
 
+def outside_bits(points, planes) -> np.ndarray:
+    """Per point (N,) an integer whose bit k is set when the point is outside plane k (rows (n, d) of
+    ``planes``, n . x + d >= 0 inside; at most 63 planes). Points with NaN coordinates are inside of
+    every plane (0), so they are never culled by the frustum. A triangle is wholly outside one plane
+    exactly when the bitwise AND of its corners' values is nonzero."""
+    planes = np.asarray(planes, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        side = points @ planes[:, :3].T + planes[:, 3] < 0  # (N, K), NaN -> False
+    return side.astype(np.int64) @ (np.int64(1) << np.arange(len(planes), dtype=np.int64))
+
+
 def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_planes=None, image_points=None,
          hole=None, order=None):
     """Mask of image triangles to keep, and a :class:`CullReport`.
@@ -118,7 +129,7 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     tris = np.asarray(tris, dtype=np.int64)
     rep = CullReport()
     keep = np.ones(len(tris), dtype=bool)
-    bad_v = ~valid[tris].all(axis=1)
+    bad_v = ~(valid[tris[:, 0]] & valid[tris[:, 1]] & valid[tris[:, 2]])
     rep.invalid_vertex = int(bad_v.sum())
     keep &= ~bad_v
     src_c = _circumference(unit_directions(source_points, camera), tris)
@@ -135,10 +146,8 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     rep.einstein_ring = int(ring.sum())
     keep &= ~ring
     if frustum_planes is not None and image_points is not None and len(frustum_planes):
-        pl = np.asarray(frustum_planes, dtype=np.float64)
-        side = image_points @ pl[:, :3].T + pl[:, 3]  # (V, K)
-        with np.errstate(invalid="ignore"):
-            outside = (side[tris] < 0).all(axis=1).any(axis=1)  # all 3 corners behind one plane
+        bits = outside_bits(image_points, frustum_planes)
+        outside = (bits[tris[:, 0]] & bits[tris[:, 1]] & bits[tris[:, 2]]) != 0  # all 3 behind one plane
         out = keep & outside
         rep.outside_frustum = int(out.sum())
         keep &= ~outside

@@ -115,19 +115,31 @@ def map_vertices(points: np.ndarray, scene: Scene, lut, order: int, plane: Plane
     ``lut`` is a :class:`lutgen.LUT` built for r_obs = scene.r_obs (checked to 1e-9 relative); points
     outside its radial range, inside the horizon, non-finite or on the axis come back invalid (NaN).
     """
-    if order not in (1, 2):
-        raise ValueError(f"order must be 1 or 2, got {order!r}")
+    return map_vertices_orders(points, scene, lut, (order,), plane)[order]
+
+
+def map_vertices_orders(points: np.ndarray, scene: Scene, lut, orders=(1, 2),
+                        plane: PlaneCoordinates | None = None) -> dict:
+    """:func:`map_vertices` for several orders at once ({order: Images}); the plane coordinates and
+    the LUT's interpolation stencil are computed once."""
+    for order in orders:
+        if order not in (1, 2):
+            raise ValueError(f"order must be 1 or 2, got {order!r}")
     if abs(lut.r_obs / scene.r_obs - 1.0) > 1e-9:
         raise ValueError(f"the LUT was built for r_obs = {lut.r_obs:.9g} r_s but the camera is at "
                          f"{scene.r_obs:.9g} r_s from the hole; rebuild the LUT")
     plane = plane if plane is not None else plane_coordinates(points, scene)
-    look = lut.lookup(plane.r, plane.phi, order, quantities=("xi", "dt"))
-    sign = 1.0 if order == 1 else -1.0
-    c, s = np.cos(look.xi), np.sin(look.xi)
-    direction = c[:, None] * scene.e1 + (sign * s)[:, None] * plane.e2
-    distance = look.dt * scene.r_s
-    position = scene.camera + distance[:, None] * direction
-    valid = np.all(np.isfinite(position), axis=1) & ~plane.on_axis
-    position[~valid] = np.nan
-    return Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
-                  xi=look.xi, dt=look.dt, ux=look.ux, uy=look.uy)
+    looks = lut.lookup_orders(plane.r, plane.phi, tuple(orders), quantities=("xi", "dt"))
+    out = {}
+    for order in orders:
+        look = looks[order]
+        sign = 1.0 if order == 1 else -1.0
+        c, s = np.cos(look.xi), np.sin(look.xi)
+        direction = c[:, None] * scene.e1 + (sign * s)[:, None] * plane.e2
+        distance = look.dt * scene.r_s
+        position = scene.camera + distance[:, None] * direction
+        valid = np.isfinite(distance) & np.isfinite(c) & ~plane.on_axis
+        position[~valid] = np.nan
+        out[order] = Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
+                            xi=look.xi, dt=look.dt, ux=look.ux, uy=look.uy)
+    return out

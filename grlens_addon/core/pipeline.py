@@ -118,8 +118,9 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
     mids = 0.5 * (src.positions[ev0] + src.positions[ev1])
     plane_v = mapping.plane_coordinates(src.positions, scene)
     planes = None if frustum_planes is None or not len(frustum_planes) else np.asarray(frustum_planes, np.float64)
+    images_v = mapping.map_vertices_orders(src.positions, scene, lut, settings.orders, plane_v)
     for order in settings.orders:
-        img_v = mapping.map_vertices(src.positions, scene, lut, order, plane_v)
+        img_v = images_v[order]
         d_a, d_b = img_v.direction[ev0], img_v.direction[ev1]
         chord = subdivision.chord_angle(d_a, d_b)
         # edge midpoints are mapped only where a level above 1 is possible: an edge whose image spans
@@ -220,11 +221,11 @@ def _inside_frustum(img_v: mapping.Images, img_m: mapping.Images, probe, tris, e
         return np.arange(len(tris))
     mid = 0.5 * (img_v.position[edges.verts[:, 0]] + img_v.position[edges.verts[:, 1]])
     mid[probe] = img_m.position
-    with np.errstate(invalid="ignore"):
-        out_v = (img_v.position @ planes[:, :3].T + planes[:, 3]) < 0  # (N, K); NaN -> False
-        out_m = (mid @ planes[:, :3].T + planes[:, 3]) < 0  # (E, K)
-    outside = out_v[tris].all(axis=1) & out_m[edges.of_tri].all(axis=1)  # (T, K)
-    return np.flatnonzero(~outside.any(axis=1))
+    out_v = culling.outside_bits(img_v.position, planes)  # (N,) bit k: outside plane k
+    out_m = culling.outside_bits(mid, planes)  # (E,)
+    t, e = tris, edges.of_tri
+    outside = out_v[t[:, 0]] & out_v[t[:, 1]] & out_v[t[:, 2]] & out_m[e[:, 0]] & out_m[e[:, 1]] & out_m[e[:, 2]]
+    return np.flatnonzero(outside == 0)
 
 
 def _map_subdivided(sub, n_pts, coarse: mapping.Images, scene, lut, order) -> mapping.Images:
