@@ -18,6 +18,16 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         obj = context.object
         if obj is not None and obj.type == "MESH" and obj.grlens.order == 0:
             col.prop(obj.grlens, "enabled", text=f"Lens '{obj.name}'")
+            if obj.grlens.enabled:
+                col.prop(obj.grlens, "emitter")
+                if obj.grlens.emitter == "THIN_DISC":
+                    sub = col.box()
+                    sub.prop(obj.grlens, "disc_mode")
+                    row = sub.row(align=True)
+                    row.prop(obj.grlens, "disc_r_in")
+                    row.prop(obj.grlens, "disc_prograde")
+                    sub.prop(obj.grlens, "disc_t_peak")
+                    sub.prop(obj.grlens, "disc_exposure")
         col.separator()
         col.prop(g, "show_order_1")
         col.prop(g, "show_order_2")

@@ -4,7 +4,7 @@ Units: ``r_s`` in Blender units (BU); LUT radii in units of r_s; light intensity
 the irradiance attribute is I0 / (c dt)^2 with c dt in BU).
 """
 import bpy
-from bpy.props import BoolProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 
 def _changed(self, context):
@@ -74,6 +74,27 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
 class GRLENS_ObjectSettings(bpy.types.PropertyGroup):
     enabled: BoolProperty(name="Lens This Object", default=False, update=_changed,
                           description="Replace what the camera sees of this object by its lensed images")
+    emitter: EnumProperty(
+        name="Emitter", default="SURFACE", update=_changed,
+        items=(("SURFACE", "Surface", "Shaded by its own materials (and GR illumination if on)"),
+               ("THIN_DISC", "Thin Disc", "A thin accretion disc of gas on circular orbits about the object's local Z "
+                                          "axis: image vertices get 1 + z ('grlens_redshift') and the Page-Thorne flux "
+                                          "/ (1 + z)^4 as a colour ('grlens_disc_colour'; node group "
+                                          "'grlens Thin Disc Emission')")),
+        description="What the object's images show")
+    disc_mode: EnumProperty(
+        name="Disc Colour", default="BOLOMETRIC", update=_changed,
+        items=(("BOLOMETRIC", "Bolometric", "Grey: observed flux F / (1 + z)^4 relative to the emitted maximum"),
+               ("BLACKBODY", "Blackbody", "Colour of the observed temperature T / (1 + z), scaled by the observed flux")),
+        description="How the thin disc's observed flux becomes a colour")
+    disc_prograde: BoolProperty(name="Prograde", default=True, update=_changed,
+                                description="Gas turns counter-clockwise about the object's local Z axis (else clockwise)")
+    disc_r_in: FloatProperty(name="Inner Radius", default=3.0, min=3.0, soft_max=20.0, update=_changed,
+                             description="Inner edge of the emitting disc in units of r_s (3: the innermost stable orbit)")
+    disc_t_peak: FloatProperty(name="Peak Temperature", default=10000.0, min=100.0, soft_max=1e6, update=_changed,
+                               description="Emitted temperature in kelvin where the flux is largest (blackbody colour)")
+    disc_exposure: FloatProperty(name="Disc Exposure", default=1.0, min=0.0, soft_max=100.0, update=_changed,
+                                 description="Colour scale: 1 maps the largest emitted flux to 1")
     source: PointerProperty(type=bpy.types.Object, name="Source",
                             description="For image objects made by grlens: the object they show (read only)")
     order: IntProperty(name="Image Order", default=0, min=0, max=2,

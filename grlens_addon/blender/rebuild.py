@@ -196,14 +196,32 @@ def _source_depsgraph(depsgraph):
     return view_dg
 
 
-def _input_key(mesh, geo, settings, lut, light, mats, planes) -> str:
+def _disc_emitter(obj_eval):
+    """core DiscEmitter for an object with obj.grlens.emitter == 'THIN_DISC' (axis: its local Z in
+    world space), else None."""
+    g = obj_eval.original.grlens if obj_eval.original is not None else obj_eval.grlens
+    if g.emitter != "THIN_DISC":
+        return None
+    m = np.array(obj_eval.matrix_world, dtype=np.float64)[:3, :3]
+    axis = m @ np.array([0.0, 0.0, 1.0])
+    norm = np.linalg.norm(axis)
+    if not norm > 0:
+        raise ValueError(f"{obj_eval.name}: the disc's local Z axis has zero length (scale 0)")
+    shading.ensure_disc_node_group()
+    return pipeline.DiscEmitter(axis=axis / norm, prograde=g.disc_prograde, mode=g.disc_mode.lower(),
+                                r_in=g.disc_r_in, t_peak=g.disc_t_peak, exposure=g.disc_exposure)
+
+
+def _input_key(mesh, geo, settings, lut, light, mats, planes, disc=None) -> str:
     """Digest of everything an image depends on: world-space geometry and attributes, camera, hole,
     r_s, settings, LUT parameters, light and material slots. Equal digests give identical images."""
     h = hashlib.blake2b(digest_size=16)
     for a in (mesh.positions, mesh.tris, mesh.corner_uv, mesh.material, mesh.corner_normals,
               geo.camera, geo.hole, planes):
         h.update(b"|" if a is None else np.ascontiguousarray(a).tobytes())
-    h.update(repr((geo.r_s, settings, tuple(sorted(lut.parameters.items())), [m.name if m else None for m in mats],
+    h.update(repr((geo.r_s, settings, None if disc is None else (tuple(disc.axis), disc.prograde, disc.mode, disc.r_in,
+                                                                 disc.t_peak, disc.exposure),
+                   tuple(sorted(lut.parameters.items())), [m.name if m else None for m in mats],
                    None if light is None else (tuple(light.position), light.intensity,
                                                tuple(sorted(light.lut.parameters.items()))))).encode())
     return h.hexdigest()
@@ -243,14 +261,15 @@ def rebuild_scene(scene, depsgraph=None) -> dict:
             mesh = _extract(src_eval)
             mats = [shading.image_material(slot.material) for slot in src.material_slots] or \
                 [shading.image_material(None)]
-            key = _input_key(mesh, geo, settings, lut, light, mats, planes)
+            disc = _disc_emitter(src_eval)
+            key = _input_key(mesh, geo, settings, lut, light, mats, planes, disc)
             objs = {order: _image_object(scene, src, order) for order in settings.orders}
             wanted.update(o.name for o in objs.values())
             _set_source_visibility(src, True)
             if all(o.get("grlens_input") == key for o in objs.values()):
                 report["objects"][src.name] = "unchanged"  # same geometry, camera and settings: skip
                 continue
-            images = pipeline.build_images(mesh, geo, lut, settings, light, planes)
+            images = pipeline.build_images(mesh, geo, lut, settings, light, planes, disc)
             entry = {}
             for order, img in images.items():
                 obj = objs[order]

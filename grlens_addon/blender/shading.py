@@ -49,6 +49,45 @@ def ensure_node_group():
     return tree
 
 
+DISC_GROUP_NAME = "grlens Thin Disc Emission"
+DISC_COLOUR = "grlens_disc_colour"
+"""Point colour attribute (linear RGB) of thin-disc images: Page-Thorne flux / (1 + z)^4, see core.thin_disc."""
+REDSHIFT = "grlens_redshift"
+"""Point float attribute of thin-disc images: the redshift factor 1 + z."""
+
+
+def ensure_disc_node_group():
+    """Get or create the node group that emits the ``grlens_disc_colour`` attribute (Strength input
+    scales it); never duplicated."""
+    tree = bpy.data.node_groups.get(DISC_GROUP_NAME)
+    if tree is not None and tree.bl_idname == "ShaderNodeTree":
+        return tree
+    tree = bpy.data.node_groups.new(DISC_GROUP_NAME, "ShaderNodeTree")
+    _socket(tree, "INPUT", "Strength", "NodeSocketFloat", 1.0)
+    _socket(tree, "OUTPUT", "Shader", "NodeSocketShader")
+    _socket(tree, "OUTPUT", "Color", "NodeSocketColor")
+    _socket(tree, "OUTPUT", "Redshift", "NodeSocketFloat")
+    n = tree.nodes
+    gin, gout = n.new("NodeGroupInput"), n.new("NodeGroupOutput")
+    colour = n.new("ShaderNodeAttribute")
+    colour.attribute_type = "GEOMETRY"
+    colour.attribute_name = DISC_COLOUR
+    z = n.new("ShaderNodeAttribute")
+    z.attribute_type = "GEOMETRY"
+    z.attribute_name = REDSHIFT
+    emit = n.new("ShaderNodeEmission")
+    links = tree.links
+    links.new(colour.outputs["Color"], emit.inputs["Color"])
+    links.new(gin.outputs["Strength"], emit.inputs["Strength"])
+    links.new(emit.outputs["Emission"], gout.inputs["Shader"])
+    links.new(colour.outputs["Color"], gout.inputs["Color"])
+    links.new(z.outputs["Fac"], gout.inputs["Redshift"])
+    for i, node in enumerate((gin, colour, emit, gout)):
+        node.location = (200 * i, 0)
+    z.location = (200, -200)
+    return tree
+
+
 # --------------------------------------------------------------------------------------------------
 # Render passes: light travel time and image order as AOVs
 # --------------------------------------------------------------------------------------------------

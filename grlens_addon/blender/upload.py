@@ -3,7 +3,8 @@
 Units: positions in Blender units, written in world space (image objects have identity transforms).
 Attributes written: UV map ``UVMap`` (corner), ``light_travel_time`` (point, float: c*dt in scene
 length units), ``grlens_order`` (point, float: 1 or 2), ``grlens_irradiance`` (corner, float; only
-with GR illumination), material indices.
+with GR illumination), ``grlens_redshift`` (point, float: 1 + z) and ``grlens_disc_colour`` (point,
+colour: linear RGB) for thin-disc sources, material indices.
 """
 import hashlib
 
@@ -60,6 +61,18 @@ def upload(mesh, img, materials) -> None:
             "value", np.ascontiguousarray(img.irradiance, dtype=np.float32).ravel())
     elif mesh.attributes.get("grlens_irradiance") is not None:
         mesh.attributes.remove(mesh.attributes["grlens_irradiance"])
+    for name, values, type_ in (("grlens_redshift", img.redshift, "FLOAT"),
+                                ("grlens_disc_colour", img.disc_colour, "FLOAT_COLOR")):
+        if values is not None:
+            a = _attr(mesh, name, type_, "POINT")
+            if type_ == "FLOAT_COLOR":
+                rgba = np.ones((len(values), 4), dtype=np.float32)
+                rgba[:, :3] = values
+                a.data.foreach_set("color", rgba.ravel())
+            else:
+                a.data.foreach_set("value", np.ascontiguousarray(values, dtype=np.float32))
+        elif mesh.attributes.get(name) is not None:
+            mesh.attributes.remove(mesh.attributes[name])
     if list(mesh.materials) != list(materials):
         mesh.materials.clear()
         for m in materials:

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import culling, illumination, mapping, subdivision
+from . import culling, illumination, mapping, subdivision, thin_disc
 
 
 @dataclass
@@ -53,7 +53,8 @@ class ImageMesh:
     positions (V, 3) BU; tris (F, 3); corner_uv (F, 3, 2) or None; material (F,);
     light_travel_time (V,) c*dt in BU; irradiance (F, 3) per corner or None; report: culling counts;
     source_tri (F,) the source triangle of each face; source_position (V, 3) BU: the undistorted
-    world point each image vertex shows.
+    world point each image vertex shows; with a :class:`DiscEmitter`: redshift (V,) 1 + z and
+    disc_colour (V, 3) linear RGB, else None.
     """
 
     order: int
@@ -66,6 +67,27 @@ class ImageMesh:
     report: culling.CullReport
     source_tri: np.ndarray = field(repr=False, default=None)
     source_position: np.ndarray = field(repr=False, default=None)
+    redshift: np.ndarray | None = field(repr=False, default=None)
+    disc_colour: np.ndarray | None = field(repr=False, default=None)
+
+
+@dataclass
+class DiscEmitter:
+    """A source that is a thin accretion disc of gas on circular geodesics (seed 002): its image
+    vertices get the redshift factor 1 + z and a colour from the Page-Thorne flux F(r) / (1 + z)^4.
+
+    axis: unit vector (world) of the disc's angular momentum (prograde gas turns counter-clockwise
+    about it; retrograde with ``prograde`` False); mode: "bolometric" or "blackbody";
+    r_in: inner edge in r_s (>= 3, the ISCO); t_peak: emitted temperature (K) at the flux maximum;
+    exposure: scale of the colour (1: the emitted maximum flux gives 1).
+    """
+
+    axis: np.ndarray
+    prograde: bool = True
+    mode: str = "bolometric"
+    r_in: float = 3.0
+    t_peak: float = 1.0e4
+    exposure: float = 1.0
 
 
 @dataclass
@@ -97,7 +119,8 @@ def clean_source(src: SourceMesh) -> tuple[SourceMesh, int]:
 
 
 def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
-                 light: Light | None = None, frustum_planes=None) -> dict[int, ImageMesh]:
+                 light: Light | None = None, frustum_planes=None,
+                 disc: DiscEmitter | None = None) -> dict[int, ImageMesh]:
     """Image meshes of the requested orders for one source mesh (see the module docstring).
 
     ``frustum_planes`` (K, 4), rows (n, d) with n . x + d >= 0 inside (world space, BU): image
@@ -160,10 +183,19 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             e, _ = illumination.irradiance(pts, n.reshape(-1, 3), light.position, scene.hole, scene.r_s,
                                            light.lut, light.intensity)
             irr = e.reshape(-1, 3)
+        redshift = colour = None
+        if disc is not None:
+            pts = sub.positions[used]
+            redshift = thin_disc.vertex_redshift_from_direction(pts, scene.hole, scene.camera, scene.r_s,
+                                                                disc.axis, img.direction[used], disc.prograde)
+            r = np.linalg.norm(pts - scene.hole, axis=1) / scene.r_s
+            colour = np.nan_to_num(thin_disc.disc_colour(r, redshift, disc.mode, r_in=disc.r_in,
+                                                         t_peak=disc.t_peak, exposure=disc.exposure))
         out[order] = ImageMesh(order=order, positions=img.position[used], tris=remap[tris],
                                corner_uv=corner_uv, material=src.material[src_tri],
                                light_travel_time=img.distance[used], irradiance=irr, report=report,
-                               source_tri=src_tri, source_position=sub.positions[used])
+                               source_tri=src_tri, source_position=sub.positions[used],
+                               redshift=redshift, disc_colour=colour)
     return out
 
 
