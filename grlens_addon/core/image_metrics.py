@@ -1,0 +1,221 @@
+"""Image-level error of the polygon method: metrics between two per-pixel buffers (numpy only, no bpy).
+
+Both inputs are ``raytrace.PixelBuffers`` of one camera: the reference (``raytrace.trace``) and a
+test image (usually ``rasterize.rasterize`` of the pipeline's image meshes). Units: light travel time
+in Blender units (BU, c = 1), UVs in texture coordinates, screen distances in pixels.
+
+Per image order o (1, 2, and "all" = orders 1 and 2 together) the comparison reports
+
+* coverage: ``covered_ref`` / ``covered_test`` pixels showing some object in order o;
+  ``mismatch``: pixels where exactly one of the two shows a given (object, order o) (a pixel where
+  both show order o but of different objects counts once); ``mismatch_frac`` = mismatch /
+  covered_ref (the fraction of the reference's covered pixels);
+* on the ``matched`` pixels (both show the same object in the same order):
+
+  - ``uv_texel``: |uv_test - uv_ref| times ``texture_size`` (texels of a square texture);
+  - ``uv_px``: the same UV difference in screen pixels, |J^-1 (uv_test - uv_ref)|, where
+    J = d(uv)/d(column, row) is the reference's UV gradient at that pixel (finite differences
+    between neighbours showing the same object and order; one-sided next to silhouettes, pixels
+    with neither neighbour in a direction are left out, see ``uv_px_n``). It is how far one would
+    have to move on the reference image to see the texture point the test pixel shows: a texture
+    lands that many pixels off;
+  - ``lt_rel``: |lt_test - lt_ref| / lt_ref, the relative light-travel-time error;
+
+  each as p50 / p99 / max (NaN if there is nothing to measure).
+
+Pixels where the reference sees an image of order 3 or more are counted separately
+(``higher_ref``; the polygon method builds orders 1 and 2 only) and enter the order keys only through
+the test buffer. UV coordinates listed in ``wrap_uv`` are periodic (differences taken modulo 1, e.g.
+the longitude of a UV sphere, whose seam otherwise reads as a jump of 1).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+_STATS = (("p50", 50.0), ("p99", 99.0), ("max", 100.0))
+
+
+def _stats(x) -> dict:
+    x = np.asarray(x, dtype=np.float64)
+    x = x[np.isfinite(x)]
+    if not x.size:
+        return {k: float("nan") for k, _ in _STATS}
+    return {k: float(np.percentile(x, q)) for k, q in _STATS}
+
+
+def _wrap(d, wrap_uv):
+    d = np.array(d, dtype=np.float64, copy=True)
+    for i, w in enumerate(wrap_uv):
+        if w:
+            d[..., i] -= np.round(d[..., i])
+    return d
+
+
+def _key(buf, orders):
+    """Per pixel an integer (object, order) key, -1 for no hit or an order not in ``orders``."""
+    ok = buf.hit & np.isin(buf.order, orders)
+    return np.where(ok, buf.object_id * 1024 + buf.order, -1)
+
+
+def uv_gradient(buf, wrap_uv=(False, False), seam: float = 0.25) -> np.ndarray:
+    """(H, W, 2, 2) UV gradient J[..., i, j] = d uv_i / d (column, row)_j of a buffer, from
+    neighbours showing the same object in the same order (central differences where both are there,
+    one-sided otherwise, NaN with neither); differences above ``seam`` (UV units) are treated as a
+    seam and not used."""
+    uv = buf.uv
+    key = np.where(buf.hit, buf.object_id * 1024 + buf.order, -1)
+    out = np.full(uv.shape[:2] + (2, 2), np.nan)
+    for j, axis in enumerate((1, 0)):  # column (x), row (y)
+        n = uv.shape[axis]
+        idx = np.arange(n)
+        nxt = np.take(uv, np.minimum(idx + 1, n - 1), axis=axis)
+        prv = np.take(uv, np.maximum(idx - 1, 0), axis=axis)
+        k_n = np.take(key, np.minimum(idx + 1, n - 1), axis=axis)
+        k_p = np.take(key, np.maximum(idx - 1, 0), axis=axis)
+        edge_n = (idx == n - 1).reshape((1, -1) if axis == 1 else (-1, 1))
+        edge_p = (idx == 0).reshape((1, -1) if axis == 1 else (-1, 1))
+        fwd = _wrap(nxt - uv, wrap_uv)
+        bwd = _wrap(uv - prv, wrap_uv)
+        with np.errstate(invalid="ignore"):
+            ok_f = (key >= 0) & (k_n == key) & ~edge_n & np.all(np.abs(fwd) < seam, axis=-1)
+            ok_b = (key >= 0) & (k_p == key) & ~edge_p & np.all(np.abs(bwd) < seam, axis=-1)
+        d = np.where((ok_f & ok_b)[..., None], 0.5 * (fwd + bwd),
+                     np.where(ok_f[..., None], fwd, np.where(ok_b[..., None], bwd, np.nan)))
+        out[..., :, j] = d
+    return out
+
+
+def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(False, False)) -> dict:
+    """Metrics between the reference buffers ``ref`` and ``test`` (see the module docstring).
+
+    Returns {"orders": {1: {...}, 2: {...}, "all": {...}}, "higher_ref": int, "higher_test": int,
+    "pixels": int}; each order's dict holds covered_ref, covered_test, mismatch, mismatch_frac,
+    matched, uv_texel / uv_px / lt_rel (dicts p50, p99, max) and uv_px_n.
+    """
+    if ref.shape != test.shape:
+        raise ValueError(f"buffers of different shapes: {ref.shape} vs {test.shape}")
+    grad = uv_gradient(ref, wrap_uv) if ref.uv.ndim == 3 else None
+    out = {"orders": {}, "pixels": int(np.prod(ref.shape)),
+           "higher_ref": int((ref.hit & (ref.order >= 3)).sum()),
+           "higher_test": int((test.hit & (test.order >= 3)).sum())}
+    for o in list(orders) + ["all"]:
+        sel = list(orders) if o == "all" else [o]
+        kr, kt = _key(ref, sel), _key(test, sel)
+        mismatch = int(((kr != kt) & ((kr >= 0) | (kt >= 0))).sum())
+        covered = int((kr >= 0).sum())
+        matched = (kr >= 0) & (kr == kt)
+        d_uv = _wrap(test.uv[matched] - ref.uv[matched], wrap_uv)
+        res = dict(covered_ref=covered, covered_test=int((kt >= 0).sum()), mismatch=mismatch,
+                   mismatch_frac=mismatch / covered if covered else float("nan"), matched=int(matched.sum()))
+        res["uv_texel"] = _stats(np.linalg.norm(d_uv, axis=-1) * texture_size)
+        if grad is not None:
+            J = grad[matched]
+            good = np.all(np.isfinite(J), axis=(1, 2)) & np.all(np.isfinite(d_uv), axis=1)
+            det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+            good &= np.abs(det) > 0
+            px = np.full(len(J), np.nan)
+            if good.any():
+                px[good] = np.linalg.norm(np.linalg.solve(J[good], d_uv[good][..., None])[..., 0], axis=1)
+            res["uv_px"] = _stats(px)
+            res["uv_px_n"] = int(np.isfinite(px).sum())
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lt = np.abs(test.light_time[matched] - ref.light_time[matched]) / ref.light_time[matched]
+        res["lt_rel"] = _stats(lt)
+        out["orders"][o] = res
+    return out
+
+
+def markdown_rows(metrics: dict, label: str = "") -> list[str]:
+    """Markdown table rows (one per order) of :func:`compare`'s result; header in
+    :data:`MARKDOWN_HEADER`."""
+    rows = []
+    for o, m in metrics["orders"].items():
+        rows.append(
+            f"| {label} | {o} | {m['covered_ref']} | {m['covered_test']} | {m['mismatch']} | "
+            f"{100 * m['mismatch_frac']:.2f}% | {m['uv_px']['p50']:.3f} | {m['uv_px']['p99']:.3f} | "
+            f"{m['uv_px']['max']:.2f} | {m['uv_texel']['p99']:.2f} | {m['lt_rel']['p50']:.1e} | "
+            f"{m['lt_rel']['p99']:.1e} | {m['lt_rel']['max']:.1e} |")
+    return rows
+
+
+MARKDOWN_HEADER = [
+    "| case | order | covered (ref) | covered (test) | mismatch | mismatch / covered | UV err p50 [px] | "
+    "UV err p99 [px] | UV err max [px] | UV err p99 [texel] | c*dt rel. err p50 | p99 | max |",
+    "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+]
+
+
+# --------------------------------------------------------------------------------------------------
+# Debug pictures
+# --------------------------------------------------------------------------------------------------
+def to_rgb(buf, field: str) -> np.ndarray:
+    """(H, W, 3) float image in [0, 1] of one buffer field: "order" (1 blue-ish, 2 orange, 3+ red,
+    fell-in black, background dark grey), "uv" (u red, v green), "light_time" (normalised grey),
+    "object_id" (a colour per object)."""
+    H, W = buf.shape
+    img = np.full((H, W, 3), 0.15)
+    if field == "order":
+        cols = {1: (0.3, 0.6, 1.0), 2: (1.0, 0.6, 0.1)}
+        for o, c in cols.items():
+            img[buf.hit & (buf.order == o)] = c
+        img[buf.hit & (buf.order >= 3)] = (1.0, 0.1, 0.1)
+        img[buf.fell] = 0.0
+    elif field == "uv":
+        uv = np.nan_to_num(buf.uv, nan=0.0) % 1.0
+        img[buf.hit] = np.stack([uv[..., 0], uv[..., 1], np.full(uv.shape[:2], 0.3)], -1)[buf.hit]
+    elif field == "light_time":
+        lt = buf.light_time
+        if np.isfinite(lt).any():
+            lo, hi = np.nanmin(lt), np.nanmax(lt)
+            g = (lt - lo) / (hi - lo if hi > lo else 1.0)
+            img[buf.hit] = np.stack([g, g, g], -1)[buf.hit] * 0.8 + 0.2
+    elif field == "object_id":
+        rng = np.random.default_rng(7)
+        pal = rng.uniform(0.3, 1.0, (64, 3))
+        img[buf.hit] = pal[buf.object_id[buf.hit] % 64]
+    else:
+        raise ValueError(f"unknown field {field!r}")
+    return img
+
+
+def save_png(path, buffers: dict, fields=("order", "uv", "light_time")) -> None:
+    """A grid of pictures (rows: the named buffers of ``buffers`` {name: PixelBuffers}, columns:
+    ``fields``), plus a column of coverage differences to the first buffer, written to ``path``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(buffers)
+    ref = buffers[names[0]]
+    ncol = len(fields) + (1 if len(names) > 1 else 0)
+    H, W = ref.shape
+    fig, axes = plt.subplots(len(names), ncol, figsize=(3.2 * ncol * W / max(H, 1) / 1.6, 2.2 * len(names)),
+                             squeeze=False)
+    for i, n in enumerate(names):
+        b = buffers[n]
+        for j, f in enumerate(fields):
+            axes[i, j].imshow(to_rgb(b, f), interpolation="nearest")
+            axes[i, j].set_title(f"{n}: {f}", fontsize=8)
+        if ncol > len(fields):
+            axes[i, -1].imshow(diff_rgb(ref, b), interpolation="nearest")
+            axes[i, -1].set_title(f"{n} vs {names[0]}", fontsize=8)
+    for ax in axes.ravel():
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def diff_rgb(ref, test) -> np.ndarray:
+    """(H, W, 3) picture of coverage differences: grey where both agree on (object, order), red where
+    only the reference shows it, green where only the test does, yellow where they show different
+    (object, order)s."""
+    kr, kt = _key(ref, [1, 2, 3, 4, 5, 6, 7, 8]), _key(test, [1, 2, 3, 4, 5, 6, 7, 8])
+    img = np.full(ref.shape + (3,), 0.1)
+    img[(kr >= 0) & (kr == kt)] = 0.45
+    img[(kr >= 0) & (kt < 0)] = (1.0, 0.1, 0.1)
+    img[(kr < 0) & (kt >= 0)] = (0.1, 1.0, 0.1)
+    img[(kr >= 0) & (kt >= 0) & (kr != kt)] = (1.0, 1.0, 0.1)
+    return img

@@ -1,0 +1,734 @@
+"""Reference renderer: one exact null geodesic per pixel against a triangle scene (numpy only, no bpy).
+
+This is the ground truth the polygon method (mapping + subdivision, see ``pipeline``) is measured
+against; it is slow (seconds per frame) and meant for tests and benchmarks, not for the add-on.
+
+Units and conventions
+---------------------
+World positions, r_s, distances and light travel times c*dt are in Blender units (BU); internally
+lengths are in units of r_s (as in ``lutgen``), c = 1. The camera is a static observer at
+r_obs = |camera - hole| / r_s (> 1.5). ``e1 = (camera - hole)/|camera - hole|`` is its outward radial
+direction; a ray leaving the camera in the world direction ``d`` makes the angle ``xi`` with e1 (in
+the observer's static orthonormal frame, which grlens identifies with Blender's Euclidean axes at the
+camera) and lies in the plane through the hole spanned by e1 and ``e2 = unit(d - (d.e1) e1)``. In
+that plane the ray is the exact curve u(Phi) = r_s/r of the orbit with impact parameter
+b = sin(xi) / (u_obs sqrt(1 - u_obs)), where Phi >= 0 is the angle swept from the camera around the
+hole towards +e2 (Phi grows monotonically along the ray). A point reached at swept angle Phi is an
+image of order 1 if Phi <= pi (lutgen's order 1 with phi = Phi), of order 2 if pi < Phi <= 2 pi
+(lutgen's order 2 with phi = 2 pi - Phi, measured on the other side of the axis) and of order
+ceil(Phi / pi) beyond.
+
+The curve in closed form (lutgen.orbit's roots e1 < e2 <= e3 or e1, m +- i n): with
+w = w_obs + s c Phi (s = +1 for rays that leave towards the hole, cos xi < 0, else -1),
+
+* turning orbits (b > b_crit): u = e1 + (e2 - e1) sn^2(w | k^2), k^2 = (e2-e1)/(e3-e1),
+  c = sqrt(e3 - e1)/2; the periapsis u = e2 is at w = K(k^2), after which u decreases again;
+* plunging orbits (b < b_crit): u = e1 + A (1 - cn(w|k^2)) / (1 + cn(w|k^2)), A = |m + i n - e1|,
+  k^2 = (A + m - e1)/(2A), c = sqrt(A);
+
+both the inverse of lutgen.orbit.sweep (``w / c`` is the F(u) of that module). The swept angle is
+therefore exact, however often a ray near the critical impact parameter winds around the hole.
+
+Intersections
+-------------
+Every ray plane contains the axis hole-camera, so a triangle can only be met by rays whose plane
+azimuth about that axis lies in the triangle's azimuth range (all rays if the triangle surrounds the
+axis); rays are sorted by azimuth and paired with triangles by ``searchsorted``. Each object gets a
+radial shell [R_lo, R_hi] around the hole; the swept-angle intervals in which a ray is inside it
+(at most one inbound and one outbound leg) are exact (lutgen.orbit.sweep). For each (ray, triangle)
+pair the triangle is cut by the ray's plane into a segment that subtends an angular sector
+[phi_a, phi_a + width] (width < pi) seen from the hole; candidate intervals are the sector shifted by
+2 pi k and clipped to the shell intervals. On each interval the curve meets the segment where
+
+    g(Phi) = u_ray(Phi) - u_line(Phi) = 0,   u_line(Phi) = (m . (cos Phi, sin Phi)) / p
+
+(the segment's line {x : m.x = p}, p > 0). Since u_ray'' + u_ray = 3/2 u_ray^2 and
+u_line'' + u_line = 0, g'' + g >= 0: on intervals shorter than pi, g has at most two zeros, a sign
+change brackets exactly one, equal negative signs exclude any, and g(a + t) >= g(a) cos t + g'(a) sin t
+(the ray stays on the hole's side of its tangent) gives a rigorous exclusion test for equal positive
+signs. Undecided intervals are bisected; bracketed roots are polished with safeguarded Newton steps
+to ~1e-14 rad. The first root along the ray (smallest Phi) is the pixel's hit. Nothing is sampled, so
+there is no step-size error; the answers are exact up to rounding (tested against lutgen.connect
+and, for the curve itself, against lutgen.reference's DOP853 integrator).
+
+Light travel time: lutgen.orbit.travel_time from u_obs to u_hit, or, for a hit after the periapsis,
+from u_obs to the periapsis plus from there to u_hit (as lutgen.solver._finish does).
+
+Limitations: triangles whose plane cut passes within 1e-12 r_s of the hole's centre (e.g. a fan
+whose centre vertex is the hole) are skipped in those planes; grazing (tangential) hits can be
+missed; everything at r <= r_s (inside the horizon) is invisible.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import ellipj
+
+from lutgen import orbit as _orb
+from lutgen.solver import check_observer_radius
+
+TWO_PI = 2.0 * np.pi
+_B_MIN = 1e-12  # impact parameters (r_s) below this are clamped (the ray is radial to rounding)
+_P_MIN = 1e-12  # a cut segment whose line passes closer than this (r_s) to the hole is skipped
+_AZ_PAD = 1e-7  # rad, widening of the triangles' azimuth ranges (pairing is only a pre-selection)
+
+
+# --------------------------------------------------------------------------------------------------
+# Camera and buffers
+# --------------------------------------------------------------------------------------------------
+@dataclass
+class Camera:
+    """A pinhole camera (Blender's convention: it looks along its local -Z, local +Y is up, +X right).
+
+    position: (3,) BU; rotation: (3, 3) camera-to-world rotation (columns: the camera's x, y, z axes in
+    world space, e.g. ``matrix_world.to_3x3()``); fov_y: full vertical field of view (rad);
+    width, height: resolution in pixels. Pixel (row j, column i) looks through its centre; row 0 is the
+    top of the image, so buffers are (height, width) arrays in image order.
+    """
+
+    position: np.ndarray
+    rotation: np.ndarray
+    fov_y: float
+    width: int
+    height: int
+
+    def __post_init__(self):
+        self.position = np.asarray(self.position, dtype=np.float64).reshape(3)
+        self.rotation = np.asarray(self.rotation, dtype=np.float64).reshape(3, 3)
+        self.fov_y = float(self.fov_y)
+        self.width, self.height = int(self.width), int(self.height)
+
+    @classmethod
+    def look_at(cls, position, target, fov_y, width, height, up=(0.0, 0.0, 1.0)) -> "Camera":
+        """Camera at ``position`` looking at ``target`` (BU) with the image's up close to ``up``."""
+        position = np.asarray(position, dtype=np.float64)
+        fwd = np.asarray(target, dtype=np.float64) - position
+        fwd /= np.linalg.norm(fwd)
+        up = np.asarray(up, dtype=np.float64)
+        if abs(fwd @ up) > 0.999999 * np.linalg.norm(up):
+            up = np.array([0.0, 1.0, 0.0]) if abs(fwd[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        x = np.cross(fwd, up)
+        x /= np.linalg.norm(x)
+        y = np.cross(x, fwd)
+        return cls(position, np.stack([x, y, -fwd], axis=1), fov_y, width, height)
+
+    @property
+    def tan_half(self) -> tuple[float, float]:
+        """(tan of the horizontal half angle, tan of the vertical half angle)."""
+        ty = np.tan(0.5 * self.fov_y)
+        return ty * self.width / self.height, ty
+
+    @property
+    def pixel_angle(self) -> float:
+        """Angular size of a pixel at the image centre (rad): fov_y / height."""
+        return self.fov_y / self.height
+
+    def pixel_directions(self) -> np.ndarray:
+        """(height, width, 3) unit world-space directions through the pixel centres."""
+        tx, ty = self.tan_half
+        xs = (2.0 * (np.arange(self.width) + 0.5) / self.width - 1.0) * tx
+        ys = (1.0 - 2.0 * (np.arange(self.height) + 0.5) / self.height) * ty
+        local = np.empty((self.height, self.width, 3))
+        local[..., 0] = xs[None, :]
+        local[..., 1] = ys[:, None]
+        local[..., 2] = -1.0
+        local /= np.linalg.norm(local, axis=2, keepdims=True)
+        return local @ self.rotation.T
+
+    def project(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """World points (N, 3; BU) -> (column, row, depth): continuous pixel coordinates (pixel centres
+        at integer + 0.5, row 0 at the top) and the view depth along the camera's -Z (BU; <= 0 behind)."""
+        local = (np.asarray(points, dtype=np.float64) - self.position) @ self.rotation
+        depth = -local[:, 2]
+        tx, ty = self.tan_half
+        with np.errstate(divide="ignore", invalid="ignore"):
+            col = (local[:, 0] / depth / tx + 1.0) * 0.5 * self.width
+            row = (1.0 - local[:, 1] / depth / ty) * 0.5 * self.height
+        return col, row, depth
+
+    def frustum_planes(self, margin: float = 0.05) -> np.ndarray:
+        """(4, 4) world-space side planes (n, d), n . x + d >= 0 inside, widened by ``margin`` (a
+        fraction of the half-angles' tangents), as the add-on passes to pipeline.build_images."""
+        tx, ty = self.tan_half
+        tx, ty = tx * (1 + margin), ty * (1 + margin)
+        corners = np.array([[-tx, -ty, -1.0], [tx, -ty, -1.0], [tx, ty, -1.0], [-tx, ty, -1.0]]) @ self.rotation.T
+        centre = corners.mean(axis=0)
+        planes = []
+        for i in range(4):
+            n = np.cross(corners[i], corners[(i + 1) % 4])
+            if n @ centre < 0:
+                n = -n
+            n /= np.linalg.norm(n)
+            planes.append([*n, -n @ self.position])
+        return np.array(planes)
+
+
+@dataclass
+class PixelBuffers:
+    """Per-pixel results of the reference tracer (:func:`trace`) or the rasterizer (``rasterize``).
+
+    Arrays have the image shape S = (height, width) (or (M,) for :func:`trace_rays`):
+
+    hit (S) bool; object_id (S) int, -1 where nothing is hit; face (S) int, the world triangle
+    (raytracer) or the image face's source triangle (rasterizer), -1 if none; bary (S, 3): barycentric
+    coordinates of the hit in that triangle (rasterizer: in the rasterized image face); uv (S, 2) the
+    interpolated corner UVs (NaN without UVs or hit); order (S) int: image order, 0 where nothing is
+    hit (1: swept angle <= pi, 2: in (pi, 2 pi], 3+ higher); light_time (S): light travel time c*dt from
+    the camera to the hit (BU; coordinate time as in lutgen); fell (S) bool: no hit and the ray falls
+    into the hole (always False from the rasterizer); point (S, 3): the world point seen (BU; rasterizer:
+    the interpolated source position); phi (S): swept angle of the hit (rad; raytracer only, else NaN);
+    depth (S): distance camera-hit along the straight pixel ray (rasterizer only, BU; NaN otherwise).
+    """
+
+    hit: np.ndarray
+    object_id: np.ndarray
+    face: np.ndarray
+    bary: np.ndarray
+    uv: np.ndarray
+    order: np.ndarray
+    light_time: np.ndarray
+    fell: np.ndarray
+    point: np.ndarray
+    phi: np.ndarray
+    depth: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    @classmethod
+    def empty(cls, shape) -> "PixelBuffers":
+        shape = tuple(shape)
+        return cls(hit=np.zeros(shape, bool), object_id=np.full(shape, -1, np.int64),
+                   face=np.full(shape, -1, np.int64), bary=np.full(shape + (3,), np.nan),
+                   uv=np.full(shape + (2,), np.nan), order=np.zeros(shape, np.int64),
+                   light_time=np.full(shape, np.nan), fell=np.zeros(shape, bool),
+                   point=np.full(shape + (3,), np.nan), phi=np.full(shape, np.nan),
+                   depth=np.full(shape, np.nan))
+
+    @property
+    def shape(self):
+        return self.hit.shape
+
+    def reshape(self, shape) -> "PixelBuffers":
+        shape = tuple(shape)
+        out = {}
+        for k in ("hit", "object_id", "face", "order", "light_time", "fell", "phi", "depth"):
+            out[k] = getattr(self, k).reshape(shape)
+        for k, n in (("bary", 3), ("uv", 2), ("point", 3)):
+            out[k] = getattr(self, k).reshape(shape + (n,))
+        return PixelBuffers(**out, info=self.info)
+
+
+@dataclass
+class TriangleScene:
+    """World-space triangles: positions (N, 3) BU, tris (T, 3) indices, corner_uv (T, 3, 2) or None,
+    object_id (T,) int (default 0)."""
+
+    positions: np.ndarray
+    tris: np.ndarray
+    corner_uv: np.ndarray | None = None
+    object_id: np.ndarray | None = None
+
+    def __post_init__(self):
+        self.positions = np.asarray(self.positions, dtype=np.float64).reshape(-1, 3)
+        self.tris = np.asarray(self.tris, dtype=np.int64).reshape(-1, 3)
+        if self.corner_uv is not None:
+            self.corner_uv = np.asarray(self.corner_uv, dtype=np.float64).reshape(-1, 3, 2)
+        if self.object_id is None:
+            self.object_id = np.zeros(len(self.tris), np.int64)
+        self.object_id = np.asarray(self.object_id, dtype=np.int64).reshape(-1)
+
+    @classmethod
+    def concatenate(cls, parts) -> "TriangleScene":
+        """One scene from several (positions, tris, corner_uv or None) meshes; object ids 0, 1, ..."""
+        pos, tris, uvs, ids, off = [], [], [], [], 0
+        any_uv = any(p[2] is not None for p in parts)
+        for i, (p, t, uv) in enumerate(parts):
+            p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
+            t = np.asarray(t, dtype=np.int64).reshape(-1, 3)
+            pos.append(p)
+            tris.append(t + off)
+            off += len(p)
+            ids.append(np.full(len(t), i, np.int64))
+            if any_uv:
+                uvs.append(np.zeros((len(t), 3, 2)) if uv is None else np.asarray(uv, np.float64).reshape(-1, 3, 2))
+        return cls(np.concatenate(pos), np.concatenate(tris), np.concatenate(uvs) if any_uv else None,
+                   np.concatenate(ids))
+
+
+# --------------------------------------------------------------------------------------------------
+# The rays: exact curves u(Phi)
+# --------------------------------------------------------------------------------------------------
+class Rays:
+    """Exact null geodesics leaving a static observer (units of r_s inside; see the module docstring).
+
+    origin (3,) and hole (3,) in BU, directions (M, 3) world-space (normalised here), r_s in BU.
+    Attributes per ray: xi (rad), b (r_s), e2 (M, 3) in-plane unit vector, normal (M, 3) plane normal,
+    turning (bool, b > b_crit), inward (bool, leaves towards the hole), the closed-form parameters,
+    and ``phi_peri`` (swept angle of the periapsis; NaN if the ray reaches none) and ``phi_end``
+    (swept angle at which it crosses the horizon or reaches infinity).
+    """
+
+    def __init__(self, origin, directions, hole, r_s):
+        self.origin = np.asarray(origin, dtype=np.float64).reshape(3)
+        self.hole = np.asarray(hole, dtype=np.float64).reshape(3)
+        self.r_s = float(r_s)
+        rel = (self.origin - self.hole) / self.r_s
+        self.r_obs = check_observer_radius(np.linalg.norm(rel))
+        self.e1 = rel / self.r_obs
+        self.uo = 1.0 / self.r_obs
+        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        d = d / np.linalg.norm(d, axis=1, keepdims=True)
+        cos_xi = np.clip(d @ self.e1, -1.0, 1.0)
+        perp = d - cos_xi[:, None] * self.e1
+        sin_xi = np.linalg.norm(perp, axis=1)
+        fallback = _any_perpendicular(self.e1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            self.e2 = np.where((sin_xi > 1e-300)[:, None], perp / sin_xi[:, None], fallback)
+        self.normal = np.cross(self.e1, self.e2)
+        self.xi = np.arctan2(sin_xi, cos_xi)
+        k = np.sqrt(1.0 - self.uo)
+        self.b = np.maximum(sin_xi / (self.uo * k), _B_MIN)
+        self.inward = cos_xi < 0.0
+        orb = _orb.orbit_from_b(self.b)
+        self.orbit = orb
+        self.turning = np.asarray(orb.real, dtype=bool)
+        n = len(d)
+        self.amp = np.empty(n)   # e2 - e1 (turning) or A (plunging)
+        self.mk = np.empty(n)    # elliptic parameter k^2
+        self.c = np.empty(n)     # dw / dPhi
+        t, p = self.turning, ~self.turning
+        e31 = orb.e3[t] - orb.e1[t]
+        self.amp[t] = orb.e2[t] - orb.e1[t]
+        self.mk[t] = self.amp[t] / e31
+        self.c[t] = 0.5 * np.sqrt(e31)
+        me1 = orb.m[p] - orb.e1[p]
+        A = np.sqrt(me1 ** 2 + orb.n[p] ** 2)
+        self.amp[p] = A
+        self.mk[p] = 1.0 - orb.n[p] ** 2 / (2.0 * A * (A + me1))
+        self.c[p] = np.sqrt(A)
+        self.e1r = orb.e1  # the orbit's negative root (not the unit vector e1)
+        self.f_obs = _orb.sweep(orb, np.full(n, self.uo))
+        self.w0 = self.c * self.f_obs
+        self.s = np.where(self.inward, 1.0, -1.0)
+        with np.errstate(invalid="ignore"):
+            f_peri = _orb.sweep_to_turning_point(orb)
+        self.f_peri = f_peri
+        self.phi_peri = np.where(self.turning & self.inward, f_peri - self.f_obs, np.nan)
+        f0 = _orb.sweep(orb, np.zeros(n))
+        f1 = np.full(n, np.nan)
+        if p.any():
+            f1[p] = _orb.sweep(orb.subset(p), np.ones(int(p.sum())))
+        self.phi_end = np.where(~self.inward, self.f_obs - f0,
+                                np.where(self.turning, 2.0 * f_peri - self.f_obs - f0, f1 - self.f_obs))
+
+    def __len__(self):
+        return len(self.b)
+
+    @property
+    def falls_in(self) -> np.ndarray:
+        """Rays that cross the horizon (inward and b < b_crit)."""
+        return self.inward & ~self.turning
+
+    def u(self, idx, phi):
+        """u = r_s/r and du/dPhi of rays ``idx`` at swept angles ``phi`` (arrays of one shape)."""
+        w = self.w0[idx] + self.s[idx] * self.c[idx] * phi
+        sn, cn, dn, _ = ellipj(w, self.mk[idx])
+        amp = self.amp[idx]
+        turn = self.turning[idx]
+        dw = self.s[idx] * self.c[idx]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            one_p = 1.0 + cn
+            u = self.e1r[idx] + amp * np.where(turn, sn * sn, (1.0 - cn) / one_p)
+            du = dw * amp * 2.0 * sn * dn * np.where(turn, cn, 1.0 / (one_p * one_p))
+        return u, du
+
+    def shell_intervals(self, r_lo: float, r_hi: float, pad: float = 1e-9) -> np.ndarray:
+        """(M, 2, 2): for each ray its inbound and outbound swept-angle intervals [Phi_0, Phi_1] (rad) in
+        which r_lo <= r <= r_hi (units of r_s; r_hi may be inf) and r > 1 (outside the horizon); NaN rows
+        where a leg does not enter the shell. Intervals are widened by ``pad`` rad."""
+        n = len(self)
+        out = np.full((n, 2, 2), np.nan)
+        u_a = 0.0 if not np.isfinite(r_hi) else 1.0 / r_hi
+        u_b = 1.0 if r_lo <= 1.0 else 1.0 / r_lo
+        if u_a >= u_b:
+            return out
+        orb, fo = self.orbit, self.f_obs
+        e2 = np.where(self.turning, orb.e2, np.inf)
+        uo = self.uo
+
+        def F(u):
+            return _orb.sweep(orb, u)
+
+        with np.errstate(invalid="ignore"):
+            # inbound leg (rays leaving towards the hole): u from uo up to e2 (turning) or 1 (plunging)
+            lo = np.maximum(uo, u_a)
+            hi = np.minimum(np.minimum(e2, u_b), 1.0)
+            ok = self.inward & (lo <= hi)
+            lo_c, hi_c = np.where(ok, lo, uo), np.where(ok, hi, uo)
+            a, b = F(lo_c) - fo, F(hi_c) - fo
+            out[ok, 0, 0], out[ok, 0, 1] = a[ok], b[ok]
+            # outbound leg after the periapsis: u from e2 down to 0
+            lo2 = np.full(n, u_a)
+            hi2 = np.minimum(e2, u_b)
+            ok2 = self.inward & self.turning & (lo2 <= hi2)
+            lo_c, hi_c = np.where(ok2, lo2, 0.5 * uo), np.where(ok2, hi2, 0.5 * uo)
+            base = 2.0 * self.f_peri - fo
+            a, b = base - F(hi_c), base - F(lo_c)
+            out[ok2, 1, 0], out[ok2, 1, 1] = a[ok2], b[ok2]
+            # rays leaving away from the hole: u from uo down to 0 (one leg)
+            hi3 = np.minimum(uo, u_b)
+            ok3 = ~self.inward & (u_a <= hi3)
+            lo_c, hi_c = np.where(ok3, u_a, 0.5 * uo), np.where(ok3, hi3, 0.5 * uo)
+            a, b = fo - F(hi_c), fo - F(lo_c)
+            out[ok3, 0, 0], out[ok3, 0, 1] = a[ok3], b[ok3]
+        out[..., 0] = np.maximum(out[..., 0] - pad, 0.0)
+        out[..., 1] += pad
+        return out
+
+    def travel_time(self, idx, phi, u):
+        """Light travel time (units of r_s/c) from the observer to the points at swept angle ``phi``
+        (inverse radius ``u``) of rays ``idx``."""
+        orb = self.orbit.subset(idx)
+        after = self.turning[idx] & self.inward[idx] & (phi > self.phi_peri[idx])
+        uo = np.full(len(idx), self.uo)
+        u = np.where(self.turning[idx], np.minimum(u, np.where(self.turning[idx], orb.e2, 1.0)), u)
+        out = _orb.travel_time(orb, uo, u)
+        if after.any():
+            oa = orb.subset(after)
+            out[after] = _orb.travel_time(oa, uo[after], oa.e2) + _orb.travel_time(oa, u[after], oa.e2)
+        return out
+
+    def points(self, idx, phi, u=None):
+        """World positions (BU) of the rays ``idx`` at swept angles ``phi``."""
+        if u is None:
+            u, _ = self.u(idx, phi)
+        r = self.r_s / u
+        return self.hole + r[:, None] * (np.cos(phi)[:, None] * self.e1 + np.sin(phi)[:, None] * self.e2[idx])
+
+
+def _any_perpendicular(e1):
+    a = np.array([0.0, 0.0, 1.0]) if abs(e1[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    v = a - (a @ e1) * e1
+    return v / np.linalg.norm(v)
+
+
+# --------------------------------------------------------------------------------------------------
+# Tracing
+# --------------------------------------------------------------------------------------------------
+def trace(scene: TriangleScene, camera: Camera, hole, r_s, *, pair_chunk: int = 400_000) -> PixelBuffers:
+    """Reference image: the first triangle hit by the exact null geodesic through each pixel centre.
+
+    scene: world triangles (BU); camera: :class:`Camera` (its position is the static observer);
+    hole: (3,) BU; r_s: Schwarzschild radius in BU. Returns :class:`PixelBuffers` of shape
+    (camera.height, camera.width); ``info`` holds counts (pairs, candidates, roots, seconds).
+    """
+    dirs = camera.pixel_directions().reshape(-1, 3)
+    out = trace_rays(scene, camera.position, dirs, hole, r_s, pair_chunk=pair_chunk)
+    return out.reshape((camera.height, camera.width))
+
+
+def _object_shells(V, tri_obj, n_obj):
+    """Per object [R_lo, R_hi] (units of r_s) around the hole: R_lo is a lower bound of the distance
+    of its triangles from the hole (nearest vertex minus longest edge / sqrt 3), R_hi the farthest
+    vertex."""
+    d = np.linalg.norm(V, axis=2)
+    edge = np.max(np.linalg.norm(V - np.roll(V, 1, axis=1), axis=2), axis=1)
+    lo_t = np.maximum(d.min(axis=1) - edge / np.sqrt(3.0), 0.0)
+    hi_t = d.max(axis=1)
+    lo = np.full(n_obj, np.inf)
+    hi = np.full(n_obj, -np.inf)
+    np.minimum.at(lo, tri_obj, lo_t)
+    np.maximum.at(hi, tri_obj, hi_t)
+    return lo, hi
+
+
+def _triangle_azimuths(V, f1, f2):
+    """Azimuth range [lo, hi] (rad, hi - lo < pi) of each triangle about the hole-camera axis, and
+    a mask of triangles that surround the axis (seen by rays of every azimuth)."""
+    q = np.stack([V @ f1, V @ f2], axis=-1)  # (T, 3, 2)
+    a = np.arctan2(q[..., 1], q[..., 0])
+    cr = [q[:, i, 0] * q[:, (i + 1) % 3, 1] - q[:, i, 1] * q[:, (i + 1) % 3, 0] for i in range(3)]
+    cr = np.stack(cr, axis=1)  # orientation of (origin, q_i, q_i+1)
+    scale = np.max(np.linalg.norm(q, axis=2), axis=1) ** 2
+    tol = 1e-12 * scale
+    surround = np.all(cr >= -tol[:, None], axis=1) | np.all(cr <= tol[:, None], axis=1)
+    surround |= np.min(np.linalg.norm(q, axis=2), axis=1) <= 1e-9 * np.sqrt(scale)
+    d1 = np.angle(np.exp(1j * (a[:, 1] - a[:, 0])))
+    d2 = np.angle(np.exp(1j * (a[:, 2] - a[:, 0])))
+    lo = a[:, 0] + np.minimum(0.0, np.minimum(d1, d2)) - _AZ_PAD
+    hi = a[:, 0] + np.maximum(0.0, np.maximum(d1, d2)) + _AZ_PAD
+    surround |= (hi - lo) >= np.pi
+    return lo, hi, surround
+
+
+def _pairs(order_beta, beta_sorted, lo, hi, surround, tri_ids, chunk):
+    """Yield (ray, tri) index arrays of rays whose plane (line azimuth beta in [0, pi)) meets the
+    triangles' azimuth ranges [lo, hi] (taken mod pi), in chunks of about ``chunk`` pairs."""
+    n = len(beta_sorted)
+    lo_m = np.mod(lo, np.pi)
+    hi_m = lo_m + (hi - lo)
+    # up to two index ranges per triangle: [lo_m, min(hi_m, pi)) and [0, hi_m - pi]
+    s1 = np.searchsorted(beta_sorted, lo_m, side="left")
+    e1 = np.searchsorted(beta_sorted, np.minimum(hi_m, np.pi), side="right")
+    s2 = np.zeros_like(s1)
+    e2 = np.where(hi_m > np.pi, np.searchsorted(beta_sorted, hi_m - np.pi, side="right"), 0)
+    s1 = np.where(surround, 0, s1)
+    e1 = np.where(surround, n, e1)
+    e2 = np.where(surround, 0, e2)
+    starts = np.concatenate([s1, s2])
+    counts = np.maximum(np.concatenate([e1 - s1, e2 - s2]), 0)
+    tris = np.concatenate([tri_ids, tri_ids])
+    keep = counts > 0
+    starts, counts, tris = starts[keep], counts[keep], tris[keep]
+    if not len(counts):
+        return
+    cum = np.cumsum(counts)
+    i0 = 0
+    while i0 < len(counts):
+        base = cum[i0 - 1] if i0 else 0
+        i1 = int(np.searchsorted(cum, base + chunk, side="right"))
+        i1 = max(i1, i0 + 1)
+        c = counts[i0:i1]
+        tot = int(c.sum())
+        off = np.repeat(np.cumsum(c) - c, c)
+        pos = np.arange(tot) - off + np.repeat(starts[i0:i1], c)
+        yield order_beta[pos], np.repeat(tris[i0:i1], c)
+        i0 = i1
+
+
+def _segments(rays: Rays, V, ray, tri):
+    """The cut of triangles ``tri`` by the planes of rays ``ray``: for the pairs that are cut,
+    (keep mask, phi_a, width, mx, my, p): the sector [phi_a, phi_a + width] (phi_a in [0, 2 pi),
+    width in [0, pi)) seen from the hole and the segment's line {x : mx x + my y = p} in the plane
+    coordinates (e1, e2 of the ray; units of r_s)."""
+    n = rays.normal[ray]
+    Vt = V[tri]  # (P, 3, 3)
+    s = np.einsum("pij,pj->pi", Vt, n)
+    pos = s > 0.0
+    lonely = np.where(pos[:, 0] == pos[:, 1], 2, np.where(pos[:, 0] == pos[:, 2], 1, 0))
+    cut = ~((pos[:, 0] == pos[:, 1]) & (pos[:, 1] == pos[:, 2]))
+    rows = np.arange(len(tri))
+    ia, ib = (lonely + 1) % 3, (lonely + 2) % 3
+    vl, va, vb = Vt[rows, lonely], Vt[rows, ia], Vt[rows, ib]
+    sl, sa, sb = s[rows, lonely], s[rows, ia], s[rows, ib]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ta = sl / (sl - sa)
+        tb = sl / (sl - sb)
+    P = vl + ta[:, None] * (va - vl)
+    Q = vl + tb[:, None] * (vb - vl)
+    e2 = rays.e2[ray]
+    xp, yp = P @ rays.e1, np.einsum("pi,pi->p", P, e2)
+    xq, yq = Q @ rays.e1, np.einsum("pi,pi->p", Q, e2)
+    dx, dy = xq - xp, yq - yp
+    ln = np.hypot(dx, dy)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mx, my = dy / ln, -dx / ln
+        p = mx * xp + my * yp
+    flip = p < 0
+    mx, my, p = np.where(flip, -mx, mx), np.where(flip, -my, my), np.abs(p)
+    ap = np.arctan2(yp, xp)
+    aq = np.arctan2(yq, xq)
+    delta = np.angle(np.exp(1j * (aq - ap)))
+    phi_a = np.mod(np.where(delta >= 0, ap, aq), TWO_PI)
+    width = np.abs(delta)
+    keep = cut & np.isfinite(p) & (p > _P_MIN) & (ln > 0)
+    return keep, phi_a, width, mx, my, p
+
+
+def _candidates(shells, phi_a, width, pair_ids):
+    """Swept-angle intervals (pair index, a, b): the sectors shifted by 2 pi k and clipped to the
+    rays' shell intervals ``shells`` (P, 2, 2)."""
+    out_p, out_a, out_b = [], [], []
+    for leg in (0, 1):
+        s0, s1 = shells[:, leg, 0], shells[:, leg, 1]
+        ok = np.isfinite(s0)
+        with np.errstate(invalid="ignore"):
+            kmin = np.ceil((s0 - phi_a - width) / TWO_PI)
+            kmax = np.floor((s1 - phi_a) / TWO_PI)
+        nk = np.where(ok, kmax - kmin + 1, 0)
+        nk = np.maximum(np.nan_to_num(nk, nan=0.0), 0).astype(np.int64)
+        sel = np.flatnonzero(nk)
+        if not sel.size:
+            continue
+        c = nk[sel]
+        idx = np.repeat(sel, c)
+        k = np.repeat(kmin[sel], c) + (np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c))
+        a = np.maximum(phi_a[idx] + TWO_PI * k, s0[idx])
+        b = np.minimum(phi_a[idx] + width[idx] + TWO_PI * k, s1[idx])
+        good = a <= b
+        out_p.append(pair_ids[idx[good]])
+        out_a.append(a[good])
+        out_b.append(b[good])
+    if not out_p:
+        return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+    return np.concatenate(out_p), np.concatenate(out_a), np.concatenate(out_b)
+
+
+def _g(rays: Rays, ray, phi, mx, my, p):
+    """g = u_ray - u_line and dg/dPhi (units of 1/r_s)."""
+    u, du = rays.u(ray, phi)
+    c, s = np.cos(phi), np.sin(phi)
+    return u - (mx * c + my * s) / p, du - (my * c - mx * s) / p
+
+
+def _roots(rays: Rays, ray, a, b, mx, my, p, max_depth=48, newton_iter=60):
+    """Roots of g on the intervals [a, b] (each shorter than pi): returns (candidate index, Phi) of
+    every root (all of them; there are at most two per interval)."""
+    n = len(a)
+    cand = np.arange(n)
+    ga, gpa = _g(rays, ray, a, mx, my, p)
+    gb, gpb = _g(rays, ray, b, mx, my, p)
+    iso_c, iso_a, iso_b, iso_ga, iso_gb = [], [], [], [], []
+    for _ in range(max_depth):
+        if not cand.size:
+            break
+        with np.errstate(invalid="ignore"):
+            bracket = (ga <= 0) & (gb >= 0) | (ga >= 0) & (gb <= 0)
+            both_pos = (ga > 0) & (gb > 0)
+            w = b - a
+            cw, sw = np.cos(w), np.sin(w)
+            excluded = both_pos & ((ga * cw + gpa * sw > 0) | (gb * cw - gpb * sw > 0))
+        iso_c.append(cand[bracket])
+        iso_a.append(a[bracket])
+        iso_b.append(b[bracket])
+        iso_ga.append(ga[bracket])
+        iso_gb.append(gb[bracket])
+        split = both_pos & ~excluded & ~bracket & (w > 1e-13)
+        if not split.any():
+            break
+        cand, a, b = cand[split], a[split], b[split]
+        ga, gpa, gb, gpb = ga[split], gpa[split], gb[split], gpb[split]
+        m = 0.5 * (a + b)
+        gm, gpm = _g(rays, ray[cand], m, mx[cand], my[cand], p[cand])
+        cand = np.concatenate([cand, cand])
+        a, b = np.concatenate([a, m]), np.concatenate([m, b])
+        ga, gb = np.concatenate([ga, gm]), np.concatenate([gm, gb])
+        gpa, gpb = np.concatenate([gpa, gpm]), np.concatenate([gpm, gpb])
+    c = np.concatenate(iso_c) if iso_c else np.zeros(0, np.int64)
+    if not c.size:
+        return c, np.zeros(0)
+    lo, hi = np.concatenate(iso_a), np.concatenate(iso_b)
+    glo, ghi = np.concatenate(iso_ga), np.concatenate(iso_gb)
+    # orient the brackets so that g(lo) <= 0 <= g(hi)
+    swap = glo > 0
+    lo, hi = np.where(swap, hi, lo), np.where(swap, lo, hi)
+    glo, ghi = np.where(swap, ghi, glo), np.where(swap, glo, ghi)
+    x = np.where(glo == 0, lo, np.where(ghi == 0, hi, lo - glo * (hi - lo) / np.where(ghi != glo, ghi - glo, 1.0)))
+    active = np.flatnonzero((glo != 0) & (ghi != 0))
+    for _ in range(newton_iter):
+        if not active.size:
+            break
+        k = active
+        g, gp = _g(rays, ray[c[k]], x[k], mx[c[k]], my[c[k]], p[c[k]])
+        neg = g < 0
+        lo[k] = np.where(neg, x[k], lo[k])
+        hi[k] = np.where(neg, hi[k], x[k])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            xn = x[k] - g / gp
+        inside = np.isfinite(xn) & (xn >= np.minimum(lo[k], hi[k])) & (xn <= np.maximum(lo[k], hi[k]))
+        xn = np.where(inside, xn, 0.5 * (lo[k] + hi[k]))
+        exact = g == 0
+        step = np.where(exact, 0.0, np.abs(xn - x[k]))
+        x[k] = np.where(exact, x[k], xn)
+        tol = 1e-15 * np.maximum(1.0, np.abs(x[k]))
+        done = exact | (step <= tol) | (np.abs(hi[k] - lo[k]) <= 2 * tol)
+        active = k[~done]
+    return c, x
+
+
+def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, pair_chunk: int = 400_000) -> PixelBuffers:
+    """First hits of the exact null geodesics leaving the static observer at ``origin`` (BU) in the
+    world ``directions`` (M, 3), for a hole at ``hole`` (BU) with Schwarzschild radius ``r_s`` (BU).
+    Returns flat :class:`PixelBuffers` of shape (M,). See the module docstring for the method."""
+    import time
+
+    t0 = time.perf_counter()
+    rays = Rays(origin, directions, hole, r_s)
+    m = len(rays)
+    out = PixelBuffers.empty((m,))
+    info = dict(pairs=0, candidates=0, roots=0)
+    V = (scene.positions[scene.tris] - rays.hole) / rays.r_s  # (T, 3, 3) r_s, relative to the hole
+    best_phi = np.full(m, np.inf)
+    best_tri = np.full(m, -1, np.int64)
+    if len(V):
+        f1 = _any_perpendicular(rays.e1)
+        f2 = np.cross(rays.e1, f1)
+        beta = np.mod(np.arctan2(rays.e2 @ f2, rays.e2 @ f1), np.pi)
+        az_lo, az_hi, surround = _triangle_azimuths(V, f1, f2)
+        objs = np.unique(scene.object_id)
+        lo_r, hi_r = _object_shells(V, np.searchsorted(objs, scene.object_id), len(objs))
+        for oi, obj in enumerate(objs):
+            shells = rays.shell_intervals(lo_r[oi], hi_r[oi])
+            active = np.flatnonzero(np.isfinite(shells[:, :, 0]).any(axis=1))
+            if not active.size:
+                continue
+            order_b = active[np.argsort(beta[active], kind="stable")]
+            beta_sorted = beta[order_b]
+            tri_ids = np.flatnonzero(scene.object_id == obj)
+            for ray, tri in _pairs(order_b, beta_sorted, az_lo[tri_ids], az_hi[tri_ids], surround[tri_ids],
+                                   tri_ids, pair_chunk):
+                info["pairs"] += len(ray)
+                keep, phi_a, width, mx, my, p = _segments(rays, V, ray, tri)
+                sel = np.flatnonzero(keep)
+                if not sel.size:
+                    continue
+                cid, a, b = _candidates(shells[ray[sel]], phi_a[sel], width[sel], sel)
+                info["candidates"] += len(cid)
+                if not cid.size:
+                    continue
+                ci, x = _roots(rays, ray[cid], a, b, mx[cid], my[cid], p[cid])
+                info["roots"] += len(ci)
+                if not ci.size:
+                    continue
+                r_hit, t_hit = ray[cid[ci]], tri[cid[ci]]
+                # keep the smallest swept angle per ray
+                o = np.lexsort((x, r_hit))
+                r_hit, t_hit, x = r_hit[o], t_hit[o], x[o]
+                first = np.ones(len(o), bool)
+                first[1:] = r_hit[1:] != r_hit[:-1]
+                r_hit, t_hit, x = r_hit[first], t_hit[first], x[first]
+                better = x < best_phi[r_hit]
+                best_phi[r_hit[better]] = x[better]
+                best_tri[r_hit[better]] = t_hit[better]
+    hit = best_tri >= 0
+    idx = np.flatnonzero(hit)
+    out.hit[:] = hit
+    out.fell[:] = ~hit & rays.falls_in
+    if idx.size:
+        phi = best_phi[idx]
+        tri = best_tri[idx]
+        u, _ = rays.u(idx, phi)
+        pts = rays.points(idx, phi, u)
+        bary = _barycentric(pts, scene.positions[scene.tris[tri]])
+        out.phi[idx] = phi
+        out.point[idx] = pts
+        out.face[idx] = tri
+        out.object_id[idx] = scene.object_id[tri]
+        out.bary[idx] = bary
+        if scene.corner_uv is not None:
+            out.uv[idx] = np.einsum("pk,pkx->px", bary, scene.corner_uv[tri])
+        out.order[idx] = np.maximum(1, np.ceil(phi / np.pi - 1e-15)).astype(np.int64)
+        out.light_time[idx] = rays.travel_time(idx, phi, u) * rays.r_s
+    info["seconds"] = time.perf_counter() - t0
+    info["higher_order_pixels"] = int((out.order >= 3).sum())
+    out.info = info
+    return out
+
+
+def _barycentric(points, tri_pts):
+    """Barycentric coordinates (P, 3) of ``points`` (P, 3) projected onto the triangles (P, 3, 3),
+    clipped to [0, 1] and renormalised (the points lie on the triangles up to rounding)."""
+    a, b, c = tri_pts[:, 0], tri_pts[:, 1], tri_pts[:, 2]
+    v0, v1, v2 = b - a, c - a, points - a
+    d00 = np.einsum("pi,pi->p", v0, v0)
+    d01 = np.einsum("pi,pi->p", v0, v1)
+    d11 = np.einsum("pi,pi->p", v1, v1)
+    d20 = np.einsum("pi,pi->p", v2, v0)
+    d21 = np.einsum("pi,pi->p", v2, v1)
+    den = d00 * d11 - d01 * d01
+    with np.errstate(invalid="ignore", divide="ignore"):
+        v = (d11 * d20 - d01 * d21) / den
+        w = (d00 * d21 - d01 * d20) / den
+    bary = np.stack([1.0 - v - w, v, w], axis=1)
+    bary = np.clip(bary, 0.0, 1.0)
+    return bary / np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
