@@ -71,6 +71,7 @@ from lutgen.solver import check_observer_radius
 TWO_PI = 2.0 * np.pi
 _B_MIN = 1e-12  # impact parameters (r_s) below this are clamped (the ray is radial to rounding)
 _P_MIN = 1e-12  # a cut segment whose line passes closer than this (r_s) to the hole is skipped
+_R_OBS_MAX = 1e8  # r_s; impact parameters above ~1e9 r_s break lutgen.orbit.orbit_from_b
 _AZ_PAD = 1e-7  # rad, widening of the triangles' azimuth ranges (pairing is only a pre-selection)
 
 
@@ -121,8 +122,10 @@ class Camera:
 
     @property
     def pixel_angle(self) -> float:
-        """Angular size of a pixel at the image centre (rad): fov_y / height."""
-        return self.fov_y / self.height
+        """Radians per pixel on the view sphere as the add-on computes it for ``Settings.pixel_angle``:
+        the smaller of the horizontal and vertical fields of view divided by their pixel counts."""
+        tx, ty = self.tan_half
+        return min(2.0 * np.arctan(tx) / self.width, 2.0 * np.arctan(ty) / self.height)
 
     def pixel_directions(self) -> np.ndarray:
         """(height, width, 3) unit world-space directions through the pixel centres."""
@@ -274,6 +277,9 @@ class Rays:
         self.r_s = float(r_s)
         rel = (self.origin - self.hole) / self.r_s
         self.r_obs = check_observer_radius(np.linalg.norm(rel))
+        if self.r_obs > _R_OBS_MAX:
+            raise ValueError(f"the camera is {self.r_obs:.3g} r_s from the hole; above {_R_OBS_MAX:.0e} r_s "
+                             "lutgen's orbit roots lose their precision (use a larger r_s for a flat-space limit)")
         self.e1 = rel / self.r_obs
         self.uo = 1.0 / self.r_obs
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)

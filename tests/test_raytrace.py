@@ -1,0 +1,312 @@
+"""Reference ray tracer, rasterizer and image metrics (grlens_addon.core.raytrace / rasterize /
+image_metrics; numpy only).
+
+Units: world positions, r_s and light travel times in Blender units (BU); lutgen in r_s and r_s/c.
+Independent checks: an ordinary pinhole ray-triangle intersection (flat-space limit), eq. (14)
+(shadow), lutgen.connect (the closed-form emitter-observer solver), lutgen.reference's DOP853
+integration of the geodesic equations (the curve u(Phi), windings, travel time).
+"""
+import importlib.util
+import math
+import os
+
+import numpy as np
+import pytest
+
+from grlens_addon.core import image_metrics, mapping, pipeline, rasterize, raytrace
+from lutgen import build_lut, connect, shadow_half_angle
+from lutgen import reference as numeric
+
+HOLE = np.zeros(3)
+
+
+def _moller_trumbore_all(o, dirs, pos, tris):
+    """Brute force: nearest straight-ray hit (face, t, u, v) of every ray against every triangle."""
+    a, b, c = pos[tris[:, 0]], pos[tris[:, 1]], pos[tris[:, 2]]
+    e1, e2 = b - a, c - a
+    p = np.cross(dirs[:, None, :], e2[None])
+    det = np.einsum("ntk,tk->nt", p, e1)
+    tv = o - a
+    u = np.einsum("ntk,tk->nt", p, tv) / det
+    q = np.cross(tv, e1)
+    v = np.einsum("nk,tk->nt", dirs, q) / det
+    t = np.einsum("tk,tk->t", e2, q)[None] / det
+    t = np.where((u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0), t, np.inf)
+    f = np.argmin(t, axis=1)
+    rows = np.arange(len(dirs))
+    return f, t[rows, f], u[rows, f], v[rows, f]
+
+
+def _random_triangles(rng, n, spread=3.0, size=0.8):
+    centres = rng.uniform(-spread, spread, (n, 3))
+    pts = (centres[:, None, :] + rng.normal(size=(n, 3, 3)) * size).reshape(-1, 3)
+    return pts, np.arange(3 * n).reshape(-1, 3)
+
+
+def _bench_accuracy():
+    path = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "bench_accuracy.py")
+    spec = importlib.util.spec_from_file_location("bench_accuracy", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+# --------------------------------------------------------------------------------------------------
+# The curve itself
+# --------------------------------------------------------------------------------------------------
+def test_curve_matches_numeric_integration():
+    """u(Phi) and the travel time of single rays (escaping, plunging, winding near the critical angle,
+    leaving away from the hole) agree with the DOP853 integration of the geodesic equations."""
+    r_obs = 20.0
+    xi_c = math.pi - float(shadow_half_angle(r_obs))
+    # near the photon sphere rays diverge like e^Phi, which amplifies the integrator's errors (rtol 1e-12)
+    cases = [(0.4, 1.0, 1e-10), (1.6, 1.5, 1e-10), (2.9, 2.5, 1e-10), (xi_c - 1e-4, 9.0, 1e-8),
+             (xi_c + 1e-4, 7.0, 1e-8), (3.1, 0.05, 1e-10)]
+    for xi, phi, tol in cases:
+        rays = raytrace.Rays([r_obs, 0, 0], [[math.cos(xi), math.sin(xi), 0.0]], HOLE, 1.0)
+        phi = min(phi, 0.97 * float(rays.phi_end[0]))
+        shot = numeric.shoot(r_obs, xi, phi_end=phi)
+        assert shot.status == "phi"
+        u, _ = rays.u(np.array([0]), np.array([phi]))
+        t = rays.travel_time(np.array([0]), np.array([phi]), u)
+        assert abs(u[0] * shot.r - 1.0) < tol, (xi, phi)
+        assert abs(t[0] / abs(shot.t) - 1.0) < tol, (xi, phi)
+
+
+def test_shadow_edge():
+    """Rays closer to the hole's direction than shadow_half_angle (eq. 14) fall in, the others escape;
+    along each ray u = r_s/r ends at 1 (horizon) or 0 (infinity)."""
+    r_obs = 12.0
+    cam = np.array([0.0, -r_obs * 2.0, 0.0])  # r_s = 2 BU
+    crit = float(shadow_half_angle(r_obs))
+    alpha = crit * np.array([0.2, 0.9, 1 - 1e-6, 1 + 1e-6, 1.1, 2.0])
+    ang = np.linspace(0, 2 * np.pi, 7)[:-1]  # around the hole direction
+    a, g = np.meshgrid(alpha, ang, indexing="ij")
+    dirs = np.stack([np.sin(a) * np.cos(g), np.cos(a), np.sin(a) * np.sin(g)], axis=-1).reshape(-1, 3)
+    empty = raytrace.TriangleScene(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
+    buf = raytrace.trace_rays(empty, cam, dirs, HOLE, 2.0)
+    inside = (a < crit).ravel()
+    assert np.array_equal(buf.fell, inside)
+    assert not buf.hit.any()
+    rays = raytrace.Rays(cam, dirs, HOLE, 2.0)
+    u_end, _ = rays.u(np.arange(len(dirs)), rays.phi_end)
+    np.testing.assert_allclose(u_end[inside], 1.0, atol=1e-9)
+    np.testing.assert_allclose(u_end[~inside], 0.0, atol=1e-9)
+
+
+# --------------------------------------------------------------------------------------------------
+# Tracing
+# --------------------------------------------------------------------------------------------------
+def test_flat_space_limit():
+    """With a tiny hole (r_s = 1e-6 BU, the camera ~1e7 r_s away) the reference is an ordinary pinhole
+    ray caster: same pixels, faces, barycentric coordinates and distances."""
+    rng = np.random.default_rng(3)
+    pts, tris = _random_triangles(rng, 60)
+    scene = raytrace.TriangleScene(pts, tris, object_id=np.arange(60) % 3)
+    cam = raytrace.Camera.look_at([12.0, 1.0, 2.0], [0, 0, 0], math.radians(40), 64, 48)
+    buf = raytrace.trace(scene, cam, np.array([-5.0, 7.0, 1.0]), 1e-6)
+    dirs = cam.pixel_directions().reshape(-1, 3)
+    f, t, u, v = _moller_trumbore_all(cam.position, dirs, pts, tris)
+    hit = np.isfinite(t)
+    assert hit.sum() > 500
+    assert np.array_equal(buf.hit.ravel(), hit)
+    assert np.array_equal(buf.face.ravel()[hit], f[hit])
+    assert np.array_equal(buf.object_id.ravel()[hit], f[hit] % 3)
+    assert np.all(buf.order.ravel()[hit] == 1)
+    np.testing.assert_allclose(buf.bary.reshape(-1, 3)[hit][:, 1:], np.stack([u, v], 1)[hit], atol=1e-4)
+    np.testing.assert_allclose(buf.light_time.ravel()[hit], t[hit], atol=1e-4)
+    assert not buf.fell.any()
+
+
+def test_triangle_behind_hole_two_images():
+    """A triangle behind the hole, above the axis: an order-1 image above the hole and a smaller
+    order-2 image below it, between the shadow's edge and the primary image's distance from the hole."""
+    r_s = 2.0
+    cam_pos = np.array([40.0, 0, 0])
+    tri = np.array([[-12.0, -1.5, 2.0], [-12.0, 1.5, 2.0], [-12.0, 0.0, 5.0]])
+    scene = raytrace.TriangleScene(tri, [[0, 1, 2]])
+    cam = raytrace.Camera.look_at(cam_pos, HOLE, math.radians(30), 96, 96)
+    buf = raytrace.trace(scene, cam, HOLE, r_s)
+    rows = np.arange(cam.height)[:, None] * np.ones(cam.width)
+    o1, o2 = buf.hit & (buf.order == 1), buf.hit & (buf.order == 2)
+    assert o1.sum() > 20 and 0 < o2.sum() < o1.sum()
+    centre = cam.height / 2
+    assert np.all(rows[o1] < centre) and np.all(rows[o2] > centre)
+    assert not (buf.hit & (buf.order >= 3)).any()
+    # light bends towards the hole, so the primary image appears farther out than in flat space
+    flat = raytrace.trace(scene, cam, np.array([0.0, 0.0, -100.0]), 1e-4)  # r_obs ~ 1e6
+    assert flat.hit.any() and not (flat.order == 2).any()
+    assert np.min(rows[o1]) < np.min(rows[flat.hit]) - 5
+    # the secondary image hugs the shadow's edge (eq. 14)
+    ang = np.arccos(np.clip(-cam.pixel_directions() @ (cam_pos / np.linalg.norm(cam_pos)), -1, 1))
+    crit = float(shadow_half_angle(20.0))
+    assert np.all((ang[o2] > crit) & (ang[o2] < 1.5 * crit))
+    assert np.max(ang[o2]) < np.min(ang[o1])
+    # light travel time: longer for the second-order image, and above the Euclidean distance
+    assert np.nanmin(buf.light_time[o2]) > np.nanmax(buf.light_time[o1])
+    assert np.nanmin(buf.light_time[o1]) > np.linalg.norm(tri.mean(0) - cam_pos) - 3.0
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_consistent_with_connect(order):
+    """Rays traced in the direction lutgen.connect finds for random points (orders 1 and 2, inside
+    the photon sphere too, and beyond the camera) hit those points at lutgen's light travel time."""
+    r_s = 1.5
+    cam = np.array([0.0, 0.0, 15.0 * r_s])  # r_obs = 15
+    r_obs = 15.0
+    rng = np.random.default_rng(11 + order)
+    n = 60
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    r = np.concatenate([rng.uniform(1.1, 1.5, 10), rng.uniform(1.5, 30.0, n - 10)])
+    pts = d * (r * r_s)[:, None]
+    e1 = cam / np.linalg.norm(cam)
+    along = pts @ e1
+    perp = pts - along[:, None] * e1
+    e2 = perp / np.linalg.norm(perp, axis=1)[:, None]
+    phi = np.arctan2(np.linalg.norm(perp, axis=1), along)
+    c = connect(r_obs, r, phi, order)
+    sign = 1.0 if order == 1 else -1.0
+    dirs = np.cos(c.xi)[:, None] * e1 + (sign * np.sin(c.xi))[:, None] * e2
+    # a tiny triangle around each point, facing the arriving ray
+    t3 = c.ux[:, None] * e1 + c.uy[:, None] * e2
+    t3 /= np.linalg.norm(t3, axis=1)[:, None]
+    a = np.cross(t3, e1 + 0.3 * e2)
+    a /= np.linalg.norm(a, axis=1)[:, None]
+    b = np.cross(t3, a)
+    s = 1e-3 * r_s
+    corners = np.stack([pts + s * a, pts + s * (-0.5 * a + 0.866 * b), pts + s * (-0.5 * a - 0.866 * b)], axis=1)
+    scene = raytrace.TriangleScene(corners.reshape(-1, 3), np.arange(3 * n).reshape(-1, 3))
+    buf = raytrace.trace_rays(scene, cam, dirs, HOLE, r_s)
+    assert np.all(buf.hit), np.flatnonzero(~buf.hit)
+    assert np.array_equal(buf.face, np.arange(n))
+    assert np.all(buf.order == order)
+    np.testing.assert_allclose(buf.point, pts, atol=1e-8 * r_s)
+    np.testing.assert_allclose(buf.light_time, c.dt * r_s, rtol=1e-9)
+    np.testing.assert_allclose(buf.phi, phi if order == 1 else 2 * np.pi - phi, atol=1e-9)
+
+
+def test_winding_ray_higher_order():
+    """A ray 1e-6 rad outside the shadow winds around the photon sphere: a small triangle placed on it
+    (by the DOP853 integrator) at swept angle 3.6 pi is hit there, as an order-4 image, at the
+    integrator's light travel time."""
+    r_obs = 20.0
+    xi = math.pi - float(shadow_half_angle(r_obs)) - 1e-6
+    phi = 3.6 * math.pi
+    shot = numeric.shoot(r_obs, xi, phi_end=phi)
+    p = shot.r * np.array([math.cos(phi), math.sin(phi), 0.0])
+    a = np.array([0.0, 0.0, 1.0])
+    b = np.array([-math.sin(phi), math.cos(phi), 0.0])  # tangential: the winding ray crosses it
+    s = 0.02
+    corners = np.array([p - s * a - s * b, p + s * a - s * b, p + 2 * s * b])
+    scene = raytrace.TriangleScene(corners, [[0, 1, 2]])
+    buf = raytrace.trace_rays(scene, [r_obs, 0, 0], [[math.cos(xi), math.sin(xi), 0.0]], HOLE, 1.0)
+    assert buf.hit[0] and buf.order[0] == 4
+    assert abs(buf.phi[0] - phi) < 1e-6
+    assert np.linalg.norm(buf.point[0] - p) < 1e-6
+    assert abs(buf.light_time[0] / abs(shot.t) - 1.0) < 1e-7
+
+
+# --------------------------------------------------------------------------------------------------
+# Rasterizer and metrics
+# --------------------------------------------------------------------------------------------------
+def test_rasterizer_matches_reference_in_flat_space():
+    """The rasterizer of the source triangles themselves (flat space: images = sources) gives the
+    reference's pixels, faces, UVs and (to the Shapiro delay) light travel times."""
+    rng = np.random.default_rng(5)
+    pts, tris = _random_triangles(rng, 40)
+    uv = rng.uniform(0, 1, (len(tris), 3, 2))
+    cam = raytrace.Camera.look_at([10.0, -3.0, 2.0], [0, 0, 0], math.radians(45), 80, 60)
+    ref = raytrace.trace(raytrace.TriangleScene(pts, tris, uv), cam, np.array([-9.0, 4.0, 0.0]), 1e-6)
+    mesh = rasterize.RasterMesh(pts, tris, np.linalg.norm(pts - cam.position, axis=1), order=1,
+                                corner_uv=uv, source_position=pts)
+    ras = rasterize.rasterize([mesh], cam)
+    assert np.array_equal(ras.hit, ref.hit) and ref.hit.sum() > 500
+    h = ref.hit
+    assert np.array_equal(ras.face[h], ref.face[h])
+    np.testing.assert_allclose(ras.uv[h], ref.uv[h], atol=1e-4)
+    np.testing.assert_allclose(ras.depth[h], ref.light_time[h], atol=1e-4)
+    np.testing.assert_allclose(ras.point[h], ref.point[h], atol=1e-4)
+    # per-vertex distances interpolated linearly over a face are a chord of the true distance
+    assert np.all(ras.light_time[h] >= ras.depth[h] - 1e-9)
+    m = image_metrics.compare(ref, ras)
+    assert m["orders"]["all"]["mismatch"] == 0
+    assert m["orders"]["all"]["uv_px"]["max"] < 1e-2
+
+
+def _synthetic(shift=0):
+    """A 40x60 buffer with a rectangle (rows 10..19, columns 10..29, shifted right by ``shift``),
+    uv = pixel centre / size, light time 10 + column of the unshifted content."""
+    H, W = 40, 60
+    b = raytrace.PixelBuffers.empty((H, W))
+    rows, cols = np.mgrid[0:H, 0:W]
+    src_col = cols - shift
+    inside = (rows >= 10) & (rows < 20) & (src_col >= 10) & (src_col < 30)
+    b.hit[inside] = True
+    b.object_id[inside] = 3
+    b.order[inside] = 1
+    b.uv[inside] = np.stack([(src_col + 0.5) / W, (rows + 0.5) / H], -1)[inside]
+    b.light_time[inside] = (10.0 + src_col)[inside]
+    return b
+
+
+def test_metrics_identical_and_shifted():
+    ref = _synthetic()
+    same = image_metrics.compare(ref, _synthetic(), texture_size=512)
+    for o in (1, "all"):
+        m = same["orders"][o]
+        assert m["mismatch"] == 0 and m["covered_ref"] == 200 and m["matched"] == 200
+        assert m["uv_px"]["max"] == 0 and m["uv_texel"]["max"] == 0 and m["lt_rel"]["max"] == 0
+    assert same["orders"][2]["covered_ref"] == 0
+    m = image_metrics.compare(ref, _synthetic(shift=1), texture_size=512)["orders"][1]
+    assert m["mismatch"] == 20 and m["mismatch_frac"] == pytest.approx(0.1)
+    assert m["matched"] == 190
+    for k in ("p50", "p99", "max"):
+        assert m["uv_px"][k] == pytest.approx(1.0, rel=1e-9)
+        assert m["uv_texel"][k] == pytest.approx(512 / 60, rel=1e-9)
+    lt = np.repeat(1.0 / (10.0 + np.arange(11, 30)), 10)  # matched columns 11..29, ref time 10 + col
+    assert m["lt_rel"]["p50"] == pytest.approx(np.percentile(lt, 50))
+    assert m["lt_rel"]["max"] == pytest.approx(1.0 / 21.0)
+    # a different object in the same place counts as a mismatch of every pixel
+    other = _synthetic()
+    other.object_id[other.hit] = 4
+    assert image_metrics.compare(ref, other)["orders"][1]["mismatch"] == 200
+
+
+def test_debug_png(tmp_path):
+    ref, test = _synthetic(), _synthetic(shift=2)
+    path = tmp_path / "dbg.png"
+    image_metrics.save_png(path, {"ref": ref, "test": test})
+    assert path.stat().st_size > 1000
+
+
+# --------------------------------------------------------------------------------------------------
+# The polygon method against the reference
+# --------------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def lut():
+    return build_lut(20.0, 1.05, 40.0, 256, 512)
+
+
+@pytest.mark.parametrize("angle", [45, 90, 135])
+def test_sphere_polygon_method_vs_reference(lut, angle):
+    """The paper's sphere (radius 0.5 r_s on r = 3 r_s, observer at 20 r_s, fov 19 deg) at 96x54: the
+    rasterized image meshes of pipeline.build_images agree with the reference ray tracer."""
+    bench = _bench_accuracy()
+    cam = bench.camera(96, 54)
+    src, scene = bench.sphere_scene(angle)
+    ref = raytrace.trace(scene, cam, HOLE, 1.0)
+    settings = bench.make_settings(cam)
+    images = pipeline.build_images(src, mapping.Scene(cam.position, HOLE, 1.0), lut, settings,
+                                   frustum_planes=cam.frustum_planes())
+    poly = rasterize.rasterize(rasterize.from_images(images), cam)
+    m = image_metrics.compare(ref, poly, wrap_uv=(True, False))
+    a = m["orders"]["all"]
+    print(f"\nsphere {angle} deg 96x54: covered {a['covered_ref']} / {a['covered_test']}, mismatch "
+          f"{a['mismatch']} ({100 * a['mismatch_frac']:.2f}%), UV p99 {a['uv_px']['p99']:.3f} px, "
+          f"max {a['uv_px']['max']:.3f} px, c*dt p99 {a['lt_rel']['p99']:.1e}; order 2: "
+          f"{m['orders'][2]['covered_ref']} px, mismatch {m['orders'][2]['mismatch']}")
+    assert a["covered_ref"] > 50 and m["orders"][2]["covered_ref"] > 0
+    assert a["mismatch_frac"] < 0.03
+    assert a["uv_px"]["p99"] < 0.5
+    assert a["lt_rel"]["p99"] < 2e-3
