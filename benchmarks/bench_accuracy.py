@@ -108,6 +108,21 @@ def reference_image(scene, cam):
     return buf, time.perf_counter() - t0
 
 
+def _code_version():
+    """Commit of the checkout, and the core files with uncommitted changes (the figures depend on them)."""
+    import subprocess
+
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                              check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "grlens_addon/core", "lutgen"], cwd=ROOT,
+                               capture_output=True, text=True, check=True).stdout.split("\n")
+        dirty = [ln[3:] for ln in dirty if ln.strip()]
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown commit"
+    return f"commit {head}" + (f" with uncommitted changes in {', '.join(dirty)}" if dirty else "")
+
+
 def _fmt_pct(x):
     return "n/a" if not np.isfinite(x) else f"{100 * x:.2f}%"
 
@@ -124,12 +139,41 @@ def main_table(angles, cam, lut, repeat, refs, png_dir=None):
         poly, t_poly, t_ras, ntri = polygon_image(src, cam, lut, settings, repeat)
         m = image_metrics.compare(ref, poly, texture_size=TEXTURE, wrap_uv=(True, False))
         results[a] = m
+        m["_t_poly"] = t_poly
         lines.append(f"| {a} | {t_ref:.2f} | {1000 * t_poly:.1f} | {t_ref / t_poly:.0f}x | {t_ras:.2f} | "
                      f"{ntri.get(1, 0)} / {ntri.get(2, 0)} |")
         rows += image_metrics.markdown_rows(m, f"{a} deg")
         if png_dir:
             image_metrics.save_png(os.path.join(png_dir, f"accuracy_{a:03d}.png"), {"reference": ref, "polygon": poly})
-    return lines, image_metrics.MARKDOWN_HEADER + rows, results
+    targets = ["| angle [deg] | view | mismatch / covered (< 0.5%) | UV err p99 [px] (< 0.5) | speed-up (>= 100x) |",
+               "|---|---|---|---|---|"]
+    for a in angles:
+        m = results[a]["orders"]["all"]
+        sp = refs[a][1] / results[a]["_t_poly"]
+
+        def mark(ok):
+            return "" if ok else " (missed)"
+
+        targets.append(f"| {a} | {'Einstein ring' if is_ring(a) else 'off-axis'} | "
+                       f"{_fmt_pct(m['mismatch_frac'])}{mark(m['mismatch_frac'] < 0.005)} | "
+                       f"{m['uv_px']['p99']:.3f}{mark(m['uv_px']['p99'] < 0.5)} | {sp:.0f}x{mark(sp >= 100)} |")
+    return lines, image_metrics.MARKDOWN_HEADER + rows, results, targets
+
+
+def ring_notes(angles, results):
+    """Generated remarks on the Einstein-ring views (coverage of each order, polygon vs reference)."""
+    ring = [a for a in angles if is_ring(a)]
+    if not ring:
+        return []
+    parts = []
+    for a in ring:
+        for o in (1, 2):
+            m = results[a]["orders"][o]
+            if m["covered_ref"]:
+                parts.append(f"{a} deg order {o}: {m['covered_test']} px drawn vs {m['covered_ref']} px in the "
+                             f"reference ({m['covered_test'] / m['covered_ref']:.2f}x), {m['mismatch']} mismatched")
+    return ["Einstein-ring views (the sphere straddles the camera-hole axis; see accuracy_NNN.png from "
+            "`--png-dir` for pictures): " + "; ".join(parts) + ".", ""]
 
 
 def sweep_settings():
@@ -151,17 +195,26 @@ def sweep_settings():
 
 def aggregate(ms):
     """Totals over angles: mismatch fraction (sum mismatch / sum covered, orders 1+2), max of p99s."""
+    if not ms:
+        return float("nan"), float("nan"), float("nan")
     mis = sum(m["orders"]["all"]["mismatch"] for m in ms)
     cov = sum(m["orders"]["all"]["covered_ref"] for m in ms)
-    uv99 = max((m["orders"]["all"]["uv_px"]["p99"] for m in ms), default=float("nan"))
-    lt99 = max((m["orders"]["all"]["lt_rel"]["p99"] for m in ms), default=float("nan"))
+    uv99 = np.nanmax([m["orders"]["all"]["uv_px"]["p99"] for m in ms])
+    lt99 = np.nanmax([m["orders"]["all"]["lt_rel"]["p99"] for m in ms])
     return mis / cov if cov else float("nan"), uv99, lt99
 
 
+def is_ring(angle_deg):
+    """True if the sphere straddles the camera-hole axis at this orbit angle (Einstein rings)."""
+    return abs(math.sin(math.radians(angle_deg))) * ORBIT < RADIUS
+
+
 def pareto(angles, cam, refs, repeat, plot_path=None):
-    lines = ["| setting | build_images [ms] (mean over angles) | mismatch / covered | UV err p99 [px] (worst angle) | "
-             "c*dt rel. err p99 (worst angle) | LUT build [s] |",
-             "|---|---|---|---|---|---|"]
+    off = [a for a in angles if not is_ring(a)]
+    ring = [a for a in angles if is_ring(a)]
+    lines = ["| setting | build_images [ms] (mean) | mismatch, off-axis | UV err p99 [px], off-axis | "
+             "c*dt rel. err p99, off-axis | mismatch, rings | UV err p99 [px], rings | LUT build [s] |",
+             "|---|---|---|---|---|---|---|---|"]
     pts = []
     luts = {}
     for label, size, over in sweep_settings():
@@ -170,16 +223,18 @@ def pareto(angles, cam, refs, repeat, plot_path=None):
             luts[size] = (build_lut(R_OBS, 1.05, 40.0, size[0], size[1]), time.perf_counter() - t0)
         lut, t_lut = luts[size]
         settings = make_settings(cam, **over)
-        times, ms = [], []
+        times, ms = [], {}
         for a in angles:
             src, _ = sphere_scene(a)
             poly, t_poly, _, _ = polygon_image(src, cam, lut, settings, repeat)
             times.append(t_poly)
-            ms.append(image_metrics.compare(refs[a][0], poly, texture_size=TEXTURE, wrap_uv=(True, False)))
-        frac, uv99, lt99 = aggregate(ms)
+            ms[a] = image_metrics.compare(refs[a][0], poly, texture_size=TEXTURE, wrap_uv=(True, False))
+        f_off, uv_off, lt_off = aggregate([ms[a] for a in off])
+        f_ring, uv_ring, _ = aggregate([ms[a] for a in ring])
         t = float(np.mean(times))
-        pts.append((label, t, frac, uv99))
-        lines.append(f"| {label} | {1000 * t:.1f} | {_fmt_pct(frac)} | {uv99:.3f} | {lt99:.1e} | {t_lut:.2f} |")
+        pts.append((label, t, f_off, uv_off, f_ring, uv_ring))
+        lines.append(f"| {label} | {1000 * t:.1f} | {_fmt_pct(f_off)} | {uv_off:.3f} | {lt_off:.1e} | "
+                     f"{_fmt_pct(f_ring)} | {uv_ring:.3f} | {t_lut:.2f} |")
         print(lines[-1], flush=True)
     if plot_path:
         import matplotlib
@@ -187,21 +242,32 @@ def pareto(angles, cam, refs, repeat, plot_path=None):
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-        for label, t, frac, uv99 in pts:
-            for ax, y in zip(axes, (100 * frac, uv99)):
-                ax.plot(1000 * t, y, "o")
-                ax.annotate(label, (1000 * t, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        fig, axes = plt.subplots(1, 2, figsize=(12, 4.6))
+        groups = ((2, 3, "off-axis " + ",".join(map(str, off)) + " deg", "o"),
+                  (4, 5, "Einstein rings " + ",".join(map(str, ring)) + " deg", "s"))
+        for i_f, i_uv, name, marker in groups:
+            if not (off if i_f == 2 else ring):
+                continue
+            for ax, idx, scale in ((axes[0], i_f, 100.0), (axes[1], i_uv, 1.0)):
+                xs = [1000 * p[1] for p in pts]
+                ys = [max(scale * p[idx], 1e-4) for p in pts]
+                ax.plot(xs, ys, marker, label=name, alpha=0.8)
+                done = []  # label only points that are not next to an already labelled one
+                for p, x, y in zip(pts, xs, ys):
+                    if any(abs(x - x0) < 2.5 and abs(math.log10(y / y0)) < 0.08 for x0, y0 in done):
+                        continue
+                    done.append((x, y))
+                    ax.annotate(p[0], (x, y), fontsize=6, xytext=(3, 2), textcoords="offset points")
         axes[0].set_ylabel("coverage mismatch [% of covered pixels]")
-        axes[1].set_ylabel("UV error p99 [px] (worst angle)")
-        axes[0].axhline(0.5, color="grey", lw=0.8, ls="--")
-        axes[1].axhline(0.5, color="grey", lw=0.8, ls="--")
+        axes[1].set_ylabel("UV error p99 [px] (worst angle of the group)")
         for ax in axes:
-            ax.set_xlabel("build_images time per frame [ms] (both orders)")
+            ax.axhline(0.5, color="grey", lw=0.8, ls="--")
+            ax.set_xlabel("build_images time per frame [ms] (both orders, mean over angles)")
             ax.set_yscale("log")
             ax.grid(alpha=0.3)
-        fig.suptitle(f"polygon method vs reference ray tracer, sphere scene {cam.width}x{cam.height}, "
-                     f"angles {', '.join(str(a) for a in angles)} deg", fontsize=9)
+            ax.legend(fontsize=7)
+        fig.suptitle(f"polygon method vs per-pixel reference: sphere scene at {cam.width}x{cam.height}; "
+                     "one setting changed per point (dashed: targets)", fontsize=9)
         fig.tight_layout()
         fig.savefig(plot_path, dpi=110)
         plt.close(fig)
@@ -232,14 +298,15 @@ def main(argv=None):
     for a in sorted(set(angles) | (set(sweep_angles) if args.sweep else set())):
         refs[a] = reference_image(sphere_scene(a)[1], cam)
         print(f"reference {a} deg: {refs[a][1]:.2f} s, {refs[a][0].info}", flush=True)
-    timing, metric_rows, results = main_table(angles, cam, lut, args.repeat, refs, args.png_dir)
+    timing, metric_rows, results, targets = main_table(angles, cam, lut, args.repeat, refs, args.png_dir)
     settings = make_settings(cam)
     out = [
         "# Accuracy of the polygon method against a per-pixel ray tracer",
         "",
         "Generated by `./dev python benchmarks/bench_accuracy.py"
         + (" --sweep" if args.sweep else "") + " --write` "
-        f"({platform.machine()}, {os.cpu_count()} CPUs, numpy {np.__version__}); do not edit by hand.",
+        f"({platform.machine()}, {os.cpu_count()} CPUs, numpy {np.__version__}; {_code_version()}); "
+        "do not edit by hand.",
         "",
         f"Scene: the paper's orbiting sphere (radius {RADIUS} r_s, 36x18 UV sphere, 1224 triangles, spherical "
         f"UVs) on the orbit r = {ORBIT} r_s, camera at {R_OBS} r_s looking at the hole, vertical field of view "
@@ -264,6 +331,10 @@ def main(argv=None):
         "Targets of issue 5 (default settings, 640x360): coverage mismatch under 0.5% of the covered pixels, "
         "UV error p99 below 0.5 px, polygon method at least 100x faster per frame than the reference.",
         "",
+        "## Targets at default settings",
+        "",
+        *targets,
+        "",
         "## Time per frame",
         "",
         *timing,
@@ -273,17 +344,25 @@ def main(argv=None):
         *metric_rows,
         "",
         "Pixels with order 3+ in the reference: "
-        + ", ".join(f"{a} deg: {results[a]['higher_ref']}" for a in angles) + ".",
+        + ", ".join(f"{a} deg: {results[a]['higher_ref']}" for a in angles) + ". "
+        "UV errors in pixels need a reference UV gradient, i.e. neighbours of the same object and order: "
+        "pixels measured (all orders) "
+        + ", ".join(f"{a} deg: {results[a]['orders']['all']['uv_px_n']} of {results[a]['orders']['all']['matched']}"
+                    for a in angles)
+        + " (a ring one pixel wide has none, hence n/a).",
         "",
+        *ring_notes(angles, results),
     ]
-    print("\n".join(out[out.index("## Time per frame"):]), flush=True)
+    print("\n".join(out[out.index("## Targets at default settings"):]), flush=True)
     if args.sweep:
         plot = os.path.join(ROOT, "docs", "accuracy_pareto.png") if args.write else None
         lines = pareto(sweep_angles, cam, refs, max(1, args.repeat // 2), plot)
         out += ["## Pareto sweep", "",
-                f"Each row changes one setting from the defaults above; angles {', '.join(map(str, sweep_angles))} "
-                "deg; mismatch summed over the angles (orders 1 and 2), UV and light-travel-time p99 of the worst "
-                "angle. Plot: [accuracy_pareto.png](accuracy_pareto.png).", "", *lines, ""]
+                "Each row changes one setting from the defaults above. Angles are grouped into off-axis "
+                f"({', '.join(str(a) for a in sweep_angles if not is_ring(a))} deg) and Einstein-ring "
+                f"({', '.join(str(a) for a in sweep_angles if is_ring(a))} deg) views; mismatch summed over a "
+                "group's angles (orders 1 and 2), UV and light-travel-time p99 of its worst angle. "
+                "Plot: [accuracy_pareto.png](accuracy_pareto.png).", "", *lines, ""]
     if args.write:
         path = os.path.join(ROOT, "docs", "accuracy.md")
         with open(path, "w") as f:

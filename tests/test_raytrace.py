@@ -51,6 +51,26 @@ def _bench_accuracy():
     return mod
 
 
+def test_camera_conventions():
+    """Pixel centres project back to (column + 0.5, row + 0.5); row 0 is the top (+Z up for look_at);
+    a 4x4 matrix_world gives the same camera."""
+    cam = raytrace.Camera.look_at([5.0, -2.0, 1.0], [0, 0, 0], math.radians(30), 8, 6)
+    d = cam.pixel_directions()
+    col, row, depth = cam.project(cam.position + 3.0 * d.reshape(-1, 3))
+    np.testing.assert_allclose(col.reshape(6, 8), np.arange(8)[None, :] + 0.5 + np.zeros((6, 1)), atol=1e-12)
+    np.testing.assert_allclose(row.reshape(6, 8), np.arange(6)[:, None] + 0.5 + np.zeros((1, 8)), atol=1e-12)
+    assert np.all(depth > 0) and d[0, 4, 2] > d[-1, 4, 2]
+    fwd = -cam.rotation[:, 2]
+    np.testing.assert_allclose(fwd, -cam.position / np.linalg.norm(cam.position), atol=1e-12)
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = cam.rotation, cam.position
+    same = raytrace.Camera.from_matrix_world(m, cam.fov_y, 8, 6)
+    np.testing.assert_allclose(same.pixel_directions(), d, atol=1e-15)
+    # the vertical field of view spans the image's height
+    top, bottom = d[0, 4], d[-1, 4]
+    assert math.acos(top @ bottom) == pytest.approx(cam.fov_y * 5 / 6, rel=0.02)
+
+
 # --------------------------------------------------------------------------------------------------
 # The curve itself
 # --------------------------------------------------------------------------------------------------

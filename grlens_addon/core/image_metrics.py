@@ -118,6 +118,8 @@ def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(Fals
                 px[good] = np.linalg.norm(np.linalg.solve(J[good], d_uv[good][..., None])[..., 0], axis=1)
             res["uv_px"] = _stats(px)
             res["uv_px_n"] = int(np.isfinite(px).sum())
+        else:
+            res["uv_px"], res["uv_px_n"] = _stats([]), 0
         with np.errstate(invalid="ignore", divide="ignore"):
             lt = np.abs(test.light_time[matched] - ref.light_time[matched]) / ref.light_time[matched]
         res["lt_rel"] = _stats(lt)

@@ -60,6 +60,7 @@ missed; everything at r <= r_s (inside the horizon) is invisible.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -85,7 +86,9 @@ class Camera:
     position: (3,) BU; rotation: (3, 3) camera-to-world rotation (columns: the camera's x, y, z axes in
     world space, e.g. ``matrix_world.to_3x3()``); fov_y: full vertical field of view (rad);
     width, height: resolution in pixels. Pixel (row j, column i) looks through its centre; row 0 is the
-    top of the image, so buffers are (height, width) arrays in image order.
+    top of the image, so buffers are (height, width) arrays in image order. (A Blender camera with
+    sensor fit AUTO and width >= height has the horizontal angle ``cam.data.angle``: then
+    fov_y = 2 atan(tan(angle / 2) * height / width).)
     """
 
     position: np.ndarray
@@ -113,6 +116,13 @@ class Camera:
         x /= np.linalg.norm(x)
         y = np.cross(x, fwd)
         return cls(position, np.stack([x, y, -fwd], axis=1), fov_y, width, height)
+
+    @classmethod
+    def from_matrix_world(cls, matrix_world, fov_y, width, height) -> "Camera":
+        """From a 4x4 (or 3x4) camera-to-world matrix such as Blender's ``camera.matrix_world`` (its
+        rotation part must be orthonormal: no scale)."""
+        m = np.asarray(matrix_world, dtype=np.float64)
+        return cls(m[:3, 3], m[:3, :3], fov_y, width, height)
 
     @property
     def tan_half(self) -> tuple[float, float]:
@@ -502,42 +512,46 @@ def _pairs(order_beta, beta_sorted, lo, hi, surround, tri_ids, chunk):
         i0 = i1
 
 
-def _segments(rays: Rays, V, ray, tri):
+def _segments(ct, st, X, Q1, Q2, ray, tri):
     """The cut of triangles ``tri`` by the planes of rays ``ray``: for the pairs that are cut,
     (keep mask, phi_a, width, mx, my, p): the sector [phi_a, phi_a + width] (phi_a in [0, 2 pi),
     width in [0, pi)) seen from the hole and the segment's line {x : mx x + my y = p} in the plane
-    coordinates (e1, e2 of the ray; units of r_s)."""
-    n = rays.normal[ray]
-    Vt = V[tri]  # (P, 3, 3)
-    s = np.einsum("pij,pj->pi", Vt, n)
+    coordinates (e1, e2 of the ray; units of r_s).
+
+    ct, st: per ray, cos and sin of the plane azimuth (e2 = ct f1 + st f2, normal = ct f2 - st f1);
+    X, Q1, Q2: per triangle (T, 3), its corners' coordinates along e1, f1, f2 (relative to the hole)."""
+    c = ct[ray][:, None]
+    s_ = st[ray][:, None]
+    q1, q2, x = Q1[tri], Q2[tri], X[tri]
+    y = c * q1 + s_ * q2   # along the ray's e2
+    s = c * q2 - s_ * q1   # signed distance from the ray's plane
     pos = s > 0.0
-    lonely = np.where(pos[:, 0] == pos[:, 1], 2, np.where(pos[:, 0] == pos[:, 2], 1, 0))
-    cut = ~((pos[:, 0] == pos[:, 1]) & (pos[:, 1] == pos[:, 2]))
-    rows = np.arange(len(tri))
-    ia, ib = (lonely + 1) % 3, (lonely + 2) % 3
-    vl, va, vb = Vt[rows, lonely], Vt[rows, ia], Vt[rows, ib]
-    sl, sa, sb = s[rows, lonely], s[rows, ia], s[rows, ib]
+    c0 = pos[:, 0] != pos[:, 1]
+    c1 = pos[:, 1] != pos[:, 2]
+    c2 = pos[:, 2] != pos[:, 0]
     with np.errstate(invalid="ignore", divide="ignore"):
-        ta = sl / (sl - sa)
-        tb = sl / (sl - sb)
-    P = vl + ta[:, None] * (va - vl)
-    Q = vl + tb[:, None] * (vb - vl)
-    e2 = rays.e2[ray]
-    xp, yp = P @ rays.e1, np.einsum("pi,pi->p", P, e2)
-    xq, yq = Q @ rays.e1, np.einsum("pi,pi->p", Q, e2)
-    dx, dy = xq - xp, yq - yp
-    ln = np.hypot(dx, dy)
-    with np.errstate(invalid="ignore", divide="ignore"):
+        def edge(i, j):
+            t = s[:, i] / (s[:, i] - s[:, j])
+            return x[:, i] + t * (x[:, j] - x[:, i]), y[:, i] + t * (y[:, j] - y[:, i])
+
+        x01, y01 = edge(0, 1)
+        x12, y12 = edge(1, 2)
+        x20, y20 = edge(2, 0)
+        xp, yp = np.where(c0, x01, x12), np.where(c0, y01, y12)
+        xq, yq = np.where(c2, x20, x12), np.where(c2, y20, y12)
+        dx, dy = xq - xp, yq - yp
+        ln = np.hypot(dx, dy)
         mx, my = dy / ln, -dx / ln
         p = mx * xp + my * yp
     flip = p < 0
     mx, my, p = np.where(flip, -mx, mx), np.where(flip, -my, my), np.abs(p)
     ap = np.arctan2(yp, xp)
     aq = np.arctan2(yq, xq)
-    delta = np.angle(np.exp(1j * (aq - ap)))
+    delta = np.mod(aq - ap + np.pi, TWO_PI) - np.pi
     phi_a = np.mod(np.where(delta >= 0, ap, aq), TWO_PI)
     width = np.abs(delta)
-    keep = cut & np.isfinite(p) & (p > _P_MIN) & (ln > 0)
+    with np.errstate(invalid="ignore"):
+        keep = (c0 | c1) & (p > _P_MIN) & (ln > 0)
     return keep, phi_a, width, mx, my, p
 
 
@@ -646,8 +660,6 @@ def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, pair_chun
     """First hits of the exact null geodesics leaving the static observer at ``origin`` (BU) in the
     world ``directions`` (M, 3), for a hole at ``hole`` (BU) with Schwarzschild radius ``r_s`` (BU).
     Returns flat :class:`PixelBuffers` of shape (M,). See the module docstring for the method."""
-    import time
-
     t0 = time.perf_counter()
     rays = Rays(origin, directions, hole, r_s)
     m = len(rays)
@@ -659,7 +671,9 @@ def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, pair_chun
     if len(V):
         f1 = _any_perpendicular(rays.e1)
         f2 = np.cross(rays.e1, f1)
-        beta = np.mod(np.arctan2(rays.e2 @ f2, rays.e2 @ f1), np.pi)
+        ct, st = rays.e2 @ f1, rays.e2 @ f2
+        beta = np.mod(np.arctan2(st, ct), np.pi)
+        X, Q1, Q2 = V @ rays.e1, V @ f1, V @ f2
         az_lo, az_hi, surround = _triangle_azimuths(V, f1, f2)
         objs = np.unique(scene.object_id)
         lo_r, hi_r = _object_shells(V, np.searchsorted(objs, scene.object_id), len(objs))
@@ -674,7 +688,7 @@ def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, pair_chun
             for ray, tri in _pairs(order_b, beta_sorted, az_lo[tri_ids], az_hi[tri_ids], surround[tri_ids],
                                    tri_ids, pair_chunk):
                 info["pairs"] += len(ray)
-                keep, phi_a, width, mx, my, p = _segments(rays, V, ray, tri)
+                keep, phi_a, width, mx, my, p = _segments(ct, st, X, Q1, Q2, ray, tri)
                 sel = np.flatnonzero(keep)
                 if not sel.size:
                     continue
