@@ -330,3 +330,46 @@ def test_sphere_polygon_method_vs_reference(lut, angle):
     assert a["mismatch_frac"] < 0.03
     assert a["uv_px"]["p99"] < 0.5
     assert a["lt_rel"]["p99"] < 2e-3
+
+
+def _annulus(r_in, r_out, n_r, n_a, z=0.0):
+    r = np.linspace(r_in, r_out, n_r + 1)
+    a = np.linspace(0, 2 * np.pi, n_a, endpoint=False)
+    R, A = np.meshgrid(r, a, indexing="ij")
+    pts = np.stack([R * np.cos(A), R * np.sin(A), np.full(R.shape, z)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(n_r), np.arange(n_a), indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    v00, v10 = i * n_a + j, (i + 1) * n_a + j
+    v11, v01 = (i + 1) * n_a + (j + 1) % n_a, i * n_a + (j + 1) % n_a
+    tris = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)])
+    return pts, tris
+
+
+def test_equatorial_disc():
+    """A disc in a plane through the hole is cut radially by every ray plane (the special case of the
+    tracer): its hits agree with lutgen.connect, and with a disc lifted by 1e-7 r_s (general case)."""
+    r_s = 1.0
+    cam_pos = 18.0 * np.array([0.0, -math.sin(math.radians(80)), math.cos(math.radians(80))])
+    cam = raytrace.Camera.look_at(cam_pos, HOLE, math.radians(50), 64, 36)
+    pts, tris = _annulus(3.0, 12.0, 8, 48)
+    buf = raytrace.trace(raytrace.TriangleScene(pts, tris), cam, HOLE, r_s)
+    assert buf.info.get("radial_segments", 0) > 0
+    h = buf.hit
+    assert h.sum() > 600
+    p = buf.point[h]
+    np.testing.assert_allclose(p[:, 2], 0.0, atol=1e-9)
+    e1 = cam_pos / np.linalg.norm(cam_pos)
+    r = np.linalg.norm(p, axis=1)
+    phi = np.arccos(np.clip(p @ e1 / r, -1, 1))
+    xi_pix = np.arccos(np.clip(cam.pixel_directions()[h] @ e1, -1, 1))
+    for o in (1, 2):  # (the order-2 ring is thinner than these pixels: it may be missing)
+        k = buf.order[h] == o
+        c = connect(18.0, r[k] / r_s, phi[k], o)
+        np.testing.assert_allclose(c.xi, xi_pix[k], atol=1e-9)
+        np.testing.assert_allclose(c.dt * r_s, buf.light_time[h][k], rtol=1e-9)
+    lifted = raytrace.trace(raytrace.TriangleScene(pts + [0, 0, 1e-7], tris), cam, HOLE, r_s)
+    assert lifted.info.get("radial_segments", 0) == 0
+    assert (lifted.hit != buf.hit).sum() <= 2
+    same = lifted.hit & buf.hit
+    np.testing.assert_allclose(lifted.point[same], buf.point[same], atol=1e-5)
+    assert np.array_equal(lifted.order[same], buf.order[same])

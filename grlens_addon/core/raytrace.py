@@ -71,7 +71,7 @@ from lutgen.solver import check_observer_radius
 
 TWO_PI = 2.0 * np.pi
 _B_MIN = 1e-12  # impact parameters (r_s) below this are clamped (the ray is radial to rounding)
-_P_MIN = 1e-12  # a cut segment whose line passes closer than this (r_s) to the hole is skipped
+_RADIAL_TOL = 1e-10  # a cut whose line passes within this fraction of its length from the hole is radial
 _R_OBS_MAX = 1e8  # r_s; impact parameters above ~1e9 r_s break lutgen.orbit.orbit_from_b
 _AZ_PAD = 1e-7  # rad, widening of the triangles' azimuth ranges (pairing is only a pre-selection)
 
@@ -550,9 +550,49 @@ def _segments(ct, st, X, Q1, Q2, ray, tri):
     delta = np.mod(aq - ap + np.pi, TWO_PI) - np.pi
     phi_a = np.mod(np.where(delta >= 0, ap, aq), TWO_PI)
     width = np.abs(delta)
+    rp, rq = np.hypot(xp, yp), np.hypot(xq, yq)
+    cut = c0 | c1
     with np.errstate(invalid="ignore"):
-        keep = (c0 | c1) & (p > _P_MIN) & (ln > 0)
-    return keep, phi_a, width, mx, my, p
+        # the segment's line passes (to _RADIAL_TOL relative) through the hole: e.g. every cut of a
+        # planar mesh whose plane contains the hole (an equatorial disc) is radial in every ray plane
+        radial = cut & ~(p > _RADIAL_TOL * np.maximum(rp, rq))
+        keep = cut & ~radial & (ln > 0)
+    return keep, phi_a, width, mx, my, p, radial, np.mod(ap, TWO_PI), np.mod(aq, TWO_PI), rp, rq
+
+
+def _radial_roots(rays: Rays, shells, ray, pair_ids, width, ap, aq, rp, rq):
+    """Hits of radial segments (lines through the hole): a segment on one side of the hole, at polar
+    angle ap ~ aq, is met where Phi = ap + 2 pi k with r(Phi) between rp and rq; one through the hole
+    (width ~ pi) is two such pieces, [0, rp] at ap and [0, rq] at aq. Returns (pair index, Phi)."""
+    through = width > 0.5 * np.pi
+    ang = np.concatenate([ap, aq[through]])
+    lo = np.concatenate([np.where(through, 0.0, np.minimum(rp, rq)), np.zeros(int(through.sum()))])
+    hi = np.concatenate([np.where(through, rp, np.maximum(rp, rq)), rq[through]])
+    pid = np.concatenate([pair_ids, pair_ids[through]])
+    sh = np.concatenate([shells, shells[through]])
+    out_p, out_x = [], []
+    for leg in (0, 1):
+        s0, s1 = sh[:, leg, 0], sh[:, leg, 1]
+        with np.errstate(invalid="ignore"):
+            kmin = np.ceil((s0 - ang) / TWO_PI)
+            kmax = np.floor((s1 - ang) / TWO_PI)
+        nk = np.maximum(np.nan_to_num(np.where(np.isfinite(s0), kmax - kmin + 1, 0), nan=0.0), 0).astype(np.int64)
+        sel = np.flatnonzero(nk)
+        if not sel.size:
+            continue
+        c = nk[sel]
+        idx = np.repeat(sel, c)
+        k = np.repeat(kmin[sel], c) + (np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c))
+        x = ang[idx] + TWO_PI * k
+        u, _ = rays.u(ray[pid[idx]], x)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = 1.0 / u
+        ok = (u > 0) & (r >= lo[idx] * (1 - 1e-12)) & (r <= hi[idx] * (1 + 1e-12))
+        out_p.append(pid[idx[ok]])
+        out_x.append(x[ok])
+    if not out_p:
+        return np.zeros(0, np.int64), np.zeros(0)
+    return np.concatenate(out_p), np.concatenate(out_x)
 
 
 def _candidates(shells, phi_a, width, pair_ids):
@@ -688,19 +728,22 @@ def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, pair_chun
             for ray, tri in _pairs(order_b, beta_sorted, az_lo[tri_ids], az_hi[tri_ids], surround[tri_ids],
                                    tri_ids, pair_chunk):
                 info["pairs"] += len(ray)
-                keep, phi_a, width, mx, my, p = _segments(ct, st, X, Q1, Q2, ray, tri)
+                keep, phi_a, width, mx, my, p, radial, ap, aq, rp, rq = _segments(ct, st, X, Q1, Q2, ray, tri)
                 sel = np.flatnonzero(keep)
-                if not sel.size:
-                    continue
                 cid, a, b = _candidates(shells[ray[sel]], phi_a[sel], width[sel], sel)
                 info["candidates"] += len(cid)
-                if not cid.size:
-                    continue
                 ci, x = _roots(rays, ray[cid], a, b, mx[cid], my[cid], p[cid])
-                info["roots"] += len(ci)
-                if not ci.size:
+                hit_pair = cid[ci]
+                rad = np.flatnonzero(radial)
+                if rad.size:
+                    info["radial_segments"] = info.get("radial_segments", 0) + len(rad)
+                    rp_, rx = _radial_roots(rays, shells[ray[rad]], ray, rad, width[rad], ap[rad], aq[rad],
+                                            rp[rad], rq[rad])
+                    hit_pair, x = np.concatenate([hit_pair, rp_]), np.concatenate([x, rx])
+                info["roots"] += len(hit_pair)
+                if not hit_pair.size:
                     continue
-                r_hit, t_hit = ray[cid[ci]], tri[cid[ci]]
+                r_hit, t_hit = ray[hit_pair], tri[hit_pair]
                 # keep the smallest swept angle per ray
                 o = np.lexsort((x, r_hit))
                 r_hit, t_hit, x = r_hit[o], t_hit[o], x[o]
