@@ -312,6 +312,9 @@ DISC_LIGHT = (40.0 * math.sin(math.radians(80.0)), 0.0, 40.0 * math.cos(math.rad
 r_s = 2 BU (its coordinates are in BU, not r_s: |(39.39, 0, 6.95)| = 40.0 = 20 r_s)."""
 DISC_EXTERNAL = {90: (20.0, -36.0, 0.0), 30: (10.0, -40.0, 4.0), 10: (0.0, -40.0, 4.0)}
 """The paper's external cameras (figure 10 b, d, f), BU."""
+DISC_EXTERNAL_TARGET = (-16.0, 0.0, 1.0)
+"""Where the external cameras look (BU): about the middle of the image meshes, which lie 25..85 BU
+from the observer (first order from x = 14 to -24, second order from -17 to -44)."""
 DISC_FRAMES = {90: 1, 30: 61, 10: 81}
 """Frames of the ``disc`` sequence at the paper's inclinations (inclination = 91 - frame degrees)."""
 
@@ -320,9 +323,13 @@ def _disc_mesh(scene, r_in, r_out, thickness, n_seg=128, n_rad=4, cells=(16, 4))
     """A ring of rectangular cross-section in its local xy plane (normal +z): top and bottom faces of
     n_seg x n_rad quads, inner and outer edges of n_seg quads each: n_seg * (2 n_rad + 2) quads
     (2560 triangles for 128 x 4, as in the paper). Corner UVs: polar, scaled so that the unit
-    checkerboard gives cells[0] sectors x cells[1] rings on the top and bottom; material slots:
-    0 top, 1 bottom, 2 edges."""
-    verts, faces, uvs, fmat = [], [], [], []
+    checkerboard gives cells[0] sectors x cells[1] rings on the top and bottom, with v shifted by
+    DISC_KIND_STEP on the bottom and twice that on the edges: one material (_disc_material) tells the
+    three kinds of faces apart by v. (Three material slots would be the natural way, but the image
+    meshes lose their faces' material indices: grlens' upload writes them before it fills the image
+    mesh's material slots with Mesh.materials.clear() + append, and clear() zeroes them; later
+    uploads keep them while the topology is unchanged.)"""
+    verts, faces, uvs = [], [], []
     h = 0.5 * thickness
     radii = [r_in + (r_out - r_in) * k / n_rad for k in range(n_rad + 1)]
 
@@ -340,49 +347,87 @@ def _disc_mesh(scene, r_in, r_out, thickness, n_seg=128, n_rad=4, cells=(16, 4))
             # top: counter-clockwise seen from +z
             faces.append([vid(k, j, True), vid(k, j + 1, True), vid(k + 1, j + 1, True), vid(k + 1, j, True)])
             uvs.append([(k * su, j * sv), (k * su, (j + 1) * sv), ((k + 1) * su, (j + 1) * sv), ((k + 1) * su, j * sv)])
-            fmat.append(0)
             faces.append([vid(k, j, False), vid(k + 1, j, False), vid(k + 1, j + 1, False), vid(k, j + 1, False)])
-            uvs.append([(k * su, j * sv), ((k + 1) * su, j * sv), ((k + 1) * su, (j + 1) * sv), (k * su, (j + 1) * sv)])
-            fmat.append(1)
+            b = DISC_KIND_STEP
+            uvs.append([(k * su, b + j * sv), ((k + 1) * su, b + j * sv), ((k + 1) * su, b + (j + 1) * sv),
+                        (k * su, b + (j + 1) * sv)])
         for j, outward in ((0, False), (n_rad, True)):  # inner and outer edge
             quad = [vid(k, j, False), vid(k + 1, j, False), vid(k + 1, j, True), vid(k, j, True)]
             faces.append(quad if outward else quad[::-1])
-            uvs.append([(k * su, 0.0), ((k + 1) * su, 0.0), ((k + 1) * su, 1.0), (k * su, 1.0)]
-                       if outward else [(k * su, 1.0), ((k + 1) * su, 1.0), ((k + 1) * su, 0.0), (k * su, 0.0)])
-            fmat.append(2)
-    return _mesh_object(scene, "Disc", verts, faces, uvs, (), fmat)
+            e = 2 * DISC_KIND_STEP
+            uvs.append([(k * su, e), ((k + 1) * su, e), ((k + 1) * su, e + 1.0), (k * su, e + 1.0)]
+                       if outward else [(k * su, e + 1.0), ((k + 1) * su, e + 1.0), ((k + 1) * su, e), (k * su, e)])
+    return _mesh_object(scene, "Disc", verts, faces, uvs, [_disc_material()])
 
 
-def _disc_materials():
-    """Slots 0 top (red checkerboard), 1 bottom (blue checkerboard), 2 edges (green), lit by GR illumination."""
-    return [_gr_lit_checker("DiscTop", (0.9, 0.12, 0.05), (0.45, 0.03, 0.02)),
-            _gr_lit_checker("DiscBottom", (0.08, 0.25, 0.95), (0.03, 0.08, 0.45)),
-            _gr_lit_checker("DiscEdge", (0.1, 0.8, 0.15), None)]
+DISC_KIND_STEP = 10.0
+"""UV v offset of the disc's bottom faces (twice that: its edges); even, so the checkerboard's parity
+is unchanged."""
+DISC_COLOURS = (((0.9, 0.12, 0.05), (0.45, 0.03, 0.02)),   # top: red checkerboard
+                ((0.08, 0.25, 0.95), (0.03, 0.08, 0.45)),  # bottom: blue checkerboard
+                ((0.1, 0.8, 0.15), (0.1, 0.8, 0.15)))      # edges: green
 
 
-def _gr_lit_checker(name, color_a, color_b, exposure=1.0):
-    """Emission = checker colour x the irradiance of grlens' GR illumination (the "grlens GR
-    Illumination" node group, made by grlens when GR illumination is on: seed 000, eq. 21)."""
-    mat, nt, out = _new_material(name)
+def _disc_material():
+    """Emission of a polar checkerboard (unit UV cells) whose colour pair is picked by the face kind
+    floor(v / DISC_KIND_STEP): 0 top (red), 1 bottom (blue), 2 edges (green). Its emission node
+    "Colour" is replaced by GR illumination in _use_gr_illumination."""
+    mat, nt, out = _new_material("Disc")
+    uv = nt.nodes.new("ShaderNodeTexCoord")
+    sep = nt.nodes.new("ShaderNodeSeparateXYZ")
+    nt.links.new(uv.outputs["UV"], sep.inputs["Vector"])
+    kind = nt.nodes.new("ShaderNodeMath")
+    kind.operation = "DIVIDE"
+    kind.inputs[1].default_value = DISC_KIND_STEP
+    nt.links.new(sep.outputs["Y"], kind.inputs[0])
+    colour = None
+    for k, (a, b) in enumerate(DISC_COLOURS):
+        tex = nt.nodes.new("ShaderNodeTexChecker")
+        tex.inputs["Scale"].default_value = 1.0
+        tex.inputs["Color1"].default_value = (*a, 1.0)
+        tex.inputs["Color2"].default_value = (*b, 1.0)
+        nt.links.new(uv.outputs["UV"], tex.inputs["Vector"])
+        if colour is None:
+            colour = tex.outputs["Color"]
+            continue
+        above = nt.nodes.new("ShaderNodeMath")  # 1 where v / step >= k
+        above.operation = "GREATER_THAN"
+        above.inputs[1].default_value = k - 1e-3
+        nt.links.new(kind.outputs["Value"], above.inputs[0])
+        mix = nt.nodes.new("ShaderNodeMix")
+        mix.data_type = "RGBA"
+        nt.links.new(above.outputs["Value"], mix.inputs["Factor"])
+        nt.links.new(colour, mix.inputs["A"])
+        nt.links.new(tex.outputs["Color"], mix.inputs["B"])
+        colour = mix.outputs["Result"]
+    em = nt.nodes.new("ShaderNodeEmission")
+    em.name = "Colour"
+    nt.links.new(colour, em.inputs["Color"])
+    nt.links.new(em.outputs["Emission"], out.inputs["Surface"])
+    mat.diffuse_color = (*DISC_COLOURS[0][0], 1.0)
+    return mat
+
+
+def _use_gr_illumination(mat, exposure=1.0):
+    """Replace the material's emission node "Colour" by the "grlens GR Illumination" node group
+    (which grlens creates at the first rebuild with GR illumination on): emission = colour x the
+    irradiance of the point light along both geodesics (seed 000, eq. 21)."""
     group = bpy.data.node_groups.get("grlens GR Illumination")
     if group is None:
-        raise RuntimeError("the grlens GR Illumination node group is missing: turn on use_gr_illumination first")
+        raise RuntimeError("grlens made no 'grlens GR Illumination' node group (is use_gr_illumination on?)")
+    nt = mat.node_tree
+    em = nt.nodes["Colour"]
     node = nt.nodes.new("ShaderNodeGroup")
     node.node_tree = group
     node.inputs["Exposure"].default_value = exposure
-    if color_b is None:
-        node.inputs["Color"].default_value = (*color_a, 1.0)
+    src = em.inputs["Color"]
+    if src.is_linked:
+        nt.links.new(src.links[0].from_socket, node.inputs["Color"])
     else:
-        tex = nt.nodes.new("ShaderNodeTexChecker")
-        tex.inputs["Scale"].default_value = 1.0
-        tex.inputs["Color1"].default_value = (*color_a, 1.0)
-        tex.inputs["Color2"].default_value = (*color_b, 1.0)
-        uv = nt.nodes.new("ShaderNodeTexCoord")
-        nt.links.new(uv.outputs["UV"], tex.inputs["Vector"])
-        nt.links.new(tex.outputs["Color"], node.inputs["Color"])
+        node.inputs["Color"].default_value = src.default_value
+    out = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    nt.nodes.remove(em)
     nt.links.new(node.outputs["Shader"], out.inputs["Surface"])
-    mat.diffuse_color = (*color_a, 1.0)
-    return mat
 
 
 def accretion_disc(scene, inclination=None, external=False):
@@ -402,8 +447,8 @@ def accretion_disc(scene, inclination=None, external=False):
     ``external``: render through an external camera at the paper's position for that inclination
     (20, -36, 0), (10, -40, 4) or (0, -40, 4) BU, with scene.grlens.observer = the observer camera:
     the image meshes are seen from outside, each vertex at its light-travel-time distance c dt from
-    the observer; a black sphere inscribed in the observer's shadow cone marks the hole and a small
-    white sphere the observer, against a dark blue background."""
+    the observer; a black sphere inscribed in the observer's shadow cone marks the hole, against a dark blue
+    background."""
     r_s = DISC_R_S
     hole = _hole(scene, r_s)
     observer = _camera(scene, "Observer", DISC_OBSERVER, (0.0, 0.0, 0.0), angle_y_deg=50.0)
@@ -425,33 +470,19 @@ def accretion_disc(scene, inclination=None, external=False):
     _lens(scene, hole, r_s, [disc], max_tess_level=64, tess_a=5.0, tess_b=0.75, observer=observer,
           use_gr_illumination=True, light=lamp, light_intensity=1600.0)
     # the first rebuild with GR illumination creates the "grlens GR Illumination" node group, which
-    # the disc's materials use
+    # the disc's material then uses
     bpy.ops.grlens.rebuild()
-    for mat in _disc_materials():
-        disc.data.materials.append(mat)
+    for mat in disc.data.materials:
+        _use_gr_illumination(mat)
     if external:
         incl = 30 if inclination is None else inclination
         pos = DISC_EXTERNAL.get(incl) or DISC_EXTERNAL[min(DISC_EXTERNAL, key=lambda k: abs(k - incl))]
-        _camera(scene, "ExternalCamera", pos, (-18.0, 0.0, 0.0), angle_y_deg=50.0)
+        _camera(scene, "ExternalCamera", pos, DISC_EXTERNAL_TARGET, angle_y_deg=62.0)
         _shadow_sphere(scene, observer.location, hole.location, r_s)
-        marker = _mesh_object(scene, "ObserverMarker", *_ico_sphere(0.6), materials=[_emission("Marker", (1, 1, 1))])
-        marker.location = observer.location
         _world(scene, (0.015, 0.02, 0.04))
     else:
         _black_world(scene)
     return scene
-
-
-def _ico_sphere(radius):
-    """(vertices, faces) of an octahedron-based small sphere (visual marker)."""
-    import bmesh
-
-    bm = bmesh.new()
-    bmesh.ops.create_icosphere(bm, subdivisions=2, radius=radius)
-    verts = [tuple(v.co) for v in bm.verts]
-    faces = [[v.index for v in f.verts] for f in bm.faces]
-    bm.free()
-    return verts, faces
 
 
 # --------------------------------------------------------------------------------------------------

@@ -1,25 +1,143 @@
-"""sample_scenes/render.py end to end (fresh process): PNG and multilayer EXR with the grlens passes."""
+"""sample_scenes/render.py end to end (fresh processes): every scene renders at a tiny resolution (PNG,
+multilayer EXR with the grlens passes, .blend), and each shows its feature, checked from the pixels
+or from the image meshes (tests/scripts/scene_stats.py prints them as JSON).
+
+Geometry used by the pixel checks: every observer camera looks at the hole, so the hole's centre is
+the image centre; with a vertical sensor fit the shadow's radius in pixels is
+tan(xi_crit) / tan(fov_v / 2) * H / 2, xi_crit from eq. 14 of seed 000.
+"""
+import json
+import math
 import os
 import subprocess
 import sys
 
 import numpy as np
 import OpenEXR
-from PIL import Image
+import pytest
+from PIL import Image, ImageDraw
 
-RENDER = os.path.join(os.path.dirname(__file__), "..", "sample_scenes", "render.py")
+HERE = os.path.dirname(__file__)
+RENDER = os.path.join(HERE, "..", "sample_scenes", "render.py")
+STATS = os.path.join(HERE, "scripts", "scene_stats.py")
+
+SCENE_NAMES = sorted([
+    "sphere", "triangle", "triangle_tess1", "triangle_tess4", "triangle_tess64", "triangle_flat",
+    "disc", "disc_external", "disc_90", "disc_30", "disc_10", "disc_90_external", "disc_30_external",
+    "disc_10_external", "shell", "room"])
+
+# how each scene is rendered here: (resolution, frames, samples); Cycles
+TEST_RENDERS = {
+    "sphere": ("96x54", "1", 2),
+    "triangle": ("96x54", "1", 2),
+    "triangle_tess1": ("96x54", "1", 1),
+    "triangle_tess4": ("96x54", "1", 1),
+    "triangle_tess64": ("192x108", "1", 2),
+    "triangle_flat": ("192x108", "1,150", 4),
+    "disc": ("80x72", "1,61,81", 4),
+    "disc_90": ("80x72", "1", 4),
+    "disc_30": ("80x72", "1", 4),
+    "disc_10": ("80x72", "1", 4),
+    "disc_external": ("96x54", "61", 2),
+    "disc_90_external": ("96x54", "1", 2),
+    "disc_30_external": ("96x54", "1", 2),
+    "disc_10_external": ("96x54", "1", 2),
+    "shell": ("192x108", "1", 4),
+    "room": ("192x108", "1", 8),
+}
 
 
-def run(*args):
-    p = subprocess.run([sys.executable, RENDER, *args], capture_output=True, text=True, timeout=600)
+def run(*args, script=RENDER):
+    p = subprocess.run([sys.executable, script, *args], capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
     return p.stdout
+
+
+def shadow_radius_px(r_obs_rs, fov_v_deg, height):
+    xi = math.asin(math.sqrt(6.75 / r_obs_rs ** 2 * (1.0 - 1.0 / r_obs_rs)))
+    return math.tan(xi) / math.tan(math.radians(fov_v_deg) / 2) * height / 2
+
+
+def radius_map(img):
+    h, w = img.shape[:2]
+    y, x = np.mgrid[0:h, 0:w]
+    return np.hypot(x + 0.5 - w / 2, y + 0.5 - h / 2), x + 0.5 - w / 2, h / 2 - (y + 0.5)
+
+
+def red(img):
+    r, g, b = (img[..., i].astype(float) for i in range(3))
+    return (r > 30) & (r > 1.5 * g) & (r > 1.5 * b)
+
+
+class Renders:
+    """Each scene rendered once per session (render.py in a fresh process), PNGs loaded as RGB arrays."""
+
+    def __init__(self, root):
+        self.root = root
+        self.done = {}
+
+    def get(self, name):
+        if name not in self.done:
+            res, frames, samples = TEST_RENDERS[name]
+            out = self.root / name
+            stdout = run("--scene", name, "--frames", frames, "--engine", "cycles", "--resolution", res,
+                         "--samples", str(samples), "--output", str(out))
+            imgs = {int(f): np.asarray(Image.open(out / f"{name}_{int(f):04d}.png").convert("RGB"))
+                    for f in frames.split(",")}
+            self.done[name] = (out, stdout, imgs)
+        return self.done[name]
+
+
+@pytest.fixture(scope="module")
+def renders(tmp_path_factory):
+    return Renders(tmp_path_factory.mktemp("scenes"))
+
+
+@pytest.fixture(scope="module")
+def stats():
+    """Image-mesh statistics of several scenes (one process), keyed by (scene, frame)."""
+    out = run("96x54", "triangle_tess1:1,150", "triangle_tess4:1,150", "triangle_tess64:1,150",
+              "triangle_flat:1", "disc_90", "disc_10", "disc_90_external", "shell", "room", script=STATS)
+    res = {}
+    for line in out.splitlines():
+        if line.startswith("SCENE_STATS "):
+            d = json.loads(line.split(" ", 1)[1])
+            res[(d["scene"], d["frame"])] = d
+    return res
+
+
+# --------------------------------------------------------------------------------------------------
+# all scenes
+# --------------------------------------------------------------------------------------------------
+
+
+def test_list_names_every_scene_with_defaults():
+    out = run("--list")
+    names = sorted(line.split()[0] for line in out.splitlines() if line.strip())
+    assert names == SCENE_NAMES == sorted(TEST_RENDERS)
+
+
+@pytest.mark.parametrize("name", SCENE_NAMES)
+def test_every_scene_renders(renders, name):
+    out_dir, stdout, imgs = renders.get(name)
+    frames = TEST_RENDERS[name][1].split(",")
+    assert f"frame {frames[0]} (1/{len(frames)})" in stdout and "s per frame" in stdout
+    assert "grlens:" not in stdout.replace("grlens: no object is marked", "")  # no rebuild errors
+    for f, img in imgs.items():
+        assert img.shape[:2] == tuple(int(v) for v in TEST_RENDERS[name][0].split("x"))[::-1]
+        assert (img.max(axis=2) > 60).sum() > 10, f"frame {f} is (nearly) empty"
+        exr = OpenEXR.File(str(out_dir / f"{name}_{f:04d}.exr"), separate_channels=True)
+        channels = [n for part in exr.parts for n in part.channels]
+        if name == "triangle_flat":  # nothing lensed: grlens adds no passes
+            continue
+        assert any("light_travel_time" in n for n in channels) and any("image_order" in n for n in channels)
+    assert (out_dir / f"{name}.blend").exists()
 
 
 def test_sphere_scene_cycles_png_and_exr(tmp_path):
     out = run("--scene", "sphere", "--frames", "1", "--engine", "cycles", "--resolution", "96x54",
               "--samples", "2", "--output", str(tmp_path))
-    assert "frame 1:" in out and "s per frame" in out
+    assert "frame 1" in out and "s per frame" in out
     png = np.asarray(Image.open(tmp_path / "sphere_0001.png").convert("L"))
     assert (png > 40).sum() > 10
     f = OpenEXR.File(str(tmp_path / "sphere_0001.exr"), separate_channels=True)
@@ -34,3 +152,194 @@ def test_triangle_scene_workbench(tmp_path):
     a = np.asarray(Image.open(tmp_path / "triangle_0001.png").convert("L"), dtype=float)
     b = np.asarray(Image.open(tmp_path / "triangle_0150.png").convert("L"), dtype=float)
     assert (a > 40).sum() > 5 and (b > 40).sum() > 5 and np.abs(a - b).mean() > 0.5
+
+
+# --------------------------------------------------------------------------------------------------
+# triangle (seed 000, 4.1, figure 8)
+# --------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("frame", [1, 150])
+def test_triangle_two_images_on_opposite_sides_of_the_hole(stats, frame):
+    for level in (1, 4, 64):
+        d = stats[(f"triangle_tess{level}", frame)]
+        hx, hy = d["hole_view"][:2]
+        one, two = d["images"]["Triangle.GR1"], d["images"]["Triangle.GR2"]
+        assert one["n_tris"] > 0 and two["n_tris"] > 0
+        a = np.subtract(one["view"]["mean"][:2], (hx, hy))
+        b = np.subtract(two["view"]["mean"][:2], (hx, hy))
+        assert a @ b < -0.5 * np.linalg.norm(a) * np.linalg.norm(b)  # roughly opposite directions
+        assert a[0] > 0 > b[0]  # the triangle is at +y (right): order 1 right, order 2 left
+        # every image point lies outside the shadow (7.274 deg at 20 r_s); the second-order image is
+        # a thin sliver just outside it, the first-order one farther out
+        assert one["view"]["angle_deg"][0] > 7.274 and two["view"]["angle_deg"][0] > 7.274
+        assert two["view"]["angle_deg"][1] < one["view"]["angle_deg"][1]
+        # the second image is farther away (longer light travel time)
+        assert two["ltt"][1] > one["ltt"][1]
+
+
+def test_triangle_higher_tess_level_more_triangles(stats):
+    for frame in (1, 150):
+        n = [stats[(f"triangle_tess{level}", frame)]["images"]["Triangle.GR1"]["n_tris"] for level in (1, 4, 64)]
+        assert n[0] == 1  # tessLevel 1: only the three corners are mapped
+        assert 1 < n[1] <= 16 < n[2]
+
+
+def test_triangle_flat_is_undistorted(renders, stats):
+    """Flat spacetime: nothing is lensed and the render shows the triangle exactly where its own
+    perspective projection is; the lensed render (tess 64) is elsewhere."""
+    d = stats[("triangle_flat", 1)]
+    assert d["images"] == {} and not d["sources"]["Triangle"]["enabled"]
+    _, _, imgs = renders.get("triangle_flat")
+    _, _, lensed = renders.get("triangle_tess64")
+    for frame, img in imgs.items():
+        h, w = img.shape[:2]
+        # the source's corners at this frame: p + (0, 0, 0), (0, 3, 0), (0, 0, 3) seen from (40, 0, 0)
+        p = (-5.0, 0.5, -0.5) if frame == 1 else (-5.0, 3.0, -0.5)
+        corners = [(p[0], p[1], p[2]), (p[0], p[1] + 3, p[2]), (p[0], p[1], p[2] + 3)]
+        f = (h / 2) / math.tan(math.radians(10.0))
+        poly = [(w / 2 + f * y / (40.0 - x), h / 2 - f * z / (40.0 - x)) for x, y, z in corners]
+        mask_img = Image.new("L", (w, h), 0)
+        ImageDraw.Draw(mask_img).polygon(poly, fill=1)
+        expected = np.asarray(mask_img, dtype=bool)
+        seen = img.max(axis=2) > 90  # checker 0.95 / 0.2 (sRGB 250 / 124); the grey disc is sRGB 48
+        iou = (expected & seen).sum() / (expected | seen).sum()
+        assert iou > 0.75, (frame, iou)
+        if frame == 1:
+            seen_lensed = lensed[1].max(axis=2) > 90
+            assert (expected & seen_lensed).sum() / (expected | seen_lensed).sum() < 0.2
+            # the lensed images lie right and left of the hole, outside the shadow
+            r, x, _ = radius_map(lensed[1])
+            big_r = shadow_radius_px(20.0, 20.0, h)
+            assert (seen_lensed & (x > 0) & (r > big_r)).sum() > 20
+            assert (seen_lensed & (x < 0) & (r > big_r)).sum() > 0
+            assert not (seen_lensed & (r < 0.9 * big_r)).any()
+
+
+# --------------------------------------------------------------------------------------------------
+# accretion disc (seed 000, 4.3, figure 10)
+# --------------------------------------------------------------------------------------------------
+
+DISC_FOV = 50.0
+
+
+@pytest.mark.parametrize("name", ["disc_30", "disc_10"])
+def test_disc_far_side_seen_above_the_shadow(renders, name):
+    """Low inclinations: the far side of the disc, which in flat space would hide behind the hole (at
+    10 degrees its top face would appear at most 4.1 deg above the centre, inside the 7.3 deg shadow),
+    is lifted by lensing into an arch right above the shadow."""
+    _, _, imgs = renders.get(name)
+    img = imgs[1]
+    h = img.shape[0]
+    r, x, y = radius_map(img)
+    big_r = shadow_radius_px(20.0, DISC_FOV, h)
+    # the upper half of the shadow is empty (the near side of the disc crosses its lower half)
+    assert img[(r < 0.8 * big_r) & (y > 0.3 * big_r)].max() < 30
+    lit = img.max(axis=2) > 30
+    band = (np.abs(x) < 3) & (y > 1.05 * big_r) & (y < 1.6 * big_r)
+    assert lit[band].sum() >= 3, "no disc pixels right above the shadow"  # far side's inner edge, top face
+    column = (np.abs(x) < 3) & (y > 1.05 * big_r) & (y < 2.5 * big_r)
+    assert red(img)[column].sum() >= 2, "no red top face above the shadow"
+    # the near side passes in front of the hole, across the lower half of the shadow
+    assert red(img)[(r < big_r) & (y < 0)].sum() >= 3
+
+
+def test_disc_face_on_ring_and_sequence(renders):
+    """Inclination 90: the first-order image is a red ring (inner edge at 10.9 deg, outer at 24.7 deg
+    from the centre) around the shadow; the 180-frame sequence passes through the paper's views at
+    frames 1, 61, 81 (90, 30, 10 degrees)."""
+    _, _, imgs = renders.get("disc_90")
+    img = imgs[1]
+    r, _, _ = radius_map(img)
+    big_r = shadow_radius_px(20.0, DISC_FOV, img.shape[0])
+    assert img[r < 0.8 * big_r].max() < 30
+    ring = (r > 1.8 * big_r) & (r < 3.0 * big_r)
+    assert red(img)[ring].mean() > 0.9
+    _, _, seq = renders.get("disc")
+    for frame, single in ((1, "disc_90"), (61, "disc_30"), (81, "disc_10")):
+        ref = renders.get(single)[2][1].astype(float)
+        assert np.abs(seq[frame].astype(float) - ref).mean() < 2.0, frame
+    assert np.abs(seq[1].astype(float) - seq[81].astype(float)).mean() > 5
+
+
+def test_disc_gr_illumination_and_light_travel_time_geometry(stats):
+    """GR illumination writes the irradiance; the external view's meshes are the observer's image
+    meshes, each vertex at c dt: the second-order image lies beyond the first, and (figure 10b) the
+    inner part of the face-on first-order image is farther away than its outer part, much more so
+    than the source disc's own depth spread (time dilation near the hole)."""
+    d = stats[("disc_90", 1)]
+    one, two = d["images"]["Disc.GR1"], d["images"]["Disc.GR2"]
+    assert one["irradiance"] and two["irradiance"]
+    assert two["ltt"][0] > one["ltt"][1]
+    # paper's table 1 (thin disc, BU): inner edge 45.33, outer 46.17; ours has a thickness of 1.1 BU
+    assert 43.0 < one["ltt"][0] < 46.0 and 45.5 < one["ltt"][1] < 48.0
+    src = d["sources"]["Disc"]["view"]
+    assert one["view"]["depth_inner"] - one["view"]["depth_outer"] > src["depth_inner"] - src["depth_outer"] + 1.0
+    ext = stats[("disc_90_external", 1)]
+    assert ext["images"]["Disc.GR1"]["n_tris"] == one["n_tris"]  # same meshes, whatever camera renders
+
+
+@pytest.mark.parametrize("name", ["disc_90_external", "disc_30_external", "disc_10_external"])
+def test_disc_external_views(renders, name):
+    _, _, imgs = renders.get(name)
+    img = imgs[min(imgs)]
+    assert red(img).mean() > 0.03  # the image meshes
+    assert (img.max(axis=2) < 8).sum() > 5  # the black shadow sphere against the dark blue background
+    if name == "disc_30_external":
+        seq = renders.get("disc_external")[2][61]
+        assert np.abs(seq.astype(float) - img.astype(float)).mean() < 2.0
+
+
+# --------------------------------------------------------------------------------------------------
+# observer inside a gridded shell (seed 004)
+# --------------------------------------------------------------------------------------------------
+
+
+def test_shell_seen_all_around_the_hole(renders, stats):
+    _, _, imgs = renders.get("shell")
+    img = imgs[1]
+    r, x, y = radius_map(img)
+    big_r = shadow_radius_px(5.0, 90.0, img.shape[0])
+    peak = img.max(axis=2)
+    assert peak[r < 0.85 * big_r].max() < 20  # the shadow in the middle
+    outside = r > 1.5 * big_r
+    assert (peak[outside] > 25).mean() > 0.98  # the shell everywhere else (dim blue between the lines)
+    lines = img[..., 2] > 120
+    ang = np.degrees(np.arctan2(y, x))
+    for k in range(8):  # grid lines in every direction around the hole
+        sector = outside & (ang >= -180 + 45 * k) & (ang < -135 + 45 * k)
+        assert lines[sector].sum() >= 3, k
+    assert (peak[(r > 1.05 * big_r) & (r < 1.4 * big_r)] > 25).mean() > 0.5  # second-order image
+    d = stats[("shell", 1)]
+    one, two = d["images"]["Shell.GR1"], d["images"]["Shell.GR2"]
+    # order 1 outside the Einstein ring of the point behind the hole, order 2 between it and the shadow
+    shadow_deg = math.degrees(math.asin(math.sqrt(6.75 / 25 * 0.8)))
+    assert two["view"]["angle_deg"][0] > shadow_deg
+    assert abs(one["view"]["angle_deg"][0] - two["view"]["angle_deg"][1]) < 1.0
+
+
+# --------------------------------------------------------------------------------------------------
+# room at everyday scale (seed 003)
+# --------------------------------------------------------------------------------------------------
+
+
+def test_room_with_hole_shadow_and_distortion(renders, stats):
+    _, _, imgs = renders.get("room")
+    img = imgs[1].astype(float)
+    h, w = img.shape[:2]
+    r, _, _ = radius_map(img)
+    big_r = shadow_radius_px(37.5, 40.0, h)
+    assert img[r < 0.7 * big_r].max() < 25  # the shadow in the middle of the room
+    assert img[(r > 1.5 * big_r) & (r < 3 * big_r)].mean() > 40  # the lit back wall around it
+    left, right = img[:, : w // 6].reshape(-1, 3).mean(axis=0), img[:, -w // 6:].reshape(-1, 3).mean(axis=0)
+    assert left[0] > 1.2 * left[1] and right[1] > 1.2 * right[0]  # red and green walls lit by the lamp
+    d = stats[("room", 1)]
+    assert d["status"].startswith("8 object(s) lensed")
+    shadow_deg = math.degrees(math.asin(math.sqrt(6.75 / 37.5 ** 2 * (1 - 1 / 37.5))))
+    wall, src = d["images"]["BackWall.GR1"], d["sources"]["BackWall"]
+    # the back wall behind the hole (from 0.5 deg off its centre) is pushed out of the shadow, into an
+    # Einstein ring, and subdivided where it bends
+    assert src["view"]["angle_deg"][0] < 1.0 < shadow_deg < wall["view"]["angle_deg"][0]
+    assert wall["n_tris"] > 2 * 41 * 41
+    for name in ("BackWall", "Floor", "Ceiling", "LeftWall", "RightWall", "Sphere", "Cube", "Cylinder"):
+        assert d["images"][f"{name}.GR2"]["n_tris"] > 0  # second-order images around the shadow
