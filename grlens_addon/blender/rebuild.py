@@ -41,8 +41,9 @@ def sources(scene):
     return [o for o in scene.objects if o.type == "MESH" and o.grlens.enabled and not is_image_object(o)]
 
 
-def _extract(obj_eval) -> pipeline.SourceMesh:
-    """World-space triangles, corner UVs, material indices and corner normals of an evaluated object."""
+def _extract(obj_eval, with_normals: bool = True) -> pipeline.SourceMesh:
+    """World-space triangles, corner UVs, material indices and (only GR illumination
+    uses them: ``with_normals``) corner normals of an evaluated object."""
     me = obj_eval.to_mesh()
     try:
         me.calc_loop_triangles()
@@ -63,7 +64,7 @@ def _extract(obj_eval) -> pipeline.SourceMesh:
             me.uv_layers.active.uv.foreach_get("vector", uv)
             corner_uv = uv.reshape(-1, 2)[loops].reshape(-1, 3, 2).astype(np.float64)
         normals = None
-        if len(me.loops):
+        if with_normals and len(me.loops):
             cn = np.empty(3 * len(me.loops), dtype=np.float32)
             me.corner_normals.foreach_get("vector", cn)
             nrm = np.linalg.inv(mw[:3, :3]).T
@@ -258,7 +259,7 @@ def rebuild_scene(scene, depsgraph=None) -> dict:
         shading.ensure_view_layer_aovs(scene)
         for src in srcs:
             src_eval = src.evaluated_get(src_dg)
-            mesh = _extract(src_eval)
+            mesh = _extract(src_eval, with_normals=light is not None)
             mats = [shading.image_material(slot.material) for slot in src.material_slots] or \
                 [shading.image_material(None)]
             disc = _disc_emitter(src_eval)

@@ -33,7 +33,8 @@ def upload(mesh, img, materials) -> None:
     """Write ``img`` (a core.pipeline.ImageMesh) into ``mesh``. If the topology is unchanged only the
     vertex positions and per-vertex/corner values are rewritten."""
     pos = np.ascontiguousarray(img.positions, dtype=np.float32).ravel()
-    if not same_topology(mesh, img):
+    same = same_topology(mesh, img)
+    if not same:
         mesh.clear_geometry()
         n_v, n_f = len(img.positions), len(img.tris)
         mesh.vertices.add(n_v)
@@ -53,7 +54,11 @@ def upload(mesh, img, materials) -> None:
         mesh.update_tag()
     if img.corner_uv is not None:
         uv = mesh.uv_layers.get("UVMap") or mesh.uv_layers.new(name="UVMap")
-        uv.uv.foreach_set("vector", np.ascontiguousarray(img.corner_uv, dtype=np.float32).ravel())
+        values = np.ascontiguousarray(img.corner_uv, dtype=np.float32).ravel()
+        key = hashlib.blake2b(values.tobytes(), digest_size=8).hexdigest()
+        if not (same and mesh.get("grlens_uv") == key):  # UVs move only with the topology
+            uv.uv.foreach_set("vector", values)
+            mesh["grlens_uv"] = key
     _attr(mesh, "light_travel_time", "FLOAT", "POINT").data.foreach_set(
         "value", np.ascontiguousarray(img.light_travel_time, dtype=np.float32))
     if img.irradiance is not None:
