@@ -104,8 +104,13 @@ def memory(resolution, n_frames=1000):
     scene = _scene(resolution)
     scene.grlens.auto_update = True
     samples = []
+    moved, last = 0, None
     for i in range(n_frames):
         scene.frame_set(1 + i % 360)
+        img = bpy.data.objects["OrbitingSphere.GR1"].data
+        first = tuple(img.vertices[0].co) if len(img.vertices) else None
+        moved += first != last
+        last = first
         if i in (9, 99, 249, 499, 749, n_frames - 1):
             samples.append((i + 1, _rss_mb(), len(bpy.data.meshes), len(bpy.data.objects),
                             len(bpy.data.materials)))
@@ -115,7 +120,8 @@ def memory(resolution, n_frames=1000):
         print(f"| {s[0]} | {s[1]:.1f} | {s[2]} | {s[3]} | {s[4]} |")
     growth = samples[-1][1] - samples[1][1]
     print(f"\nRSS change from frame {samples[1][0]} to {samples[-1][0]}: {growth:+.1f} MB; data-blocks "
-          f"{'unchanged' if samples[1][2:] == samples[-1][2:] else 'CHANGED'}")
+          f"{'unchanged' if samples[1][2:] == samples[-1][2:] else 'CHANGED'}; the image moved in {moved} of "
+          f"{n_frames} frames (rebuilt by the frame handler)")
 
 
 def main(argv=None):
