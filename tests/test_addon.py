@@ -115,7 +115,9 @@ def test_first_order_image_matches_lutgen():
     assert abs(math.acos(centre_dir @ e1) - float(c.xi)) < math.radians(0.5)
 
 
-@pytest.mark.parametrize("problem", ["no_hole", "no_camera", "camera_inside", "nan_vertex", "empty_mesh", "r_s_tiny"])
+@pytest.mark.parametrize("problem", ["no_hole", "no_camera", "camera_inside", "camera_in_horizon", "nan_vertex",
+                                     "inf_vertex", "empty_mesh", "r_s_tiny", "ngon_and_loose_edge",
+                                     "object_inside_horizon", "zero_scale"])
 def test_bad_input_gives_a_message_not_a_crash(problem):
     scene, sphere = _small_demo()
     _place(sphere, 90)
@@ -125,13 +127,34 @@ def test_bad_input_gives_a_message_not_a_crash(problem):
         scene.camera = None
     elif problem == "camera_inside":
         scene.camera.location = (2.5, 0, 0)  # 1.25 r_s: inside the photon sphere
+    elif problem == "camera_in_horizon":
+        scene.camera.location = (1.0, 0, 0)  # 0.5 r_s
     elif problem == "nan_vertex":
         sphere.data.vertices[5].co = (float("nan"), 0, 0)
+    elif problem == "inf_vertex":
+        sphere.data.vertices[7].co = (0, float("inf"), 0)
+    elif problem == "ngon_and_loose_edge":
+        import bmesh
+
+        bm = bmesh.new()
+        bm.from_mesh(sphere.data)
+        ring = [bm.verts.new((0.3 * math.cos(a), 0.3 * math.sin(a), 1.5)) for a in np.linspace(0, 6, 7)]
+        bm.faces.new(ring)  # a heptagon
+        bm.edges.new((bm.verts.new((0, 0, 2.0)), bm.verts.new((0, 0.5, 2.0))))  # a loose edge
+        bm.verts.new((0, 0, 2.5))  # a loose vertex
+        bm.to_mesh(sphere.data)
+        bm.free()
+    elif problem == "object_inside_horizon":
+        sphere.parent = None
+        sphere.location = (0.2, 0.0, 0.0)  # within 1 r_s of the hole: no image at all
+    elif problem == "zero_scale":
+        sphere.scale = (0.0, 0.0, 0.0)
     elif problem == "empty_mesh":
         sphere.data.clear_geometry()
     elif problem == "r_s_tiny":
         scene.grlens.r_s = 1e-6  # camera at 4e7 r_s: far outside the LUT range, nothing to show
-    if problem in ("no_hole", "no_camera", "camera_inside"):
+    before = np.array([v.co[:] for v in sphere.data.vertices])
+    if problem in ("no_hole", "no_camera", "camera_inside", "camera_in_horizon"):
         # scripts get the operator's error report as an exception with the message
         with pytest.raises(RuntimeError, match="grlens: (no black hole|the scene has no camera|the camera is inside)"):
             bpy.ops.grlens.rebuild()
@@ -142,6 +165,12 @@ def test_bad_input_gives_a_message_not_a_crash(problem):
         pts = np.empty(3 * len(o.data.vertices), np.float32)
         o.data.vertices.foreach_get("co", pts)
         assert np.all(np.isfinite(pts))
+    if problem == "ngon_and_loose_edge":
+        assert len(bpy.data.objects["OrbitingSphere.GR1"].data.polygons) > 0
+    if problem == "object_inside_horizon":
+        assert all(len(o.data.polygons) == 0 for o in _image_objects().values())
+    after = np.array([v.co[:] for v in sphere.data.vertices])
+    np.testing.assert_array_equal(before, after)  # the source is never changed
 
 
 def test_order_switch_and_clear():
