@@ -95,7 +95,8 @@ def main(argv=None):
         scene.eevee.taa_render_samples = args.samples
     blend = os.path.abspath(os.path.join(args.output, f"{args.scene}.blend"))
     bpy.ops.wm.save_as_mainfile(filepath=blend)
-    print(f"{args.scene}: scene built in {t_build:.2f} s; {len(args.frames)} frame(s), {engine}, "
+    print(f"{args.scene}: scene built in {t_build:.2f} s (with any LUT builds and rebuilds it triggered, so the "
+          f"first frame's images may be ready already); {len(args.frames)} frame(s), {engine}, "
           f"{args.resolution[0]}x{args.resolution[1]}", flush=True)
     times, rebuilds = [], []
     for i, f in enumerate(args.frames):

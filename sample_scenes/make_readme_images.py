@@ -1,0 +1,65 @@
+"""Render the README's sample-scene pictures into docs/images/<scene>.png (Cycles, CPU).
+
+    ./dev python sample_scenes/make_readme_images.py [SCENE ...]
+
+Each scene is rendered by render.py in its own process (default frames, resolution and samples of
+sample_scenes.scenes.DEFAULTS unless listed below); scenes with several frames are put side by side
+(the triangle: p1 = frame 150 on the left, p2 = frame 1 on the right, like the paper's figure 8).
+Prints render.py's per-frame summary for each scene.
+"""
+import os
+import subprocess
+import sys
+import tempfile
+
+from PIL import Image
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+RENDER = os.path.join(ROOT, "sample_scenes", "render.py")
+OUT = os.path.join(ROOT, "docs", "images")
+
+PICTURES = {  # scene: extra render.py arguments
+    "triangle_flat": ["--frames", "150,1"],
+    "triangle_tess1": ["--frames", "150,1"],
+    "triangle_tess4": ["--frames", "150,1"],
+    "triangle_tess64": ["--frames", "150,1"],
+    "disc_90": [], "disc_30": [], "disc_10": [],
+    "disc_90_external": [], "disc_30_external": [], "disc_10_external": [],
+    "shell": [],
+    "room": [],
+}
+
+
+def side_by_side(paths, gap=4):
+    ims = [Image.open(p).convert("RGB") for p in paths]
+    out = Image.new("RGB", (sum(i.width for i in ims) + gap * (len(ims) - 1), max(i.height for i in ims)))
+    x = 0
+    for im in ims:
+        out.paste(im, (x, 0))
+        x += im.width + gap
+    return out
+
+
+def main(names):
+    os.makedirs(OUT, exist_ok=True)
+    for name in names or list(PICTURES):
+        with tempfile.TemporaryDirectory() as tmp:
+            args = [sys.executable, RENDER, "--scene", name, "--output", tmp, *PICTURES.get(name, [])]
+            p = subprocess.run(args, capture_output=True, text=True)
+            if p.returncode:
+                sys.exit(p.stdout[-3000:] + p.stderr[-3000:])
+            for line in p.stdout.splitlines():
+                if line.startswith("frame ") or "s per frame" in line:
+                    print(line.replace(tmp, "<tmp>"), flush=True)
+            pngs = [os.path.join(tmp, f) for f in sorted(os.listdir(tmp)) if f.endswith(".png")]
+            frames = PICTURES.get(name, [])
+            if "--frames" in frames:  # keep the order given
+                order = [int(f) for f in frames[frames.index("--frames") + 1].split(",")]
+                pngs = [os.path.join(tmp, f"{name}_{f:04d}.png") for f in order]
+            target = os.path.join(OUT, f"{name}.png")
+            side_by_side(pngs).save(target, optimize=True)
+            print(f"-> {os.path.relpath(target, ROOT)} ({os.path.getsize(target) // 1024} KB)", flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
