@@ -59,7 +59,7 @@ ring (and, close to the axis, across the shadow); with a circumference ratio abo
 such triangles are culled."""
 
 
-def axis_geometry(source_points, tris, camera, hole, order):
+def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     """Per triangle: (straddles, span).
 
     ``straddles`` (F,) bool: the observer-hole axis passes through the triangle on a half where that
@@ -71,7 +71,8 @@ def axis_geometry(source_points, tris, camera, hole, order):
     sweeps 2 pi), the order-1 image there is regular.
 
     ``span`` (F,) radians: the angle around the axis the triangle covers (pi for triangles containing
-    the axis in projection).
+    the axis in projection); with ``span_of`` (a boolean mask or index array) only for those
+    triangles, the others get NaN.
     """
     tris = np.asarray(tris, dtype=np.int64)
     e1 = camera - hole
@@ -94,7 +95,11 @@ def axis_geometry(source_points, tris, camera, hole, order):
         def angle(x1, y1, x2, y2):  # angle between the projected corners, seen from the axis
             return np.abs(np.arctan2(x1 * y2 - y1 * x2, x1 * x2 + y1 * y2))
 
-        span = np.maximum(np.maximum(angle(xa, ya, xb, yb), angle(xb, yb, xc, yc)), angle(xc, yc, xa, ya))
+        span = np.full(len(tris), np.nan)
+        sel = slice(None) if span_of is None else span_of
+        xa_, xb_, xc_, ya_, yb_, yc_ = (c[sel] for c in (xa, xb, xc, ya, yb, yc))
+        span[sel] = np.maximum(np.maximum(angle(xa_, ya_, xb_, yb_), angle(xb_, yb_, xc_, yc_)),
+                               angle(xc_, yc_, xa_, ya_))
     crossed = inside & (total != 0)  # edge-on projections have no crossing point
     span = np.where(inside, np.pi, span)
     straddles = crossed & (along < 0) if order == 1 else crossed
@@ -123,8 +128,8 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     axis passes through are always dropped, and the ratio drops only triangles that also cover more
     than AZIMUTH_SPAN_MAX around the axis (see :func:`axis_geometry`): near the Einstein ring regular
     triangles are magnified by large factors too (a fine mesh behind the hole would lose its whole
-    ring to the ratio alone), but only wide or straddling ones have a wrong image. ``frustum_planes`` (K, 4): rows (n, d) with
-    n . x + d >= 0 inside, applied to ``image_points`` (V, 3).
+    ring to the ratio alone), but only wide or straddling ones have a wrong image.
+    ``frustum_planes`` (K, 4): rows (n, d) with n . x + d >= 0 inside, applied to ``image_points`` (V, 3).
     """
     tris = np.asarray(tris, dtype=np.int64)
     rep = CullReport()
@@ -141,8 +146,9 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     ring = keep & ~(ratio <= cull_ratio)
     if hole is not None and order is not None:
         straddles, span = axis_geometry(source_points, tris, np.asarray(camera, np.float64),
-                                        np.asarray(hole, np.float64), order)
-        ring = keep & (straddles | (ring & (span > AZIMUTH_SPAN_MAX)))
+                                        np.asarray(hole, np.float64), order, span_of=np.flatnonzero(ring))
+        with np.errstate(invalid="ignore"):
+            ring = keep & (straddles | (ring & (span > AZIMUTH_SPAN_MAX)))
     rep.einstein_ring = int(ring.sum())
     keep &= ~ring
     if frustum_planes is not None and image_points is not None and len(frustum_planes):

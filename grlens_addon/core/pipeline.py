@@ -166,12 +166,17 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                                     settings.cull_ratio, planes, img.position, scene.hole, order)
         report.outside_frustum += n_pre
         report.extra["bad_source_triangles"] = n_bad
-        tris = sub.tris[keep]
+        everything = bool(keep.all())
+        tris = sub.tris if everything else sub.tris[keep]
         used = _used_vertices(tris, len(sub.positions))
-        remap = np.full(len(sub.positions), -1, dtype=np.int64)
-        remap[used] = np.arange(used.size)
-        src_tri = tri_sel[sub.source_tri[keep]]
-        bary = None if sub.identity else sub.bary[keep]
+        if used.size == len(sub.positions):  # every vertex is used: indices stay as they are
+            image_tris = tris
+        else:
+            remap = np.full(len(sub.positions), -1, dtype=np.int64)
+            remap[used] = np.arange(used.size)
+            image_tris = remap[tris]
+        src_tri = tri_sel[sub.source_tri if everything else sub.source_tri[keep]]
+        bary = None if sub.identity else (sub.bary if everything else sub.bary[keep])
         corner_uv = None
         if src.corner_uv is not None:
             corner_uv = _interpolate(bary, src.corner_uv[src_tri], sub.identity)
@@ -191,7 +196,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             r = np.linalg.norm(pts - scene.hole, axis=1) / scene.r_s
             colour = np.nan_to_num(thin_disc.disc_colour(r, redshift, disc.mode, r_in=disc.r_in,
                                                          t_peak=disc.t_peak, exposure=disc.exposure))
-        out[order] = ImageMesh(order=order, positions=img.position[used], tris=remap[tris],
+        out[order] = ImageMesh(order=order, positions=img.position[used], tris=image_tris,
                                corner_uv=corner_uv, material=src.material[src_tri],
                                light_travel_time=img.distance[used], irradiance=irr, report=report,
                                source_tri=src_tri, source_position=sub.positions[used],
