@@ -432,3 +432,26 @@ def test_interactive_edit_rebuilds_through_the_depsgraph_handler():
     _place(sphere, 60)
     bpy.context.view_layer.update()
     np.testing.assert_array_equal(_verts("OrbitingSphere.GR1"), b)
+
+
+def test_material_slots_and_indices_carry_over():
+    """Faces of the images use the material slot of their source face (regression: clearing the
+    image mesh's materials reset every face to slot 0)."""
+    scene, sphere = _small_demo()
+    _place(sphere, 90)
+    a, b = bpy.data.materials.new("Upper"), bpy.data.materials.new("Lower")
+    sphere.data.materials.clear()
+    sphere.data.materials.append(a)
+    sphere.data.materials.append(b)
+    for p in sphere.data.polygons:
+        p.material_index = 1 if p.center.z < 0 else 0
+    for frame in (1, 2):
+        scene.frame_set(frame)
+        bpy.ops.grlens.rebuild()
+        for order in (1, 2):
+            me = bpy.data.objects[f"OrbitingSphere.GR{order}"].data
+            assert [m.name for m in me.materials] == ["Upper (grlens)", "Lower (grlens)"]
+            mi = np.empty(len(me.polygons), np.int32)
+            me.polygons.foreach_get("material_index", mi)
+            counts = np.bincount(mi, minlength=2)
+            assert counts[0] > 0 and counts[1] > 0 and abs(int(counts[0]) - int(counts[1])) < 0.2 * len(mi)

@@ -45,7 +45,6 @@ def upload(mesh, img, materials) -> None:
             "value", np.ascontiguousarray(img.tris, dtype=np.int32).ravel())
         mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * n_f, 3, dtype=np.int32))
         if n_f:
-            mesh.polygons.foreach_set("material_index", np.ascontiguousarray(img.material, dtype=np.int32))
             mesh.polygons.foreach_set("use_smooth", np.ones(n_f, dtype=bool))
         mesh["grlens_topology"] = _topology_key(img)
         mesh.update()
@@ -79,9 +78,11 @@ def upload(mesh, img, materials) -> None:
         elif mesh.attributes.get(name) is not None:
             mesh.attributes.remove(mesh.attributes[name])
     if list(mesh.materials) != list(materials):
-        mesh.materials.clear()
+        mesh.materials.clear()  # (this also resets the faces' material indices: written below)
         for m in materials:
             mesh.materials.append(m)
+    if len(img.tris):
+        mesh.polygons.foreach_set("material_index", np.ascontiguousarray(img.material, dtype=np.int32))
 
 
 def set_order(mesh, order: int) -> None:
