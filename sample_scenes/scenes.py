@@ -667,7 +667,8 @@ def room(scene):
     light under the ceiling (Cycles), not grlens' GR illumination. Camera at (15, 0, 0) BU = 37.5 r_s,
     outside the room, vertical field of view 40 degrees; LUT r = 1.05..22 r_s (the room's corners
     reach 21.7 r_s; the camera lies outside that range). Frames 1..120: the hole drifts from the room's
-    centre 1.5 BU to the left and back, so the lensing moves over the back wall."""
+    centre 1.5 BU to the left and back, so the lensing moves over the back wall (the camera's distance to
+    the hole changes, so every frame of the drift builds its own LUT, about 1 s)."""
     r_s = ROOM_R_S
     hole = _hole(scene, r_s)
     hole.keyframe_insert("location", frame=1)
@@ -737,23 +738,24 @@ _DISC_EXT = dict(frames=[1], resolution=(480, 270), samples=16)
 DEFAULTS = {
     "sphere": dict(frames=[1, 46, 91], resolution=(320, 180), samples=16,
                    what="seed 000 4.2: sphere on the last stable orbit, one orbit in 360 frames"),
-    "triangle": dict(_TRI, what="seed 000 4.1: checkerboard triangle behind the hole, p2 -> p1 -> p2 in 300 frames"),
+    "triangle": dict(_TRI, what="seed 000 4.1: checkered triangle behind the hole, p2 -> p1 -> p2 in 300 frames"),
     "triangle_tess1": dict(_TRI, what="figure 8(b): the triangle, MaxTessLevel 1 (only its corners are mapped)"),
     "triangle_tess4": dict(_TRI, what="figure 8(c): the triangle, MaxTessLevel 4"),
     "triangle_tess64": dict(_TRI, what="figure 8(d): the triangle, MaxTessLevel 64"),
-    "triangle_flat": dict(_TRI, what="figure 8(a): the triangle in flat spacetime (not lensed), grey disc = shadow"),
+    "triangle_flat": dict(_TRI, what="figure 8(a): the triangle in flat spacetime (not lensed), grey = shadow"),
     "disc": dict(_DISC, frames=[1, 61, 81],
-                 what="seed 000 4.3: accretion disc, inclination 90 -> -89 deg over 180 frames (1, 61, 81 = 90, 30, 10)"),
+                 what="seed 000 4.3: accretion disc, inclination 90 -> -89 deg in 180 frames (61: 30, 81: 10)"),
     "disc_external": dict(_DISC_EXT, frames=[1, 61, 81],
                           what="the disc sequence seen by the external camera (10, -40, 4) BU"),
     "shell": dict(frames=[1], resolution=(480, 270), samples=16,
-                  what="seed 004: observer at 5 r_s inside a lat/long gridded shell of 10 r_s; shell turns in 120 frames"),
+                  what="seed 004: observer at 5 r_s inside a lat/long gridded shell of 10 r_s, 120 frames"),
     "room": dict(frames=[1], resolution=(480, 270), samples=64,
-                 what="seed 003: Cornell-like room with a sphere, cube and cylinder, hole of r_s = 0.4 BU in the middle"),
+                 what="seed 003: Cornell-like room, sphere, cube, cylinder, hole of r_s = 0.4 BU in the middle"),
 }
 for _incl, _letters in ((90, "a, b"), (30, "c, d"), (10, "e, f")):
     _obs, _ext = _letters.split(", ")
-    DEFAULTS[f"disc_{_incl}"] = dict(_DISC, what=f"figure 10({_obs}): the disc at inclination {_incl} deg, observer view")
+    DEFAULTS[f"disc_{_incl}"] = dict(
+        _DISC, what=f"figure 10({_obs}): the disc at inclination {_incl} deg, observer view")
     DEFAULTS[f"disc_{_incl}_external"] = dict(
         _DISC_EXT, what=f"figure 10({_ext}): inclination {_incl} deg, external camera {DISC_EXTERNAL[_incl]} BU")
 assert set(DEFAULTS) == set(SCENES)
