@@ -323,13 +323,9 @@ def _disc_mesh(scene, r_in, r_out, thickness, n_seg=128, n_rad=4, cells=(16, 4))
     """A ring of rectangular cross-section in its local xy plane (normal +z): top and bottom faces of
     n_seg x n_rad quads, inner and outer edges of n_seg quads each: n_seg * (2 n_rad + 2) quads
     (2560 triangles for 128 x 4, as in the paper). Corner UVs: polar, scaled so that the unit
-    checkerboard gives cells[0] sectors x cells[1] rings on the top and bottom, with v shifted by
-    DISC_KIND_STEP on the bottom and twice that on the edges: one material (_disc_material) tells the
-    three kinds of faces apart by v. (Three material slots would be the natural way, but the image
-    meshes lose their faces' material indices: grlens' upload writes them before it fills the image
-    mesh's material slots with Mesh.materials.clear() + append, and clear() zeroes them; later
-    uploads keep them while the topology is unchanged.)"""
-    verts, faces, uvs = [], [], []
+    checkerboard gives cells[0] sectors x cells[1] rings on the top and bottom; material slots 0 top
+    (red checkerboard), 1 bottom (blue checkerboard), 2 edges (green)."""
+    verts, faces, uvs, fmat = [], [], [], []
     h = 0.5 * thickness
     radii = [r_in + (r_out - r_in) * k / n_rad for k in range(n_rad + 1)]
 
@@ -347,64 +343,40 @@ def _disc_mesh(scene, r_in, r_out, thickness, n_seg=128, n_rad=4, cells=(16, 4))
             # top: counter-clockwise seen from +z
             faces.append([vid(k, j, True), vid(k, j + 1, True), vid(k + 1, j + 1, True), vid(k + 1, j, True)])
             uvs.append([(k * su, j * sv), (k * su, (j + 1) * sv), ((k + 1) * su, (j + 1) * sv), ((k + 1) * su, j * sv)])
+            fmat.append(0)
             faces.append([vid(k, j, False), vid(k + 1, j, False), vid(k + 1, j + 1, False), vid(k, j + 1, False)])
-            b = DISC_KIND_STEP
-            uvs.append([(k * su, b + j * sv), ((k + 1) * su, b + j * sv), ((k + 1) * su, b + (j + 1) * sv),
-                        (k * su, b + (j + 1) * sv)])
+            uvs.append([(k * su, j * sv), ((k + 1) * su, j * sv), ((k + 1) * su, (j + 1) * sv), (k * su, (j + 1) * sv)])
+            fmat.append(1)
         for j, outward in ((0, False), (n_rad, True)):  # inner and outer edge
             quad = [vid(k, j, False), vid(k + 1, j, False), vid(k + 1, j, True), vid(k, j, True)]
             faces.append(quad if outward else quad[::-1])
-            e = 2 * DISC_KIND_STEP
-            uvs.append([(k * su, e), ((k + 1) * su, e), ((k + 1) * su, e + 1.0), (k * su, e + 1.0)]
-                       if outward else [(k * su, e + 1.0), ((k + 1) * su, e + 1.0), ((k + 1) * su, e), (k * su, e)])
-    return _mesh_object(scene, "Disc", verts, faces, uvs, [_disc_material()])
+            uvs.append([(k * su, 0.0), ((k + 1) * su, 0.0), ((k + 1) * su, 1.0), (k * su, 1.0)]
+                       if outward else [(k * su, 1.0), ((k + 1) * su, 1.0), ((k + 1) * su, 0.0), (k * su, 0.0)])
+            fmat.append(2)
+    materials = [_checker_colour("DiscTop", (0.9, 0.12, 0.05), (0.45, 0.03, 0.02)),
+                 _checker_colour("DiscBottom", (0.08, 0.25, 0.95), (0.03, 0.08, 0.45)),
+                 _checker_colour("DiscEdge", (0.1, 0.8, 0.15), None)]
+    return _mesh_object(scene, "Disc", verts, faces, uvs, materials, fmat)
 
 
-DISC_KIND_STEP = 10.0
-"""UV v offset of the disc's bottom faces (twice that: its edges); even, so the checkerboard's parity
-is unchanged."""
-DISC_COLOURS = (((0.9, 0.12, 0.05), (0.45, 0.03, 0.02)),   # top: red checkerboard
-                ((0.08, 0.25, 0.95), (0.03, 0.08, 0.45)),  # bottom: blue checkerboard
-                ((0.1, 0.8, 0.15), (0.1, 0.8, 0.15)))      # edges: green
-
-
-def _disc_material():
-    """Emission of a polar checkerboard (unit UV cells) whose colour pair is picked by the face kind
-    floor(v / DISC_KIND_STEP): 0 top (red), 1 bottom (blue), 2 edges (green). Its emission node
-    "Colour" is replaced by GR illumination in _use_gr_illumination."""
-    mat, nt, out = _new_material("Disc")
-    uv = nt.nodes.new("ShaderNodeTexCoord")
-    sep = nt.nodes.new("ShaderNodeSeparateXYZ")
-    nt.links.new(uv.outputs["UV"], sep.inputs["Vector"])
-    kind = nt.nodes.new("ShaderNodeMath")
-    kind.operation = "DIVIDE"
-    kind.inputs[1].default_value = DISC_KIND_STEP
-    nt.links.new(sep.outputs["Y"], kind.inputs[0])
-    colour = None
-    for k, (a, b) in enumerate(DISC_COLOURS):
-        tex = nt.nodes.new("ShaderNodeTexChecker")
-        tex.inputs["Scale"].default_value = 1.0
-        tex.inputs["Color1"].default_value = (*a, 1.0)
-        tex.inputs["Color2"].default_value = (*b, 1.0)
-        nt.links.new(uv.outputs["UV"], tex.inputs["Vector"])
-        if colour is None:
-            colour = tex.outputs["Color"]
-            continue
-        above = nt.nodes.new("ShaderNodeMath")  # 1 where v / step >= k
-        above.operation = "GREATER_THAN"
-        above.inputs[1].default_value = k - 1e-3
-        nt.links.new(kind.outputs["Value"], above.inputs[0])
-        mix = nt.nodes.new("ShaderNodeMix")
-        mix.data_type = "RGBA"
-        nt.links.new(above.outputs["Value"], mix.inputs["Factor"])
-        nt.links.new(colour, mix.inputs["A"])
-        nt.links.new(tex.outputs["Color"], mix.inputs["B"])
-        colour = mix.outputs["Result"]
+def _checker_colour(name, color_a, color_b):
+    """Emission (node "Colour") of a UV checkerboard of unit cells in color_a / color_b, or of color_a
+    alone; _use_gr_illumination later replaces the emission by GR illumination."""
+    mat, nt, out = _new_material(name)
     em = nt.nodes.new("ShaderNodeEmission")
     em.name = "Colour"
-    nt.links.new(colour, em.inputs["Color"])
+    if color_b is None:
+        em.inputs["Color"].default_value = (*color_a, 1.0)
+    else:
+        tex = nt.nodes.new("ShaderNodeTexChecker")
+        tex.inputs["Scale"].default_value = 1.0
+        tex.inputs["Color1"].default_value = (*color_a, 1.0)
+        tex.inputs["Color2"].default_value = (*color_b, 1.0)
+        uv = nt.nodes.new("ShaderNodeTexCoord")
+        nt.links.new(uv.outputs["UV"], tex.inputs["Vector"])
+        nt.links.new(tex.outputs["Color"], em.inputs["Color"])
     nt.links.new(em.outputs["Emission"], out.inputs["Surface"])
-    mat.diffuse_color = (*DISC_COLOURS[0][0], 1.0)
+    mat.diffuse_color = (*color_a, 1.0)
     return mat
 
 
@@ -470,7 +442,7 @@ def accretion_disc(scene, inclination=None, external=False):
     _lens(scene, hole, r_s, [disc], max_tess_level=64, tess_a=5.0, tess_b=0.75, observer=observer,
           use_gr_illumination=True, light=lamp, light_intensity=1600.0)
     # the first rebuild with GR illumination creates the "grlens GR Illumination" node group, which
-    # the disc's material then uses
+    # the disc's materials then use
     bpy.ops.grlens.rebuild()
     for mat in disc.data.materials:
         _use_gr_illumination(mat)
