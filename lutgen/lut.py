@@ -207,8 +207,11 @@ def build_lut(r_obs, r_min, r_max, n_r, n_phi, *, progress: Callable[[int, int],
     phi = np.linspace(0.0, np.pi, n_phi)
     data = np.empty((2, len(QUANTITIES), n_r, n_phi))
     workers = max(1, workers or os.cpu_count() or 1)
-    # blocks of rows: small enough for a lively progress bar and to share between threads
-    rows_per_block = int(np.clip(n_r // (4 * workers), 1, max(1, 131072 // n_phi)))
+    # blocks of rows: small enough for a lively progress bar and to share between threads. The rows of
+    # a block are solved together (vectorised quadrature shares its segmentation within a batch), so
+    # the partition must not depend on the machine: it depends on the table's size only, and every
+    # process (render-farm nodes with any number of CPUs) builds a bit-identical table.
+    rows_per_block = int(np.clip(n_r // 32, 1, max(1, 131072 // n_phi)))
     blocks = [(a, min(a + rows_per_block, n_r)) for a in range(0, n_r, rows_per_block)]
 
     def work(block):

@@ -108,3 +108,10 @@ def test_lookup_of_some_quantities(lut):
     np.testing.assert_array_equal(part.uy, full.uy)
     with pytest.raises(ValueError):
         lut.lookup(2.0, 0.3, 1, quantities=("zeta",))
+
+
+def test_build_is_bit_identical_for_any_number_of_threads():
+    """Render-farm nodes differ in CPU count: the table must not depend on it."""
+    a = build_lut(20.0, 1.05, 40.0, 64, 96, workers=1).data
+    b = build_lut(20.0, 1.05, 40.0, 64, 96, workers=5).data
+    assert np.array_equal(a, b, equal_nan=True)
