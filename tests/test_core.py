@@ -280,8 +280,9 @@ def test_axis_geometry_straddling_and_span():
 
 
 def test_fine_mesh_behind_the_hole_keeps_its_ring(lut):
-    """Behind the hole a fine mesh is magnified everywhere, yet only the triangles at the axis are
-    culled: the ring stays closed, and no kept triangle spans a wide arc (no chord across the shadow)."""
+    """Behind the hole a fine mesh is magnified everywhere, yet only small triangles at the axis are
+    culled: the ring stays closed, and no kept triangle spans a wide arc (its straight sides would cut
+    into the ring: at this size about 10 px across, 0.25 px allows about 6.4 degrees)."""
     from grlens_addon.core import pipeline
 
     scene = mapping.Scene(CAMERA, HOLE, R_S)
@@ -290,13 +291,13 @@ def test_fine_mesh_behind_the_hole_keeps_its_ring(lut):
         pts, tris = _sphere(np.array([-3.0 * R_S, 0.0, 0.01 * R_S]), segments=segments, rings=rings)
         out = pipeline.build_images(pipeline.SourceMesh(pts, tris), scene, lut, settings)
         for order, img in out.items():
-            assert 0 < img.report.einstein_ring < 0.05 * len(img.tris)
+            assert 0 < img.report.einstein_ring < 0.1 * len(img.tris)
             d = img.positions - CAMERA
             az = np.arctan2(d[:, 2], d[:, 1])  # position angle around the hole's direction (-x)
             assert len(np.unique(((az + np.pi) / (2 * np.pi) * 32).astype(int) % 32)) == 32
             a = az[img.tris]
             diff = np.abs(np.angle(np.exp(1j * (a[:, :, None] - a[:, None, :])))).max(axis=(1, 2))
-            assert diff.max() < np.radians(60.0)
+            assert diff.max() < np.radians(8.0)
 
 
 def test_pipeline_thin_disc_emitter(lut):

@@ -118,7 +118,7 @@ def outside_bits(points, planes) -> np.ndarray:
 
 
 def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_planes=None, image_points=None,
-         hole=None, order=None):
+         hole=None, order=None, pixel_angle=None, max_error_px=None):
     """Mask of image triangles to keep, and a :class:`CullReport`.
 
     tris (F, 3) index the per-vertex arrays: image_dirs (V, 3) unit apparent directions of the images,
@@ -128,7 +128,12 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     axis passes through are always dropped, and the ratio drops only triangles that also cover more
     than AZIMUTH_SPAN_MAX around the axis (see :func:`axis_geometry`): near the Einstein ring regular
     triangles are magnified by large factors too (a fine mesh behind the hole would lose its whole
-    ring to the ratio alone), but only wide or straddling ones have a wrong image.
+    ring to the ratio alone), but only wide or straddling ones have a wrong image. With
+    ``pixel_angle`` (radians per pixel) and ``max_error_px`` given, "wide" is measured on screen: the
+    mapping keeps a point's angle about the axis, so near the ring an image triangle covering an
+    azimuth D at an angular radius R from the hole's direction has straight sides that fall
+    R (1 - cos(D/2)) inside the ring; such magnified triangles are culled when that exceeds
+    ``max_error_px`` pixels (else when D > AZIMUTH_SPAN_MAX).
     ``frustum_planes`` (K, 4): rows (n, d) with n . x + d >= 0 inside, applied to ``image_points`` (V, 3).
     """
     tris = np.asarray(tris, dtype=np.int64)
@@ -148,7 +153,15 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
         straddles, span = axis_geometry(source_points, tris, np.asarray(camera, np.float64),
                                         np.asarray(hole, np.float64), order, span_of=np.flatnonzero(ring))
         with np.errstate(invalid="ignore"):
-            ring = keep & (straddles | (ring & (span > AZIMUTH_SPAN_MAX)))
+            if pixel_angle and max_error_px:
+                towards_hole = np.asarray(hole, np.float64) - np.asarray(camera, np.float64)
+                towards_hole /= np.linalg.norm(towards_hole)
+                radius = np.arccos(np.clip(image_dirs @ towards_hole, -1.0, 1.0))  # (V,) radians
+                r_px = radius[tris].max(axis=1) / pixel_angle
+                wide = r_px * (1.0 - np.cos(0.5 * np.minimum(span, np.pi))) > max_error_px
+            else:
+                wide = span > AZIMUTH_SPAN_MAX
+            ring = keep & (straddles | (ring & wide))
     rep.einstein_ring = int(ring.sum())
     keep &= ~ring
     if frustum_planes is not None and image_points is not None and len(frustum_planes):

@@ -157,13 +157,16 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         rho[probe] = subdivision.rho(d_a[probe], d_b[probe], img_m.direction)
         levels = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
                                          chord, settings.pixel_angle, settings.max_error_px)
+        if settings.pixel_angle and settings.max_error_px:
+            _raise_ring_levels(levels, src, edges, scene, img_v, order, settings)
         tri_sel = _inside_frustum(img_v, img_m, probe, src.tris, edges, planes)
         n_pre = len(src.tris) - len(tri_sel)
         sub = subdivision.subdivide(src.positions, src.tris[tri_sel],
                                     subdivision.Edges(edges.verts, edges.of_tri[tri_sel]), levels)
         img = _map_subdivided(sub, n_pts, img_v, scene, lut, order)
         keep, report = culling.cull(sub.tris, img.direction, img.valid, sub.positions, scene.camera,
-                                    settings.cull_ratio, planes, img.position, scene.hole, order)
+                                    settings.cull_ratio, planes, img.position, scene.hole, order,
+                                    settings.pixel_angle, settings.max_error_px)
         report.outside_frustum += n_pre
         report.extra["bad_source_triangles"] = n_bad
         everything = bool(keep.all())
@@ -234,6 +237,36 @@ def _interpolate(bary, corner_values, identity: bool):
     if identity:
         return np.array(corner_values, dtype=np.float64)
     return np.matmul(bary, corner_values)
+
+
+RING_MAGNIFICATION = 2.0
+"""Source triangles whose image circumference exceeds this many times their own are treated as
+lying in a strongly lensed (Einstein-ring) region by :func:`_raise_ring_levels`."""
+
+
+def _raise_ring_levels(levels, src, edges, scene, img_v: mapping.Images, order, settings: Settings) -> None:
+    """Raise, in place, the edge levels of strongly magnified source triangles near the axis so that
+    their sub-triangles are narrow enough on screen (see culling.cull: the mapping keeps a point's
+    angle about the observer-hole axis, so a piece covering an azimuth d at an angular radius R from
+    the hole's direction has straight sides R (1 - cos(d/2)) inside the ring). A triangle covering D
+    gets level ceil(D / d_max), d_max = 2 arccos(1 - max_error_px / R_px), on all its edges (levels
+    are per edge, so neighbours stay crack-free). Capped at max_tess_level."""
+    top = int(np.clip(settings.max_tess_level, 1, subdivision.GRID))
+    tris = src.tris
+    d = img_v.direction
+    src_dirs = culling.unit_directions(src.positions, scene.camera)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = culling._circumference(d, tris) / culling._circumference(src_dirs, tris)
+    cand = np.flatnonzero(ratio > RING_MAGNIFICATION)
+    if cand.size == 0:
+        return
+    _, span = culling.axis_geometry(src.positions, tris[cand], scene.camera, scene.hole, order)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        radius = np.arccos(np.clip(-(d @ scene.e1), -1.0, 1.0)) / settings.pixel_angle  # pixels
+        r_px = radius[tris[cand]].max(axis=1)
+        d_max = 2.0 * np.arccos(np.clip(1.0 - settings.max_error_px / r_px, -1.0, 1.0))
+        want = np.clip(np.nan_to_num(np.ceil(span / d_max), nan=1.0), 1, top).astype(levels.dtype)
+    np.maximum.at(levels, edges.of_tri[cand].ravel(), np.repeat(want, 3))
 
 
 def _below_pixel(img_v: mapping.Images, img_m: mapping.Images, pixel_angle) -> bool:
