@@ -455,3 +455,24 @@ def test_material_slots_and_indices_carry_over():
             me.polygons.foreach_get("material_index", mi)
             counts = np.bincount(mi, minlength=2)
             assert counts[0] > 0 and counts[1] > 0 and abs(int(counts[0]) - int(counts[1])) < 0.2 * len(mi)
+
+
+def test_orbiting_camera_reuses_one_lut():
+    """A camera circling the hole at a fixed distance (float32 transforms jitter by ~1e-7) builds its
+    lookup table once, not every frame."""
+    from grlens_addon.blender import lutcache
+
+    scene, sphere = _small_demo()
+    lutcache.clear()
+    pivot = bpy.data.objects.new("CameraPivot", None)
+    scene.collection.objects.link(pivot)
+    scene.camera.parent = pivot
+    pivot.rotation_euler = (0.0, 0.0, 0.0)
+    pivot.keyframe_insert("rotation_euler", index=2, frame=1)
+    pivot.rotation_euler = (0.0, 0.0, math.radians(90.0))
+    pivot.keyframe_insert("rotation_euler", index=2, frame=9)
+    keys = set()
+    for f in range(1, 10):
+        scene.frame_set(f)
+        keys |= set(lutcache._CACHE)
+    assert len({k for k in keys if k[3] == scene.grlens.lut_n_r}) == 1

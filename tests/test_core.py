@@ -78,6 +78,13 @@ def test_bad_vertices_are_invalid_not_errors(lut):
 def test_lut_mismatch_and_bad_scene(lut):
     with pytest.raises(ValueError, match="rebuild"):
         mapping.map_vertices(np.zeros((1, 3)) + 5, mapping.Scene([30.0, 0, 0], HOLE, R_S), lut, 1)
+    with pytest.raises(ValueError, match="rebuild"):  # beyond the tolerance
+        mapping.map_vertices(np.zeros((1, 3)) + 5, mapping.Scene(CAMERA * (1 + 3e-6), HOLE, R_S), lut, 1)
+    # float32 jitter of a camera transform (~1e-7) is accepted, with a negligible change of the image
+    p = np.array([[-6.0, 3.0, 1.0]])
+    exact = mapping.map_vertices(p, mapping.Scene(CAMERA, HOLE, R_S), lut, 1)
+    jitter = mapping.map_vertices(p, mapping.Scene(CAMERA * (1 + 2e-7), HOLE, R_S), lut, 1)
+    assert np.degrees(np.arccos(np.clip(exact.direction[0] @ jitter.direction[0], -1, 1))) < 1e-4
     with pytest.raises(ValueError):
         mapping.Scene(CAMERA, HOLE, 0.0)
     with pytest.raises(ValueError):

@@ -16,7 +16,9 @@ _MAX = 4
 
 
 def _key(r_obs, r_min, r_max, n_r, n_phi):
-    return (float(r_obs), float(r_min), float(r_max), int(n_r), int(n_phi))
+    """Cache key; r_obs rounded to 7 significant digits (see core.mapping.R_OBS_TOLERANCE), so a
+    camera orbiting at a fixed distance (float32 jitter) keeps using one table."""
+    return (float(f"{float(r_obs):.7g}"), float(r_min), float(r_max), int(n_r), int(n_phi))
 
 
 def _prop_name(key):

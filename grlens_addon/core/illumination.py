@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mapping import Scene, plane_coordinates
+from .mapping import R_OBS_TOLERANCE, Scene, plane_coordinates
 
 
 def irradiance(points, normals, light, hole, r_s, lut, intensity=1.0, orders=(1, 2)):
@@ -24,7 +24,7 @@ def irradiance(points, normals, light, hole, r_s, lut, intensity=1.0, orders=(1,
     (3,; BU). ``lut`` must be built for r_obs = |light - hole| / r_s. Returns (N,) float64 with 0 where a
     point receives no light (or lies outside the LUT's range), and a dict of per-order arrays."""
     scene = Scene(camera=light, hole=hole, r_s=r_s)
-    if abs(lut.r_obs / scene.r_obs - 1.0) > 1e-9:
+    if abs(lut.r_obs / scene.r_obs - 1.0) > R_OBS_TOLERANCE:
         raise ValueError(f"the light's LUT was built for r = {lut.r_obs:.9g} r_s, the light is at "
                          f"{scene.r_obs:.9g} r_s")
     plane = plane_coordinates(points, scene)

@@ -20,6 +20,12 @@ import numpy as np
 # an Einstein ring, which a mesh cannot show. Such vertices are flagged and their triangles culled.
 AXIS_EPS = 1e-9
 
+R_OBS_TOLERANCE = 1e-6
+"""Largest relative difference between the LUT's observer radius and the camera's distance that is
+accepted. Camera transforms are single precision in Blender, so an orbiting camera's distance
+jitters by ~1e-7 from frame to frame; the add-on rounds the radius to 7 significant digits when it
+builds tables (one table for the whole orbit). The resulting direction error is below 1e-6 rad."""
+
 
 @dataclass
 class Scene:
@@ -112,7 +118,7 @@ class Images:
 def map_vertices(points: np.ndarray, scene: Scene, lut, order: int, plane: PlaneCoordinates | None = None) -> Images:
     """Images of order 1 or 2 of world-space ``points`` (N, 3; BU) seen from ``scene.camera``.
 
-    ``lut`` is a :class:`lutgen.LUT` built for r_obs = scene.r_obs (checked to 1e-9 relative); points
+    ``lut`` is a :class:`lutgen.LUT` built for r_obs = scene.r_obs (to R_OBS_TOLERANCE relative); points
     outside its radial range, inside the horizon, non-finite or on the axis come back invalid (NaN).
     """
     return map_vertices_orders(points, scene, lut, (order,), plane)[order]
@@ -125,7 +131,7 @@ def map_vertices_orders(points: np.ndarray, scene: Scene, lut, orders=(1, 2),
     for order in orders:
         if order not in (1, 2):
             raise ValueError(f"order must be 1 or 2, got {order!r}")
-    if abs(lut.r_obs / scene.r_obs - 1.0) > 1e-9:
+    if abs(lut.r_obs / scene.r_obs - 1.0) > R_OBS_TOLERANCE:
         raise ValueError(f"the LUT was built for r_obs = {lut.r_obs:.9g} r_s but the camera is at "
                          f"{scene.r_obs:.9g} r_s from the hole; rebuild the LUT")
     plane = plane if plane is not None else plane_coordinates(points, scene)
