@@ -27,6 +27,7 @@ PICTURES = {  # scene: extra render.py arguments
     "disc_90_external": [], "disc_30_external": [], "disc_10_external": [],
     "shell": [],
     "room": [],
+    "luminet": [], "luminet_blackbody": [],
 }
 
 

@@ -16,6 +16,8 @@ import math
 
 import bpy
 
+from sample_scenes import luminet as _luminet
+
 # --------------------------------------------------------------------------------------------------
 # helpers (plain bpy: materials, cameras, meshes)
 # --------------------------------------------------------------------------------------------------
@@ -702,6 +704,8 @@ SCENES = {
     "shell": gridded_shell,
     "room": room,
 }
+SCENES["luminet"] = _luminet.luminet_disc
+SCENES["luminet_blackbody"] = _luminet.luminet_disc_blackbody
 for _incl in (90, 30, 10):
     SCENES[f"disc_{_incl}"] = functools.partial(accretion_disc, inclination=_incl)
     SCENES[f"disc_{_incl}_external"] = functools.partial(accretion_disc, inclination=_incl, external=True)
@@ -723,6 +727,10 @@ DEFAULTS = {
                           what="the disc sequence seen by the external camera (10, -40, 4) BU"),
     "shell": dict(frames=[1], resolution=(480, 270), samples=16,
                   what="seed 004: observer at 5 r_s inside a lat/long gridded shell of 10 r_s, 120 frames"),
+    "luminet": dict(frames=[1], resolution=(640, 360), samples=16,
+                    what="seed 002: thin disc 3-15 r_s at 84.5 deg from 120 r_s, fov 6 deg, Page-Thorne flux / (1+z)^4"),
+    "luminet_blackbody": dict(frames=[1], resolution=(640, 360), samples=16,
+                              what="seed 002: the thin disc in blackbody colours of the observed temperature"),
     "room": dict(frames=[1], resolution=(480, 270), samples=64,
                  what="seed 003: Cornell-like room, sphere, cube, cylinder, hole of r_s = 0.4 BU in the middle"),
 }
