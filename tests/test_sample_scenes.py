@@ -24,7 +24,7 @@ STATS = os.path.join(HERE, "scripts", "scene_stats.py")
 SCENE_NAMES = sorted([
     "sphere", "triangle", "triangle_tess1", "triangle_tess4", "triangle_tess64", "triangle_flat",
     "disc", "disc_external", "disc_90", "disc_30", "disc_10", "disc_90_external", "disc_30_external",
-    "disc_10_external", "shell", "room"])
+    "disc_10_external", "shell", "room", "luminet", "luminet_blackbody"])
 
 # how each scene is rendered here: (resolution, frames, samples); Cycles
 TEST_RENDERS = {
@@ -44,6 +44,8 @@ TEST_RENDERS = {
     "disc_10_external": ("96x54", "1", 2),
     "shell": ("192x108", "1", 4),
     "room": ("192x108", "1", 8),
+    "luminet": ("96x54", "1", 2),
+    "luminet_blackbody": ("96x54", "1", 2),
 }
 
 
