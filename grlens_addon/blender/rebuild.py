@@ -14,7 +14,7 @@ import math
 import bpy
 import numpy as np
 
-from ..core import mapping, pipeline
+from ..core import culling, mapping, pipeline
 from . import lutcache, shading, upload
 
 COLLECTION = "grlens"
@@ -110,17 +110,8 @@ def frustum_planes(scene, cam):
     frame = [np.array(v) for v in cam.data.view_frame(scene=scene)]  # camera space, z = -distance
     corners = np.array([[v[0] * (1 + FRUSTUM_MARGIN), v[1] * (1 + FRUSTUM_MARGIN), v[2]] for v in frame])
     mw = np.array(cam.matrix_world, dtype=np.float64)
-    rot, origin = mw[:3, :3], mw[:3, 3]
-    world = corners @ rot.T  # directions from the camera
-    centre = world.mean(axis=0)
-    planes = []
-    for i in range(4):
-        n = np.cross(world[i], world[(i + 1) % 4])
-        if n @ centre < 0:
-            n = -n
-        n /= np.linalg.norm(n)
-        planes.append([*n, -n @ origin])
-    return np.array(planes)
+    rot = mw[:3, :3] / np.linalg.norm(mw[:3, :3], axis=0)  # without the camera object's scale
+    return culling.side_planes(mw[:3, 3], corners @ rot.T)
 
 
 def scene_geometry(scene, depsgraph):

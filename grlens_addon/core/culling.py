@@ -106,6 +106,19 @@ def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     return straddles, span
 
 
+def side_planes(origin, corner_directions) -> np.ndarray:
+    """(4, 4) planes (n, d), n . x + d >= 0 inside, through ``origin`` (3,; BU) and consecutive pairs of
+    the four ``corner_directions`` (4, 3) of a pyramid (a camera frustum without near and far
+    planes), with unit normals pointing into it."""
+    origin = np.asarray(origin, dtype=np.float64)
+    corners = np.asarray(corner_directions, dtype=np.float64)
+    centre = corners.mean(axis=0)
+    n = np.cross(corners, np.roll(corners, -1, axis=0))
+    n *= np.where(n @ centre < 0, -1.0, 1.0)[:, None]
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    return np.column_stack([n, -(n @ origin)])
+
+
 def outside_bits(points, planes) -> np.ndarray:
     """Per point (N,) an integer whose bit k is set when the point is outside plane k (rows (n, d) of
     ``planes``, n . x + d >= 0 inside; at most 63 planes). Points with NaN coordinates are inside of

@@ -73,6 +73,7 @@ from scipy.special import ellipj
 
 from lutgen import orbit as _orb
 from lutgen.solver import check_observer_radius
+from .culling import side_planes
 
 TWO_PI = 2.0 * np.pi
 _B_MIN = 1e-12  # impact parameters (r_s) below this are clamped (the ray is radial to rounding)
@@ -171,15 +172,7 @@ class Camera:
         tx, ty = self.tan_half
         tx, ty = tx * (1 + margin), ty * (1 + margin)
         corners = np.array([[-tx, -ty, -1.0], [tx, -ty, -1.0], [tx, ty, -1.0], [-tx, ty, -1.0]]) @ self.rotation.T
-        centre = corners.mean(axis=0)
-        planes = []
-        for i in range(4):
-            n = np.cross(corners[i], corners[(i + 1) % 4])
-            if n @ centre < 0:
-                n = -n
-            n /= np.linalg.norm(n)
-            planes.append([*n, -n @ self.position])
-        return np.array(planes)
+        return side_planes(self.position, corners)
 
 
 @dataclass
