@@ -152,18 +152,10 @@ def photon_angular_momentum(e1, e2, xi, r_obs, order: int) -> np.ndarray:
     return (s * impact_parameter(xi, r_obs))[..., None] * n
 
 
-def vertex_redshift(points, hole, camera, r_s, axis, xi, e2, order: int, prograde: bool = True):
-    """Per-vertex 1 + z of disc gas seen along the order-1 or order-2 geodesic.
-
-    points (N, 3), hole (3,), camera (3,), r_s: Blender units (BU). axis (3,): disc axis (normalised
-    here). xi (N,): LUT angle (rad) of that order at the vertex (mapping.Images.xi); e2 (N, 3): the
-    vertex's plane vector (mapping.Images.plane.e2). Returns (N,) 1 + z, NaN where xi is NaN or
-    r <= 1.5 r_s.
-
-    Vertices off the disc plane (a disc mesh with thickness) are given the circular geodesic through
-    the vertex in the plane that contains the hole and the axis' component perpendicular to the vertex
-    direction as normal (for vertices in the disc plane this is ``axis`` itself).
-    """
+def _gas_frame(points, hole, camera, r_s, axis):
+    """(r (N,) in r_s, orbit normal (N, 3), e1 (3,), r_obs in r_s) for vertices (BU): the unit normal of
+    the circular orbit through each vertex (the axis' component perpendicular to the vertex direction,
+    normalised; ``axis`` itself for vertices in the disc plane)."""
     points = np.asarray(points, dtype=np.float64)
     hole = np.asarray(hole, dtype=np.float64).reshape(3)
     camera = np.asarray(camera, dtype=np.float64).reshape(3)
@@ -179,6 +171,23 @@ def vertex_redshift(points, hole, camera, r_s, axis, xi, e2, order: int, prograd
         p_hat = p / r[:, None]
         normal = axis - (p_hat @ axis)[:, None] * p_hat
         normal /= np.linalg.norm(normal, axis=1)[:, None]
+    return r, normal, e1, r_obs
+
+
+def vertex_redshift(points, hole, camera, r_s, axis, xi, e2, order: int, prograde: bool = True):
+    """Per-vertex 1 + z of disc gas seen along the order-1 or order-2 geodesic.
+
+    points (N, 3), hole (3,), camera (3,), r_s: Blender units (BU). axis (3,): disc axis (normalised
+    here). xi (N,): LUT angle (rad) of that order at the vertex (mapping.Images.xi); e2 (N, 3): the
+    vertex's plane vector (mapping.Images.plane.e2). Returns (N,) 1 + z, NaN where xi is NaN or
+    r <= 1.5 r_s.
+
+    Vertices off the disc plane (a disc mesh with thickness) are given the circular geodesic through
+    the vertex in the plane that contains the hole and the axis' component perpendicular to the vertex
+    direction as normal (for vertices in the disc plane this is ``axis`` itself).
+    """
+    r, normal, e1, r_obs = _gas_frame(points, hole, camera, r_s, axis)
+    with np.errstate(invalid="ignore", divide="ignore"):
         L = photon_angular_momentum(e1, e2, xi, r_obs, order)
         l_z = np.einsum("ij,ij->i", L, normal)
     return redshift_factor(r, l_z, r_obs, prograde)
@@ -193,21 +202,8 @@ def vertex_redshift_from_direction(points, hole, camera, r_s, axis, direction, p
     :func:`vertex_redshift` (direction = cos(xi) e1 +- sin(xi) e2 for order 1 / 2) and needs neither
     xi nor e2. Arguments as there; ``direction`` (N, 3) unit vectors; NaN directions give NaN.
     """
-    points = np.asarray(points, dtype=np.float64)
-    hole = np.asarray(hole, dtype=np.float64).reshape(3)
-    camera = np.asarray(camera, dtype=np.float64).reshape(3)
-    r_s = float(r_s)
-    axis = np.asarray(axis, dtype=np.float64).reshape(3)
-    axis = axis / np.linalg.norm(axis)
-    d = camera - hole
-    r_obs = np.linalg.norm(d) / r_s
-    e1 = d / np.linalg.norm(d)
-    p = (points - hole) / r_s
-    r = np.linalg.norm(p, axis=1)
+    r, normal, e1, r_obs = _gas_frame(points, hole, camera, r_s, axis)
     with np.errstate(invalid="ignore", divide="ignore"):
-        p_hat = p / r[:, None]
-        normal = axis - (p_hat @ axis)[:, None] * p_hat
-        normal /= np.linalg.norm(normal, axis=1)[:, None]
         L = -(r_obs / np.sqrt(1.0 - 1.0 / r_obs)) * np.cross(e1, np.asarray(direction, dtype=np.float64))
         l_z = np.einsum("ij,ij->i", L, normal)
     return redshift_factor(r, l_z, r_obs, prograde)
