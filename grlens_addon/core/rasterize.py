@@ -10,7 +10,8 @@ are tested against every pixel instead of being clipped. Depth is the distance f
 along the pixel ray (the image meshes sit at distance c*dt along their apparent directions, so this is
 the order in which a renderer's z-buffer keeps them). Attributes (UV, light travel time, source
 position) are interpolated with the hit's barycentric coordinates, as Blender interpolates corner and
-point attributes.
+point attributes; extra per-vertex attributes (``RasterMesh.attributes``, e.g. a thin disc's ``redshift``
+and ``disc_colour``) are interpolated linearly the same way into ``PixelBuffers.info["attributes"]``.
 """
 from __future__ import annotations
 
@@ -28,7 +29,10 @@ class RasterMesh:
     positions (V, 3) BU; tris (F, 3); light_travel_time (V,) c*dt in BU; order: image order (int);
     object_id: int; corner_uv (F, 3, 2) or None; face_id (F,) reported per pixel (default: the image
     mesh's source triangle, else the face index); source_position (V, 3) BU or None: the world point
-    each vertex shows (interpolated into ``PixelBuffers.point``).
+    each vertex shows (interpolated into ``PixelBuffers.point``); attributes: optional dict
+    {name: (V,) or (V, K) array} of further per-vertex values, interpolated linearly into
+    ``PixelBuffers.info["attributes"][name]`` ((H, W) or (H, W, K), NaN where no triangle of a mesh with
+    that attribute is seen).
     """
 
     positions: np.ndarray
@@ -39,17 +43,24 @@ class RasterMesh:
     corner_uv: np.ndarray | None = None
     face_id: np.ndarray | None = None
     source_position: np.ndarray | None = None
+    attributes: dict | None = None
 
     @classmethod
     def from_image_mesh(cls, img, object_id: int = 0) -> "RasterMesh":
         """From a ``pipeline.ImageMesh`` (its order, UVs, per-vertex light travel time, source
-        triangles and source positions)."""
+        triangles and source positions; a disc image's per-vertex ``redshift`` and ``disc_colour`` as
+        attributes of those names)."""
         face = getattr(img, "source_tri", None)
         if face is not None and len(face) != len(img.tris):
             face = None
+        attrs = {}
+        for name in ("redshift", "disc_colour"):
+            val = getattr(img, name, None)
+            if val is not None and len(val) == len(img.positions):
+                attrs[name] = np.asarray(val, np.float64)
         return cls(np.asarray(img.positions, np.float64), np.asarray(img.tris, np.int64),
                    np.asarray(img.light_travel_time, np.float64), int(img.order), int(object_id),
-                   img.corner_uv, face, getattr(img, "source_position", None))
+                   img.corner_uv, face, getattr(img, "source_position", None), attrs or None)
 
 
 def from_images(images, object_id: int = 0) -> list[RasterMesh]:
@@ -61,7 +72,8 @@ def rasterize(meshes, camera: Camera, *, near: float = 1e-6, chunk: int = 1_000_
     """Per-pixel buffers (shape (camera.height, camera.width)) of the nearest triangle of ``meshes``
     (a sequence of :class:`RasterMesh`) along each straight pixel ray; ``near`` (BU) is the view depth
     below which a triangle corner counts as behind the camera. ``info`` holds the number of
-    (triangle, pixel) tests. See the module docstring."""
+    (triangle, pixel) tests ("tests") and the interpolated extra attributes ("attributes", a dict,
+    empty if no mesh has any). See the module docstring."""
     H, W = camera.height, camera.width
     dirs = camera.pixel_directions().reshape(-1, 3)
     n_pix = H * W
@@ -128,6 +140,11 @@ def rasterize(meshes, camera: Camera, *, near: float = 1e-6, chunk: int = 1_000_
                 best_uv[p, 0], best_uv[p, 1] = u[better], v[better]
             i0 = i1
     out = PixelBuffers.empty((n_pix,))
+    attributes = {}
+    for mesh in meshes:
+        for name, val in (mesh.attributes or {}).items():
+            if name not in attributes:
+                attributes[name] = np.full((n_pix,) + np.shape(val)[1:], np.nan)
     hit = best_mesh >= 0
     out.hit[:] = hit
     out.depth[hit] = best_t[hit]
@@ -147,7 +164,13 @@ def rasterize(meshes, camera: Camera, *, near: float = 1e-6, chunk: int = 1_000_
             out.uv[pix] = np.einsum("pk,pkx->px", bary, np.asarray(mesh.corner_uv)[face])
         if mesh.source_position is not None:
             out.point[pix] = np.einsum("pk,pkx->px", bary, np.asarray(mesh.source_position)[tri])
-    out.info = dict(tests=tests)
+        for name, val in (mesh.attributes or {}).items():
+            val = np.asarray(val, np.float64)
+            if val.ndim == 1:
+                attributes[name][pix] = np.einsum("pk,pk->p", bary, val[tri])
+            else:
+                attributes[name][pix] = np.einsum("pk,pkx->px", bary, val[tri].reshape(len(pix), 3, -1))
+    out.info = dict(tests=tests, attributes={k: v.reshape((H, W) + v.shape[1:]) for k, v in attributes.items()})
     return out.reshape((H, W))
 
 
