@@ -376,7 +376,8 @@ def check_connect(r_obs, r, phi, orders=(1, 2)):
     radial_overflow = (r64 > 1e307) & (phi64 == 0)  # xfail: test_connect_radial_ray_to_huge_radius_is_finite
     for order in orders:
         c = connect(r_obs, r, phi, order)
-        excused = (known | radial_overflow) if order == 1 else np.zeros(r64.shape, bool)
+        # xfail test_connect_next_to_the_horizon_is_finite: r within a few ulps of 1
+        excused = (r64 < 1 + 1e-15) | ((known | radial_overflow) if order == 1 else np.zeros(r64.shape, bool))
         far = (r64 >= 1e14) & ((phi64 != 0) | (order == 2))  # xfail: test_connect_to_far_targets
         for name in ("xi", "dt", "ux", "uy", "b"):
             v = getattr(c, name)
@@ -461,6 +462,18 @@ def test_connect_to_far_targets():
                 dt = c.dt
                 # flat space to first order: dt = r - r_obs cos(phi) + ln r + O(1); order 2 alike
                 np.testing.assert_allclose(dt, r, rtol=max(1e-6, 100 * np.log(r) / r))
+
+
+@pytest.mark.xfail(strict=True, reason="lutgen.orbit._leg_time: for r = nextafter(1, 2) (u one ulp below 1) a "
+                   "Gauss node u = e2 - delta sinh^2(v) or m + n sinh(v) can round to exactly 1.0, so the integrand "
+                   "1 / (u^2 (1 - u) sqrt(u - e1)) is inf and connect returns dt = inf (seen for order 2, e.g. "
+                   "r_obs = 1.6, phi = 0.1319; r_obs = 20, phi = 0.9802)")
+def test_connect_next_to_the_horizon_is_finite():
+    phi = np.linspace(0.0, np.pi, 2001)
+    for r_obs in (1.6, 2.0, 20.0, 1000.0):
+        for order in (1, 2):
+            c = connect(r_obs, np.nextafter(1.0, 2.0), phi, order)
+            assert all(np.isfinite(v).all() for v in c), (r_obs, order)
 
 
 def _lookup_inside(lut, r, phi):
