@@ -25,7 +25,6 @@ import argparse
 import json
 import math
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -42,7 +41,7 @@ from tests import test_stress as ts  # noqa: E402
 
 
 def _rss_mb():
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return ts.peak_rss_mb()
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -78,26 +77,38 @@ def lutgen_tables(n_points):
 
     per = n_points // len(ts.R_OBS)
     print(f"\n## lutgen.connect, {per} adversarial points per observer ({per * len(ts.R_OBS)} in all)\n")
-    print("Rule: NaN exactly where r <= 1 or the input is NaN/inf/outside [0, pi]. 'unexpected NaN': "
-          "valid input, NaN result (the known cases are the xfail tests of tests/test_stress.py: order 1 "
-          "with 0 < phi < 1e-46, order 1 next to the observer, r >~ 1e15 r_s).\n")
-    print("| r_obs | order | time [s] | valid | valid finite | invalid NaN | unexpected NaN (r < 1e14) | "
-          "unexpected NaN (r >= 1e14) | inf | not NaN for invalid |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("Rule: NaN exactly where r <= 1 or the input is NaN/inf/outside [0, pi], finite elsewhere. Valid "
+          "points whose result is not finite, by known cause (the xfail tests of tests/test_stress.py): "
+          "order 1 with 0 < phi < 1e-30; order 1 within 1e-12 r_obs and 1e-6 rad of the observer; r within "
+          "1e-15 of the horizon; r >= 1e14 r_s (and the radial ray to r > 1e307). 'other' must be 0.\n")
+    print("| r_obs | order | time [s] | valid | finite | invalid -> NaN | invalid not NaN | tiny phi | "
+          "at observer | r - 1 < 1e-15 | far | other | of which inf |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r_obs in ts.R_OBS:
         r, phi = ts.adversarial_polar(per, rng, r_obs, 1 + 1e-9, 2 * r_obs + 10)
         valid = ts._connect_rule(r, phi)
-        near = r < 1e14
+        with np.errstate(invalid="ignore"):
+            tiny = (phi > 0) & (phi < 1e-30)
+            at_obs = (np.abs(r / r_obs - 1.0) < 1e-12) & (np.abs(phi) < 1e-6)
+            ulp = r < 1 + 1e-15
+            far = r >= 1e14
         for order in (1, 2):
             t0 = time.perf_counter()
             c = connect(r_obs, r, phi, order)
             t = time.perf_counter() - t0
             fin = np.all([np.isfinite(v) for v in c], axis=0)
             nan_all = np.all([np.isnan(v) for v in c], axis=0)
-            inf = int(np.any([np.isinf(v) for v in c], axis=0).sum())
+            inf = np.any([np.isinf(v) for v in c], axis=0)
+            bad = valid & ~fin
+            causes = []
+            left = bad.copy()
+            for m in ((tiny if order == 1 else np.zeros_like(bad)), (at_obs if order == 1 else np.zeros_like(bad)),
+                      ulp, far):
+                causes.append(int((left & m).sum()))
+                left &= ~m
             print(f"| {r_obs:g} | {order} | {t:.1f} | {int(valid.sum())} | {int((valid & fin).sum())} | "
-                  f"{int((~valid & nan_all).sum())} | {int((valid & near & ~fin).sum())} | "
-                  f"{int((valid & ~near & ~fin).sum())} | {inf} | {int((~valid & ~nan_all).sum())} |")
+                  f"{int((~valid & nan_all).sum())} | {int((~valid & ~nan_all).sum())} | "
+                  + " | ".join(str(k) for k in causes) + f" | {int(left.sum())} | {int((valid & inf).sum())} |")
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -159,6 +170,9 @@ def pipeline_table(n):
           "Einstein ring / outside frustum / below pixel), bad source triangles (dropped before mapping), "
           "F - S (extra faces from subdivision); the accounting identity kept + culled + bad = T + (F - S) "
           "and every finiteness and topology check of tests/test_stress.check_images are 'ok'.\n")
+    print("Peak RSS: the child's VmHWM (/proc/self/status; ru_maxrss of resource.getrusage carries the "
+          "parent's peak across fork/exec on Linux, so it is only used where VmHWM is missing); growth: "
+          "from after the set-up (mesh and LUT built) to the end of build_images.\n")
     print("| case | T | vertices | order | kept | invalid | degenerate | ring | frustum | below px | bad | F - S | "
           "time [s] | peak RSS [MB] (growth) | checks |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")

@@ -782,6 +782,23 @@ def test_disc_outside_the_photon_sphere_is_finite(monkeypatch):
 # ---------------------------------------------------------------------------------------------------
 # large meshes: time and peak memory, measured in a fresh process
 # ---------------------------------------------------------------------------------------------------
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process, MB: VmHWM of /proc/self/status where there is one, else
+    ru_maxrss of resource.getrusage. (On Linux ru_maxrss survives fork and exec: a fresh child
+    reports at least its parent's peak, which would hide a case's own growth; VmHWM belongs to the
+    process's own address space.)"""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def big_mesh_case(n_tris, r_s=2.0, r_obs=20.0, angle_deg=178.0, resolution=(640, 360), fov_deg=19.0,
                   frustum=True, lut_size=(256, 512)):
     """A UV sphere of about n_tris triangles (radius 0.5 r_s on the orbit r = 3 r_s at ``angle_deg``
@@ -789,9 +806,7 @@ def big_mesh_case(n_tris, r_s=2.0, r_obs=20.0, angle_deg=178.0, resolution=(640,
     ring and culled triangles) through
     build_images with the add-on's default settings and the screen-space caps of a camera looking at
     the hole. Returns a dict of counts, culled triangles by reason, time and peak RSS."""
-    import resource
-
-    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    rss0 = peak_rss_mb()
     rings = max(3, int(round(math.sqrt(n_tris / 4.0))) + 1)
     segments = max(3, int(round(n_tris / (2.0 * (rings - 1)))))
     a = math.radians(angle_deg)
@@ -808,23 +823,21 @@ def big_mesh_case(n_tris, r_s=2.0, r_obs=20.0, angle_deg=178.0, resolution=(640,
     settings = pipeline.Settings(max_tess_level=64, tess_a=5.0, tess_b=0.75, cull_ratio=8.0,
                                  pixel_angle=fov_y / resolution[1], max_error_px=0.25)
     planes = frustum_planes(scene.camera, scene.hole, 1.05 * fov_x, 1.05 * fov_y) if frustum else None
-    rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    rss1 = peak_rss_mb()
     with SubdivideSpy() as spy:
         t0 = time.perf_counter()
         out = pipeline.build_images(src, scene, lut, settings, None, planes)
         t_build = time.perf_counter() - t0
-    rss2 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    rss2 = peak_rss_mb()
     summary = check_images(out, src, scene, settings, spy.calls)
     return dict(case=f"sphere {len(tris)} tris", source_triangles=len(tris), source_vertices=len(pts),
-                orders=summary, time_build_s=t_build, time_lut_s=t_lut, rss_start_mb=rss0 / 1024,
-                rss_before_mb=rss1 / 1024, rss_peak_mb=rss2 / 1024)
+                orders=summary, time_build_s=t_build, time_lut_s=t_lut, rss_start_mb=rss0,
+                rss_before_mb=rss1, rss_peak_mb=rss2)
 
 
 def soup_case(n_vertices, seed=0, r_obs=20.0, max_tess_level=4):
     """n_vertices adversarial vertices (n_vertices / 3 soup triangles) through build_images, with a
     frustum; returns counts, culled by reason, time and peak RSS."""
-    import resource
-
     rng = np.random.default_rng(seed)
     r_s = 2.0
     scene = mapping.Scene([r_obs * r_s, 0, 0], [0, 0, 0], r_s)
@@ -833,19 +846,19 @@ def soup_case(n_vertices, seed=0, r_obs=20.0, max_tess_level=4):
     src = pipeline.SourceMesh(pts, tris, rng.uniform(size=(len(tris), 3, 2)), np.zeros(len(tris), np.int64))
     settings = pipeline.Settings(max_tess_level=max_tess_level, pixel_angle=math.radians(19) / 360)
     planes = frustum_planes(scene.camera, scene.hole, math.radians(34), math.radians(20))
-    rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    rss1 = peak_rss_mb()
     with SubdivideSpy() as spy:
         t0 = time.perf_counter()
         out = pipeline.build_images(src, scene, lut, settings, None, planes)
         t_build = time.perf_counter() - t0
-    rss2 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    rss2 = peak_rss_mb()
     summary = check_images(out, src, scene, settings, spy.calls)
     return dict(case=f"soup {len(pts)} vertices", source_triangles=len(tris), source_vertices=len(pts),
-                orders=summary, time_build_s=t_build, rss_before_mb=rss1 / 1024, rss_peak_mb=rss2 / 1024)
+                orders=summary, time_build_s=t_build, rss_before_mb=rss1, rss_peak_mb=rss2)
 
 
 def run_in_subprocess(func: str, *args, timeout=1800):
-    """Run ``func(*args)`` of this module in a fresh Python (so ru_maxrss is this case's own peak);
+    """Run ``func(*args)`` of this module in a fresh Python (so the peak RSS is this case's own);
     returns its dict."""
     code = ("import json, sys, warnings; warnings.simplefilter('ignore', RuntimeWarning); "
             "sys.path.insert(0, %r); from tests import test_stress as t; "
