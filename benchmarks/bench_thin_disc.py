@@ -262,10 +262,12 @@ def _g(x, fmt=".1e"):
 def tables(cases) -> list[str]:
     lines = ["## Time per frame", "",
              "| resolution | source triangles | order-1 / order-2 image triangles | build_images [ms] | "
-             "analytic reference [ms] | rasterize [s] |", "|---|---|---|---|---|---|"]
+             "analytic reference [ms] | rasterize [s] | culled as Einstein ring (order 1 / 2) |",
+             "|---|---|---|---|---|---|---|"]
     for (w, h), c in cases.items():
+        ring = [c["images"][k].report.einstein_ring for k in (1, 2)]
         lines.append(f"| {w}x{h} | {c['n_src']} | {c['poly'][1]['tris']} / {c['poly'][2]['tris']} | "
-                     f"{1000 * c['t_poly']:.0f} | {1000 * c['t_ref']:.0f} | {c['t_ras']:.2f} |")
+                     f"{1000 * c['t_poly']:.0f} | {1000 * c['t_ref']:.0f} | {c['t_ras']:.2f} | {ring[0]} / {ring[1]} |")
     lines += ["", "## Coverage", "",
               "| resolution | order | covered (reference) | covered (polygon) | both | only polygon | only reference | "
               "mismatch / covered | sum of flux polygon / reference |", "|---|---|---|---|---|---|---|---|---|"]
@@ -315,6 +317,28 @@ def check_lines(case) -> list[str]:
              "|---|---|---|---|---|---|---|"]
     for k, j, i, rr, rp, zr, zp in orientation_check(case["poly"], case["ref"], n=4):
         lines.append(f"| {k} | {j} | {i} | {rr:.4f} | {rp:.4f} | {zr:.5f} | {zp:.5f} |")
+    return lines
+
+
+def worst_lines(case, n=8) -> list[str]:
+    """The pixels with the largest difference of the observed flux (both orders summed)."""
+    poly = case["poly"][1]["flux"] + case["poly"][2]["flux"]
+    ref = case["ref"][1].flux + case["ref"][2].flux
+    d = np.abs(poly - ref)
+    fmax = float(ref.max())
+    W = case["cam"].width
+    lines = [f"## Largest flux differences ({W}x{case['cam'].height})", "",
+             "| row | column | abs. difference / max flux | order: drawn by polygon / reference, r polygon / reference "
+             "[r_s], 1+z polygon / reference |", "|---|---|---|---|"]
+    for f in np.argsort(d.ravel())[::-1][:n]:
+        j, i = divmod(int(f), W)
+        parts = []
+        for k in (1, 2):
+            p, r = case["poly"][k], case["ref"][k]
+            if p["hit"][j, i] or r.hit[j, i]:
+                parts.append(f"{k}: {int(p['hit'][j, i])}/{int(r.hit[j, i])}, {p['r'][j, i]:.3f}/{r.r[j, i]:.3f}, "
+                             f"{p['one_plus_z'][j, i]:.4f}/{r.one_plus_z[j, i]:.4f}")
+        lines.append(f"| {j} | {i} | {d[j, i] / fmax:.3f} | {'; '.join(parts)} |")
     return lines
 
 
@@ -395,7 +419,8 @@ def main(argv=None):
         "and 1 + z), the flux error over the image's maximum flux, and the radius error |r_polygon - r_reference| "
         "(r_s; r_polygon = |interpolated source point|), over the pixels both cover. The relative flux error "
         "is large only where the flux itself vanishes (next to r_in, where F -> 0).", ""]
-    body = tables(cases) + [""] + brightness_lines(cases) + [""] + check_lines(biggest)
+    body = (tables(cases) + [""] + brightness_lines(cases) + [""] + check_lines(biggest) + [""]
+            + worst_lines(biggest))
     text = "\n".join(head + body) + "\n"
     print(text)
     if args.write:
