@@ -43,6 +43,8 @@ class Scene:
             raise ValueError(f"r_s must be a positive number of Blender units, got {self.r_s}")
         if not (np.all(np.isfinite(self.camera)) and np.all(np.isfinite(self.hole))):
             raise ValueError("camera and black hole positions must be finite")
+        if not np.linalg.norm(self.camera - self.hole) > 0:
+            raise ValueError("the camera is at the centre of the black hole")
 
     @property
     def r_obs(self) -> float:

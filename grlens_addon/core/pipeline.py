@@ -53,8 +53,9 @@ class ImageMesh:
     positions (V, 3) BU; tris (F, 3); corner_uv (F, 3, 2) or None; material (F,);
     light_travel_time (V,) c*dt in BU; irradiance (F, 3) per corner or None; report: culling counts;
     source_tri (F,) the source triangle of each face; source_position (V, 3) BU: the undistorted
-    world point each image vertex shows; with a :class:`DiscEmitter`: redshift (V,) 1 + z and
-    disc_colour (V, 3) linear RGB, else None.
+    world point each image vertex shows; with a :class:`DiscEmitter`: redshift (V,) 1 + z (0 where
+    gas has no circular orbit: r <= 1.5 r_s or on the disc axis) and disc_colour (V, 3) linear RGB
+    (black there), else None. source_tri indexes the caller's SourceMesh.tris.
     """
 
     order: int
@@ -100,11 +101,23 @@ class Light:
 
 
 def clean_source(src: SourceMesh) -> tuple[SourceMesh, int]:
-    """Drop triangles with non-finite or repeated vertices. Returns (cleaned, number dropped)."""
-    tris = np.asarray(src.tris, dtype=np.int64).reshape(-1, 3)
+    """Drop triangles with out-of-range (negative or >= N) indices, non-finite or repeated vertices.
+    Returns (cleaned, number dropped)."""
+    cleaned, n_bad, _ = _clean(src)
+    return cleaned, n_bad
+
+
+def _clean(src: SourceMesh):
+    """clean_source, and the indices (into src.tris) of the triangles kept."""
+    tris = np.asarray(src.tris).reshape(-1, 3)
+    if not np.issubdtype(tris.dtype, np.integer):
+        raise ValueError(f"triangle indices must be integers, got {tris.dtype}")
+    tris = tris.astype(np.int64, copy=False)
     pos = np.asarray(src.positions, dtype=np.float64).reshape(-1, 3)
+    in_range = ((tris >= 0) & (tris < len(pos))).all(axis=1)
+    safe = np.where(in_range[:, None], tris, 0)
     finite = np.all(np.isfinite(pos), axis=1)
-    ok = finite[tris].all(axis=1) if len(tris) else np.zeros(0, bool)
+    ok = in_range & (finite[safe].all(axis=1) if len(tris) and len(pos) else np.zeros(len(tris), bool))
     ok &= (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 2] != tris[:, 0])
 
     all_ok = bool(ok.all())
@@ -115,7 +128,7 @@ def clean_source(src: SourceMesh) -> tuple[SourceMesh, int]:
     cleaned = SourceMesh(pos, sel(tris), sel(src.corner_uv),
                          sel(src.material) if src.material is not None else np.zeros(int(ok.sum()), np.int64),
                          sel(src.corner_normals))
-    return cleaned, int((~ok).sum())
+    return cleaned, int((~ok).sum()), np.flatnonzero(ok)
 
 
 def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
@@ -129,7 +142,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
     is below one pixel (``settings.pixel_angle``) is not built at all if it is a second-order image
     (reported as ``below_pixel``); first-order images are always built, so small objects stay visible.
     """
-    src, n_bad = clean_source(src)
+    src, n_bad, kept_source = _clean(src)
     out = {}
     if len(src.tris) == 0:
         for order in settings.orders:
@@ -199,10 +212,11 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             r = np.linalg.norm(pts - scene.hole, axis=1) / scene.r_s
             colour = np.nan_to_num(thin_disc.disc_colour(r, redshift, disc.mode, r_in=disc.r_in,
                                                          t_peak=disc.t_peak, exposure=disc.exposure))
+            redshift = np.nan_to_num(redshift, nan=0.0)  # 0: no circular orbit there (r <= 1.5 r_s, axis)
         out[order] = ImageMesh(order=order, positions=img.position[used], tris=image_tris,
                                corner_uv=corner_uv, material=src.material[src_tri],
                                light_travel_time=img.distance[used], irradiance=irr, report=report,
-                               source_tri=src_tri, source_position=sub.positions[used],
+                               source_tri=kept_source[src_tri], source_position=sub.positions[used],
                                redshift=redshift, disc_colour=colour)
     return out
 
@@ -244,6 +258,12 @@ RING_MAGNIFICATION = 2.0
 lying in a strongly lensed (Einstein-ring) region by :func:`_raise_ring_levels`."""
 
 
+RING_LEVEL_MARGIN = 0.75
+"""Fraction of the largest allowed azimuth per piece that :func:`_raise_ring_levels` aims at: pieces
+of a triangle subdivided uniformly in space cover unequal azimuths, and the culling test of the same
+bound (culling.cull) must not catch the widest of them."""
+
+
 def _raise_ring_levels(levels, src, edges, scene, img_v: mapping.Images, order, settings: Settings) -> None:
     """Raise, in place, the edge levels of strongly magnified source triangles near the axis so that
     their sub-triangles are narrow enough on screen (see culling.cull: the mapping keeps a point's
@@ -265,7 +285,9 @@ def _raise_ring_levels(levels, src, edges, scene, img_v: mapping.Images, order, 
         radius = np.arccos(np.clip(-(d @ scene.e1), -1.0, 1.0)) / settings.pixel_angle  # pixels
         r_px = radius[tris[cand]].max(axis=1)
         d_max = 2.0 * np.arccos(np.clip(1.0 - settings.max_error_px / r_px, -1.0, 1.0))
-        want = np.clip(np.nan_to_num(np.ceil(span / d_max), nan=1.0), 1, top).astype(levels.dtype)
+        # the subdivision is uniform in space, not in azimuth: aim at RING_LEVEL_MARGIN of d_max
+        want = np.clip(np.nan_to_num(np.ceil(span / (RING_LEVEL_MARGIN * d_max)), nan=1.0), 1, top)
+        want = want.astype(levels.dtype)
     np.maximum.at(levels, edges.of_tri[cand].ravel(), np.repeat(want, 3))
 
 
