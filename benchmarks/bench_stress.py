@@ -18,12 +18,18 @@ section); it is not repeated here.
 
 Usage: ./dev python benchmarks/bench_stress.py [--quick] [--skip-lutgen] [--skip-pipeline]
 (--quick: 10^5 instead of 10^6.)
+
+Last full run (2 CPUs, 2.5 minutes in all): lookups of 10^6 points take 1.2-2.6 s per observer,
+with no NaN inside a table, nothing finite outside, no inf; connect needs 6 s (order 1) and 2-3 s
+(order 2) per 1.7e5 points, and every non-finite result of a valid point has one of the known causes
+('other' 0). build_images: the 10^6-triangle sphere behind the hole in 9 s at +1.1 GB peak RSS
+(about 1.1 KB per source triangle), the 10^6-vertex soup in 13 s at +1.3 GB, the random scenes in
+3.5-8 s at +0.6 to +0.9 GB; all checks and the accounting identity hold.
 """
 from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys

@@ -144,7 +144,8 @@ def adversarial_soup(n_tris, rng, scene: mapping.Scene, r_min, r_max, size=(1e-9
     m = cat == 3
     r[m] = pick([r_min, r_max], (m.sum(), 1)) * (1 + rng.uniform(-TINY, TINY, (m.sum(), 3)))
     m = cat == 4
-    r[m] = np.exp(rng.uniform(np.log(1e6), np.log(1e300), (m.sum(), 1))) * (1 + ang[m, None] * rng.uniform(size=(m.sum(), 3)))
+    far = np.exp(rng.uniform(np.log(1e6), np.log(1e300), (m.sum(), 1)))
+    r[m] = far * (1 + ang[m, None] * rng.uniform(size=(m.sum(), 3)))
     m = np.flatnonzero(cat == 5)  # on the axis (front and back), exactly or within up to 2e-9 rad
     side = rng.choice([-1.0, 1.0], (m.size, 1, 1))
     tilt = pick([0.0, 1e-15, 1e-12, 1e-9, 2e-9, 1e-6], (m.size, 3, 1))
