@@ -292,6 +292,9 @@ def _leg_time(real, lo, hi, e1, e2, delta, m, n, logit_step, v_step):
             u = e2[k, None, None] - delta[k, None, None] * sh * sh
         else:
             u = m[k, None, None] + n[k, None, None] * sh
+        # rounding can put a node a hair outside the leg, e.g. onto u = 1 for a target one ulp off the
+        # horizon, where the integrand is infinite
+        u = np.clip(u, lo[k, None, None], hi[k, None, None])
         integrand = 1.0 / (u * u * (1.0 - u) * np.sqrt(u - e1[k, None, None]))
         out[k] = (2.0 if real else 1.0) * inv_b[k] * np.einsum("ijk,k,ij->i", integrand, _GL_W, np.abs(h))
     return out
@@ -302,4 +305,5 @@ def radial_travel_time(u_a, u_b) -> np.ndarray:
     |Delta r + ln((r_b - 1)/(r_a - 1))|, r = 1/u."""
     r_a = 1.0 / np.asarray(u_a, dtype=float)
     r_b = 1.0 / np.asarray(u_b, dtype=float)
-    return np.abs((r_b - r_a) + np.log((r_b - 1.0) / (r_a - 1.0)))
+    with np.errstate(divide="ignore"):
+        return np.abs((r_b - r_a) + (np.log(r_b - 1.0) - np.log(r_a - 1.0)))  # no overflow of the ratio
