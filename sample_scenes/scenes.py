@@ -206,9 +206,18 @@ def _lens(scene, hole, r_s, objects, **settings):
 
 
 def _linear_keys(obj):
+    """Linear interpolation for all keys of the object's action (Blender 4.x: action.fcurves; 5.0:
+    the F-curves live in the channel bags of the action's layered strips)."""
     ad = obj.animation_data
     action = ad.action if ad is not None else None
-    for fc in getattr(action, "fcurves", None) or []:
+    if action is None:
+        return
+    if hasattr(action, "layers") and len(action.layers):
+        curves = [fc for layer in action.layers for strip in layer.strips
+                  for bag in getattr(strip, "channelbags", []) for fc in bag.fcurves]
+    else:
+        curves = list(getattr(action, "fcurves", []))
+    for fc in curves:
         for kp in fc.keyframe_points:
             kp.interpolation = "LINEAR"
 

@@ -476,3 +476,12 @@ def test_orbiting_camera_reuses_one_lut():
         scene.frame_set(f)
         keys |= set(lutcache._CACHE)
     assert len({k for k in keys if k[3] == scene.grlens.lut_n_r}) == 1
+
+
+def test_demo_orbit_is_uniform():
+    """The demo sphere moves one degree per frame (linear keys on Blender 4.x and 5.0 actions alike)."""
+    scene, sphere = _small_demo()
+    for frame, deg in ((1, 0.0), (31, 30.0), (91, 90.0)):
+        scene.frame_set(frame)
+        p = sphere.matrix_world.translation
+        assert math.isclose(math.degrees(math.atan2(-p.x, p.y)), deg, abs_tol=1e-3)

@@ -82,7 +82,7 @@ class GRLENS_OT_demo_scene(bpy.types.Operator):
         orbit.keyframe_insert("rotation_euler", index=2, frame=1)
         orbit.rotation_euler = (0.0, 0.0, 2 * math.pi)
         orbit.keyframe_insert("rotation_euler", index=2, frame=361)
-        for fc in orbit.animation_data.action.fcurves if hasattr(orbit.animation_data.action, "fcurves") else []:
+        for fc in _fcurves(orbit.animation_data.action):
             for kp in fc.keyframe_points:
                 kp.interpolation = "LINEAR"
         scene.frame_start, scene.frame_end = 1, 360
@@ -105,6 +105,17 @@ class GRLENS_OT_demo_scene(bpy.types.Operator):
 
         rebuild_scene(scene, context.evaluated_depsgraph_get())
         return {"FINISHED"}
+
+
+def _fcurves(action):
+    """The F-curves of an action: ``action.fcurves`` up to Blender 4.x, the channel bags of its
+    layered (slotted) strips in 5.0, where ``Action.fcurves`` is gone."""
+    if action is None:
+        return []
+    if hasattr(action, "layers") and len(action.layers):
+        return [fc for layer in action.layers for strip in layer.strips
+                for bag in getattr(strip, "channelbags", []) for fc in bag.fcurves]
+    return list(getattr(action, "fcurves", []))
 
 
 class GRLENS_OT_pack_lut(bpy.types.Operator):
