@@ -59,6 +59,13 @@ ring (and, close to the axis, across the shadow); with a circumference ratio abo
 such triangles are culled."""
 
 
+SAGITTA_CULL_FACTOR = 2.0
+"""A magnified piece is culled when its straight sides fall more than this many times max_error_px
+inside the ring: the subdivision aims every piece at max_error_px, but pieces of a triangle split
+uniformly in space cover unequal azimuths (the sagitta grows with the square of the azimuth), so
+the widest pieces of a correctly subdivided triangle must not be culled."""
+
+
 def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     """Per triangle: (straddles, span).
 
@@ -146,7 +153,7 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     mapping keeps a point's angle about the axis, so near the ring an image triangle covering an
     azimuth D at an angular radius R from the hole's direction has straight sides that fall
     R (1 - cos(D/2)) inside the ring; such magnified triangles are culled when that exceeds
-    ``max_error_px`` pixels (else when D > AZIMUTH_SPAN_MAX).
+    SAGITTA_CULL_FACTOR * ``max_error_px`` pixels (else when D > AZIMUTH_SPAN_MAX).
     ``frustum_planes`` (K, 4): rows (n, d) with n . x + d >= 0 inside, applied to ``image_points`` (V, 3).
     """
     tris = np.asarray(tris, dtype=np.int64)
@@ -171,7 +178,7 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
                 towards_hole /= np.linalg.norm(towards_hole)
                 radius = np.arccos(np.clip(image_dirs @ towards_hole, -1.0, 1.0))  # (V,) radians
                 r_px = radius[tris].max(axis=1) / pixel_angle
-                wide = r_px * (1.0 - np.cos(0.5 * np.minimum(span, np.pi))) > max_error_px
+                wide = r_px * (1.0 - np.cos(0.5 * np.minimum(span, np.pi))) > SAGITTA_CULL_FACTOR * max_error_px
             else:
                 wide = span > AZIMUTH_SPAN_MAX
             ring = keep & (straddles | (ring & wide))
