@@ -258,7 +258,7 @@ RING_MAGNIFICATION = 2.0
 lying in a strongly lensed (Einstein-ring) region by :func:`_raise_ring_levels`."""
 
 
-RING_LEVEL_MARGIN = 1.0
+RING_LEVEL_MARGIN = 0.75
 """Fraction of the largest allowed azimuth per piece that :func:`_raise_ring_levels` aims at: pieces
 of a triangle subdivided uniformly in space cover unequal azimuths, and the culling test of the same
 bound (culling.cull) must not catch the widest of them."""
