@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .mapping import any_perpendicular
+
 
 @dataclass
 class CullReport:
@@ -32,7 +34,7 @@ class CullReport:
                 + self.below_pixel)
 
 
-def _circumference(d, tris):
+def circumference(d, tris):
     """Perimeter of each triangle on the unit view sphere, as the sum of its corners' chord lengths
     (dimensionless; equal to the sum of the angles in radians to second order for small triangles)."""
     a, b, c = d[tris[:, 0]], d[tris[:, 1]], d[tris[:, 2]]
@@ -67,6 +69,28 @@ with no level margin halves the triangles of the ring frames but doubles the pix
 sphere's second-order ring in front of the hole, docs/accuracy.md.)"""
 
 
+def hole_angle(directions, camera, hole) -> np.ndarray:
+    """Angle (radians) of unit ``directions`` (N, 3) from the camera's direction to the hole (BU)."""
+    towards_hole = np.asarray(hole, np.float64) - np.asarray(camera, np.float64)
+    towards_hole /= np.linalg.norm(towards_hole)
+    return np.arccos(np.clip(directions @ towards_hole, -1.0, 1.0))
+
+
+def ring_sagitta(radius, span):
+    """How far (same unit as ``radius``) the straight sides of a piece covering the azimuth ``span``
+    (radians about the observer-hole axis) fall inside a ring of angular radius ``radius`` around the
+    hole's direction: radius (1 - cos(span / 2)). The mapping keeps a point's angle about the axis,
+    so near an Einstein ring azimuth becomes position along the ring. :func:`max_ring_span` is its
+    inverse."""
+    return radius * (1.0 - np.cos(0.5 * np.minimum(span, np.pi)))
+
+
+def max_ring_span(radius, sagitta):
+    """The largest azimuth (radians) whose :func:`ring_sagitta` at ``radius`` stays within ``sagitta``:
+    2 arccos(1 - sagitta / radius) (2 pi when any azimuth would do)."""
+    return 2.0 * np.arccos(np.clip(1.0 - sagitta / radius, -1.0, 1.0))
+
+
 def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     """Per triangle: (straddles, span).
 
@@ -85,9 +109,7 @@ def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     tris = np.asarray(tris, dtype=np.int64)
     e1 = camera - hole
     e1 = e1 / np.linalg.norm(e1)
-    a = np.array([0.0, 0.0, 1.0]) if abs(e1[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    u = a - (a @ e1) * e1
-    u /= np.linalg.norm(u)
+    u = any_perpendicular(e1)
     v = np.cross(e1, u)
     p = np.asarray(source_points, dtype=np.float64) - hole
     x, y, z = p @ u, p @ v, p @ e1
@@ -163,23 +185,20 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     bad_v = ~(valid[tris[:, 0]] & valid[tris[:, 1]] & valid[tris[:, 2]])
     rep.invalid_vertex = int(bad_v.sum())
     keep &= ~bad_v
-    src_c = _circumference(unit_directions(source_points, camera), tris)
+    src_c = circumference(unit_directions(source_points, camera), tris)
     degenerate = keep & ~(src_c > 0)
     rep.degenerate_source = int(degenerate.sum())
     keep &= ~degenerate
     with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = _circumference(image_dirs, tris) / src_c
+        ratio = circumference(image_dirs, tris) / src_c
     ring = keep & ~(ratio <= cull_ratio)
     if hole is not None and order is not None:
         straddles, span = axis_geometry(source_points, tris, np.asarray(camera, np.float64),
                                         np.asarray(hole, np.float64), order, span_of=np.flatnonzero(ring))
         with np.errstate(invalid="ignore"):
             if pixel_angle and max_error_px:
-                towards_hole = np.asarray(hole, np.float64) - np.asarray(camera, np.float64)
-                towards_hole /= np.linalg.norm(towards_hole)
-                radius = np.arccos(np.clip(image_dirs @ towards_hole, -1.0, 1.0))  # (V,) radians
-                r_px = radius[tris].max(axis=1) / pixel_angle
-                wide = r_px * (1.0 - np.cos(0.5 * np.minimum(span, np.pi))) > SAGITTA_CULL_FACTOR * max_error_px
+                r_px = hole_angle(image_dirs, camera, hole)[tris].max(axis=1) / pixel_angle
+                wide = ring_sagitta(r_px, span) > SAGITTA_CULL_FACTOR * max_error_px
             else:
                 wide = span > AZIMUTH_SPAN_MAX
             ring = keep & (straddles | (ring & wide))

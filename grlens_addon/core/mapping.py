@@ -82,13 +82,15 @@ def plane_coordinates(points: np.ndarray, scene: Scene) -> PlaneCoordinates:
         n_perp = np.linalg.norm(perp, axis=1)
         r = np.linalg.norm(p, axis=1)
         on_axis = n_perp <= AXIS_EPS * r
-        fallback = _any_perpendicular(e1)
+        fallback = any_perpendicular(e1)
         e2 = np.where(on_axis[:, None], fallback, perp / n_perp[:, None])
         phi = np.arctan2(n_perp, along)
     return PlaneCoordinates(r=r, phi=phi, e2=e2, on_axis=on_axis)
 
 
-def _any_perpendicular(e1):
+def any_perpendicular(e1):
+    """A unit vector perpendicular to the unit vector ``e1`` (3,), chosen deterministically (from the z
+    axis, or the x axis when e1 is close to z)."""
     a = np.array([0.0, 0.0, 1.0]) if abs(e1[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
     v = a - (a @ e1) * e1
     return v / np.linalg.norm(v)

@@ -155,6 +155,9 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
     plane_v = mapping.plane_coordinates(src.positions, scene)
     planes = None if frustum_planes is None or not len(frustum_planes) else np.asarray(frustum_planes, np.float64)
     images_v = mapping.map_vertices_orders(src.positions, scene, lut, settings.orders, plane_v)
+    ring_levels = settings.pixel_angle and settings.max_error_px
+    if ring_levels:  # the undistorted circumferences, for _raise_ring_levels (the same for both orders)
+        src_circ = culling.circumference(culling.unit_directions(src.positions, scene.camera), src.tris)
     for order in settings.orders:
         img_v = images_v[order]
         d_a, d_b = img_v.direction[ev0], img_v.direction[ev1]
@@ -170,8 +173,8 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         rho[probe] = subdivision.rho(d_a[probe], d_b[probe], img_m.direction)
         levels = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
                                          chord, settings.pixel_angle, settings.max_error_px)
-        if settings.pixel_angle and settings.max_error_px:
-            _raise_ring_levels(levels, src, edges, scene, img_v, order, settings)
+        if ring_levels:
+            _raise_ring_levels(levels, src, src_circ, edges, scene, img_v, order, settings)
         tri_sel = _inside_frustum(img_v, img_m, probe, src.tris, edges, planes)
         n_pre = len(src.tris) - len(tri_sel)
         sub = subdivision.subdivide(src.positions, src.tris[tri_sel],
@@ -264,27 +267,26 @@ of a triangle subdivided uniformly in space cover unequal azimuths, and the cull
 bound (culling.cull) must not catch the widest of them."""
 
 
-def _raise_ring_levels(levels, src, edges, scene, img_v: mapping.Images, order, settings: Settings) -> None:
+def _raise_ring_levels(levels, src, src_circ, edges, scene, img_v: mapping.Images, order, settings: Settings) -> None:
     """Raise, in place, the edge levels of strongly magnified source triangles near the axis so that
-    their sub-triangles are narrow enough on screen (see culling.cull: the mapping keeps a point's
-    angle about the observer-hole axis, so a piece covering an azimuth d at an angular radius R from
-    the hole's direction has straight sides R (1 - cos(d/2)) inside the ring). A triangle covering D
-    gets level ceil(D / d_max), d_max = 2 arccos(1 - max_error_px / R_px), on all its edges (levels
-    are per edge, so neighbours stay crack-free). Capped at max_tess_level."""
+    their sub-triangles are narrow enough on screen (see culling.ring_sagitta: a piece covering an
+    azimuth d at an angular radius R from the hole's direction has straight sides R (1 - cos(d/2))
+    inside the ring). A triangle covering D gets level ceil(D / (RING_LEVEL_MARGIN d_max)),
+    d_max = culling.max_ring_span(R_px, max_error_px), on all its edges (levels are per edge, so
+    neighbours stay crack-free). Capped at max_tess_level. ``src_circ``: the source triangles'
+    undistorted circumferences (culling.circumference of their directions from the camera)."""
     top = int(np.clip(settings.max_tess_level, 1, subdivision.GRID))
     tris = src.tris
     d = img_v.direction
-    src_dirs = culling.unit_directions(src.positions, scene.camera)
     with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = culling._circumference(d, tris) / culling._circumference(src_dirs, tris)
+        ratio = culling.circumference(d, tris) / src_circ
     cand = np.flatnonzero(ratio > RING_MAGNIFICATION)
     if cand.size == 0:
         return
     _, span = culling.axis_geometry(src.positions, tris[cand], scene.camera, scene.hole, order)
     with np.errstate(invalid="ignore", divide="ignore"):
-        radius = np.arccos(np.clip(-(d @ scene.e1), -1.0, 1.0)) / settings.pixel_angle  # pixels
-        r_px = radius[tris[cand]].max(axis=1)
-        d_max = 2.0 * np.arccos(np.clip(1.0 - settings.max_error_px / r_px, -1.0, 1.0))
+        radius = culling.hole_angle(d, scene.camera, scene.hole) / settings.pixel_angle  # pixels
+        d_max = culling.max_ring_span(radius[tris[cand]].max(axis=1), settings.max_error_px)
         # the subdivision is uniform in space, not in azimuth: aim at RING_LEVEL_MARGIN of d_max
         want = np.clip(np.nan_to_num(np.ceil(span / (RING_LEVEL_MARGIN * d_max)), nan=1.0), 1, top)
         want = want.astype(levels.dtype)
@@ -321,9 +323,8 @@ def _inside_frustum(img_v: mapping.Images, img_m: mapping.Images, probe, tris, e
 
 
 def _map_subdivided(sub, n_pts, coarse: mapping.Images, scene, lut, order) -> mapping.Images:
-    # coarse: the images of the source vertices (indexed by welding keys < n_pts)
-    """Images of the subdivided vertices; source corners (welding keys < n_pts) reuse the coarse
-    mapping, only the new vertices are looked up."""
+    """Images of the subdivided vertices; source corners (welding keys < n_pts) reuse ``coarse``, the
+    images of the source vertices; only the new vertices are looked up."""
     is_corner = sub.vertex_key < n_pts
     if is_corner.all():
         idx = sub.vertex_key

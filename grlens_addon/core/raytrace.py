@@ -74,6 +74,7 @@ from scipy.special import ellipj
 from lutgen import orbit as _orb
 from lutgen.solver import check_observer_radius
 from .culling import side_planes
+from .mapping import any_perpendicular
 
 TWO_PI = 2.0 * np.pi
 _B_MIN = 1e-12  # impact parameters (r_s) below this are clamped (the ray is radial to rounding)
@@ -295,7 +296,7 @@ class Rays:
         cos_xi = np.clip(d @ self.e1, -1.0, 1.0)
         perp = d - cos_xi[:, None] * self.e1
         sin_xi = np.linalg.norm(perp, axis=1)
-        fallback = _any_perpendicular(self.e1)
+        fallback = any_perpendicular(self.e1)
         with np.errstate(invalid="ignore", divide="ignore"):
             self.e2 = np.where((sin_xi > 1e-300)[:, None], perp / sin_xi[:, None], fallback)
         self.normal = np.cross(self.e1, self.e2)
@@ -418,12 +419,6 @@ class Rays:
             u, _ = self.u(idx, phi)
         r = self.r_s / u
         return self.hole + r[:, None] * (np.cos(phi)[:, None] * self.e1 + np.sin(phi)[:, None] * self.e2[idx])
-
-
-def _any_perpendicular(e1):
-    a = np.array([0.0, 0.0, 1.0]) if abs(e1[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    v = a - (a @ e1) * e1
-    return v / np.linalg.norm(v)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -707,7 +702,7 @@ def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, pair_chun
     best_phi = np.full(m, np.inf)
     best_tri = np.full(m, -1, np.int64)
     if len(V):
-        f1 = _any_perpendicular(rays.e1)
+        f1 = any_perpendicular(rays.e1)
         f2 = np.cross(rays.e1, f1)
         ct, st = rays.e2 @ f1, rays.e2 @ f2
         beta = np.mod(np.arctan2(st, ct), np.pi)
