@@ -335,3 +335,74 @@ def test_pipeline_thin_disc_emitter(lut):
         np.testing.assert_allclose(img.redshift, expect, rtol=1e-9)
         assert img.disc_colour.shape == (len(img.positions), 3) and np.all(img.disc_colour >= 0)
         assert img.redshift.min() < 1.0 < img.redshift.max()
+
+
+def test_near_axis_is_a_superset_of_the_crossed_triangles():
+    """culling.near_axis never misses a triangle (or a sub-triangle of one) that the axis crosses, and
+    excludes triangles away from the axis; non-finite corners count as candidates."""
+    rng = np.random.default_rng(5)
+    cam, hole = CAMERA, np.array([0.3, -0.2, 0.1])
+    axis = (cam - hole) / np.linalg.norm(cam - hole)
+    # small triangles scattered around the axis, some touching it exactly
+    centres = hole + axis * rng.uniform(-20, 20, 4000)[:, None] + rng.normal(scale=0.3, size=(4000, 3))
+    pts = (centres[:, None, :] + rng.normal(scale=0.3, size=(4000, 3, 3))).reshape(-1, 3)
+    pts[:30] = hole + axis * rng.uniform(-20, 20, 30)[:, None]  # corners exactly on the axis
+    tris = np.arange(len(pts)).reshape(-1, 3)
+    cand = culling.near_axis(pts, tris, cam, hole)
+    for order in (1, 2):
+        crossed, _ = culling.axis_geometry(pts, tris, cam, hole, order)
+        assert crossed.sum() > 100 and not np.any(crossed & ~cand)
+    assert 0.2 < cand.mean() < 0.9  # it does exclude the ones beside the axis
+    # sub-triangles of an unsplit-then-split mesh
+    E = subdivision.mesh_edges(tris)
+    S = subdivision.subdivide(pts, tris, E, rng.integers(1, 9, len(E.verts)))
+    sub_crossed, _ = culling.axis_geometry(S.positions, S.tris, cam, hole, 2)
+    assert sub_crossed.any() and not np.any(sub_crossed & ~cand[S.source_tri])
+    bad = pts.copy()
+    bad[0] = np.nan
+    assert culling.near_axis(bad, tris, cam, hole)[0]
+
+
+def test_cull_with_precomputed_values_is_the_same(lut):
+    """culling.cull gives the same mask and counts whether the circumferences, frustum bits and axis
+    candidates are passed in or computed by itself (a sphere behind the hole: ring, straddling and
+    frustum culling all happen)."""
+    scene = mapping.Scene(CAMERA, HOLE, R_S)
+    pts, tris = _sphere(np.array([-3.0 * R_S, 0.1, 0.02 * R_S]), segments=48, rings=24)
+    planes = np.array([[0.0, 0.0, 1.0, 0.0]])  # z >= 0
+    pix = np.radians(19.0) / 360
+    for order in (1, 2):
+        img = mapping.map_vertices(pts, scene, lut, order)
+        args = (tris, img.direction, img.valid, pts, CAMERA, 4.0, planes, img.position, HOLE, order, pix, 0.25)
+        keep, rep = culling.cull(*args)
+        fast_keep, fast_rep = culling.cull(
+            *args, source_circumference=culling.circumference(culling.unit_directions(pts, CAMERA), tris),
+            image_circumference=culling.circumference(img.direction, tris),
+            image_outside_bits=culling.outside_bits(img.position, planes),
+            axis_candidates=culling.near_axis(pts, tris, CAMERA, HOLE))
+        assert rep.einstein_ring > 0 and rep.outside_frustum > 0 and rep.kept > 0
+        assert np.array_equal(keep, fast_keep) and rep == fast_rep
+
+
+def test_frustum_pre_cull_matches_brute_force(lut):
+    """pipeline._inside_frustum (corners first, midpoints only where the corners agree) keeps exactly
+    the source triangles a brute-force test of all corners and edge midpoints keeps."""
+    from grlens_addon.core import pipeline
+
+    rng = np.random.default_rng(9)
+    scene = mapping.Scene(CAMERA, HOLE, R_S)
+    pts, tris = _sphere(np.array([-3.0 * R_S, 1.0 * R_S, 0.02]), segments=40, rings=20)
+    edges = subdivision.mesh_edges(tris)
+    img_v = mapping.map_vertices(pts, scene, lut, 1)
+    probe = np.sort(rng.choice(len(edges.verts), len(edges.verts) // 2, replace=False))
+    mids = 0.5 * (pts[edges.verts[probe, 0]] + pts[edges.verts[probe, 1]])
+    img_m = mapping.map_vertices(mids, scene, lut, 1)
+    planes = np.array([[0.0, 0.0, 1.0, -0.05], [0.0, 1.0, 0.0, -1.0]])
+    sel, out_v = pipeline._inside_frustum(img_v, img_m, probe, tris, edges, planes)
+    mid = 0.5 * (img_v.position[edges.verts[:, 0]] + img_v.position[edges.verts[:, 1]])
+    mid[probe] = img_m.position
+    pts_of = np.concatenate([img_v.position[tris], mid[edges.of_tri]], axis=1)  # (T, 6, 3)
+    out = (np.einsum("tpx,kx->tpk", pts_of, planes[:, :3]) + planes[:, 3] < 0).all(axis=1).any(axis=1)
+    assert 0 < out.sum() < len(tris)
+    assert np.array_equal(sel, np.flatnonzero(~out))
+    assert np.array_equal(out_v, culling.outside_bits(img_v.position, planes))

@@ -136,6 +136,26 @@ def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     return straddles, span
 
 
+def near_axis(source_points, tris, camera, hole, margin=1e-9) -> np.ndarray:
+    """(F,) bool: triangles that may be crossed by the observer-hole axis: False only for those whose
+    corners all lie, by more than ``margin`` times their distance from the hole, on one side of one of
+    two perpendicular planes through the axis. A superset of the triangles :func:`axis_geometry`
+    finds crossed, and of every sub-triangle of theirs (sub-triangles lie inside their source
+    triangle), for ``cull(..., axis_candidates=...)``. Non-finite corners make a candidate."""
+    tris = np.asarray(tris, dtype=np.int64)
+    e1 = np.asarray(camera, np.float64) - hole
+    e1 = e1 / np.linalg.norm(e1)
+    u = any_perpendicular(e1)
+    v = np.cross(e1, u)
+    p = np.asarray(source_points, dtype=np.float64) - hole
+    x, y = p @ u, p @ v
+    tol = margin * np.linalg.norm(p, axis=1)
+    with np.errstate(invalid="ignore"):  # NaN compares False: no side, so never excluded
+        side = ((x > tol).astype(np.uint8) | ((x < -tol).astype(np.uint8) << 1)
+                | ((y > tol).astype(np.uint8) << 2) | ((y < -tol).astype(np.uint8) << 3))
+    return (side[tris[:, 0]] & side[tris[:, 1]] & side[tris[:, 2]]) == 0
+
+
 def side_planes(origin, corner_directions) -> np.ndarray:
     """(4, 4) planes (n, d), n . x + d >= 0 inside, through ``origin`` (3,; BU) and consecutive pairs of
     the four ``corner_directions`` (4, 3) of a pyramid (a camera frustum without near and far
@@ -155,13 +175,17 @@ def outside_bits(points, planes) -> np.ndarray:
     every plane (0), so they are never culled by the frustum. A triangle is wholly outside one plane
     exactly when the bitwise AND of its corners' values is nonzero."""
     planes = np.asarray(planes, dtype=np.float64)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    bits = np.zeros(len(points), dtype=np.int64)
     with np.errstate(invalid="ignore"):
-        side = points @ planes[:, :3].T + planes[:, 3] < 0  # (N, K), NaN -> False
-    return side.astype(np.int64) @ (np.int64(1) << np.arange(len(planes), dtype=np.int64))
+        for k, (n, d) in enumerate(zip(planes[:, :3], planes[:, 3])):
+            bits |= (points @ n + d < 0).astype(np.int64) << k  # NaN -> False (inside)
+    return bits
 
 
 def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_planes=None, image_points=None,
-         hole=None, order=None, pixel_angle=None, max_error_px=None):
+         hole=None, order=None, pixel_angle=None, max_error_px=None, *, source_circumference=None,
+         image_circumference=None, image_outside_bits=None, axis_candidates=None):
     """Mask of image triangles to keep, and a :class:`CullReport`.
 
     tris (F, 3) index the per-vertex arrays: image_dirs (V, 3) unit apparent directions of the images,
@@ -178,6 +202,12 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     R (1 - cos(D/2)) inside the ring; such magnified triangles are culled when that exceeds
     SAGITTA_CULL_FACTOR * ``max_error_px`` pixels (else when D > AZIMUTH_SPAN_MAX).
     ``frustum_planes`` (K, 4): rows (n, d) with n . x + d >= 0 inside, applied to ``image_points`` (V, 3).
+
+    Values the caller already has can be passed instead of being computed here (the result is the
+    same): ``source_circumference`` and ``image_circumference`` (F,), :func:`circumference` of the
+    undistorted and image directions; ``image_outside_bits`` (V,), :func:`outside_bits` of
+    ``image_points``; ``axis_candidates`` (F,) bool, a superset of the triangles the axis may pass
+    through (e.g. from :func:`near_axis` of their source triangles; others are not tested).
     """
     tris = np.asarray(tris, dtype=np.int64)
     rep = CullReport()
@@ -185,19 +215,29 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     bad_v = ~(valid[tris[:, 0]] & valid[tris[:, 1]] & valid[tris[:, 2]])
     rep.invalid_vertex = int(bad_v.sum())
     keep &= ~bad_v
-    src_c = circumference(unit_directions(source_points, camera), tris)
+    src_c = source_circumference
+    if src_c is None:
+        src_c = circumference(unit_directions(source_points, camera), tris)
     degenerate = keep & ~(src_c > 0)
     rep.degenerate_source = int(degenerate.sum())
     keep &= ~degenerate
+    img_c = circumference(image_dirs, tris) if image_circumference is None else image_circumference
     with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = circumference(image_dirs, tris) / src_c
+        ratio = img_c / src_c
     ring = keep & ~(ratio <= cull_ratio)
     if hole is not None and order is not None:
-        straddles, span = axis_geometry(source_points, tris, np.asarray(camera, np.float64),
-                                        np.asarray(hole, np.float64), order, span_of=np.flatnonzero(ring))
+        # the axis test and the azimuth span only where they can matter: candidates and ring triangles
+        test = ring if axis_candidates is None else ring | axis_candidates
+        sel = np.arange(len(tris)) if axis_candidates is None else np.flatnonzero(test)
+        straddles = np.zeros(len(tris), dtype=bool)
+        span = np.full(len(tris), np.nan)
+        straddles[sel], span[sel] = axis_geometry(source_points, tris[sel], np.asarray(camera, np.float64),
+                                                  np.asarray(hole, np.float64), order,
+                                                  span_of=np.flatnonzero(ring[sel]))
         with np.errstate(invalid="ignore"):
             if pixel_angle and max_error_px:
-                r_px = hole_angle(image_dirs, camera, hole)[tris].max(axis=1) / pixel_angle
+                r_px = np.full(len(tris), np.nan)
+                r_px[sel] = hole_angle(image_dirs, camera, hole)[tris[sel]].max(axis=1) / pixel_angle
                 wide = ring_sagitta(r_px, span) > SAGITTA_CULL_FACTOR * max_error_px
             else:
                 wide = span > AZIMUTH_SPAN_MAX
@@ -205,7 +245,7 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     rep.einstein_ring = int(ring.sum())
     keep &= ~ring
     if frustum_planes is not None and image_points is not None and len(frustum_planes):
-        bits = outside_bits(image_points, frustum_planes)
+        bits = outside_bits(image_points, frustum_planes) if image_outside_bits is None else image_outside_bits
         outside = (bits[tris[:, 0]] & bits[tris[:, 1]] & bits[tris[:, 2]]) != 0  # all 3 behind one plane
         out = keep & outside
         rep.outside_frustum = int(out.sum())

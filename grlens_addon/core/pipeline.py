@@ -114,11 +114,15 @@ def _clean(src: SourceMesh):
         raise ValueError(f"triangle indices must be integers, got {tris.dtype}")
     tris = tris.astype(np.int64, copy=False)
     pos = np.asarray(src.positions, dtype=np.float64).reshape(-1, 3)
-    in_range = ((tris >= 0) & (tris < len(pos))).all(axis=1)
-    safe = np.where(in_range[:, None], tris, 0)
-    finite = np.all(np.isfinite(pos), axis=1)
-    ok = in_range & (finite[safe].all(axis=1) if len(tris) and len(pos) else np.zeros(len(tris), bool))
-    ok &= (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 2] != tris[:, 0])
+    t0, t1, t2 = tris[:, 0], tris[:, 1], tris[:, 2]
+    in_range = (np.minimum(np.minimum(t0, t1), t2) >= 0) & (np.maximum(np.maximum(t0, t1), t2) < len(pos))
+    finite = np.isfinite(pos[:, 0]) & np.isfinite(pos[:, 1]) & np.isfinite(pos[:, 2])
+    if len(tris) and len(pos):
+        s0, s1, s2 = (np.where(in_range, t, 0) for t in (t0, t1, t2))
+        ok = in_range & finite[s0] & finite[s1] & finite[s2]
+    else:
+        ok = np.zeros(len(tris), bool)
+    ok &= (t0 != t1) & (t1 != t2) & (t2 != t0)
 
     all_ok = bool(ok.all())
 
@@ -151,38 +155,55 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
     edges = _edges_of(src.tris)
     n_pts = len(src.positions)
     ev0, ev1 = edges.verts[:, 0], edges.verts[:, 1]
-    mids = 0.5 * (src.positions[ev0] + src.positions[ev1])
     plane_v = mapping.plane_coordinates(src.positions, scene)
     planes = None if frustum_planes is None or not len(frustum_planes) else np.asarray(frustum_planes, np.float64)
     images_v = mapping.map_vertices_orders(src.positions, scene, lut, settings.orders, plane_v)
     ring_levels = settings.pixel_angle and settings.max_error_px
-    if ring_levels:  # the undistorted circumferences, for _raise_ring_levels (the same for both orders)
-        src_circ = culling.circumference(culling.unit_directions(src.positions, scene.camera), src.tris)
+    # per source triangle, the same for both orders: undistorted circumference (from its edges' chords
+    # on the view sphere), and whether the observer-hole axis may pass through it
+    src_circ = _circumference_from_edges(
+        _chord_lengths(culling.unit_directions(src.positions, scene.camera), edges.verts), edges.of_tri)
+    src_near_axis = culling.near_axis(src.positions, src.tris, scene.camera, scene.hole)
     for order in settings.orders:
         img_v = images_v[order]
-        d_a, d_b = img_v.direction[ev0], img_v.direction[ev1]
-        chord = subdivision.chord_angle(d_a, d_b)
+        img_chord_len = _chord_lengths(img_v.direction, edges.verts)
+        img_circ = _circumference_from_edges(img_chord_len, edges.of_tri)
+        chord = 2.0 * np.arcsin(np.clip(0.5 * img_chord_len, 0.0, 1.0))  # subdivision.chord_angle
         # edge midpoints are mapped only where a level above 1 is possible: an edge whose image spans
         # at most one pixel keeps level 1 whatever its curvature (see subdivision.edge_levels)
         probe = np.flatnonzero(~(chord <= settings.pixel_angle)) if settings.pixel_angle else np.arange(len(ev0))
-        img_m = mapping.map_vertices(mids[probe], scene, lut, order)
+        p0, p1 = ev0[probe], ev1[probe]
+        img_m = mapping.map_vertices(0.5 * (src.positions[p0] + src.positions[p1]), scene, lut, order)
         if order == 2 and _below_pixel(img_v, img_m, settings.pixel_angle):
             out[order] = _empty(order, n_bad, below_pixel=len(src.tris))
             continue
-        rho = np.zeros(len(ev0))
-        rho[probe] = subdivision.rho(d_a[probe], d_b[probe], img_m.direction)
-        levels = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
-                                         chord, settings.pixel_angle, settings.max_error_px)
+        rho = subdivision.rho(img_v.direction[p0], img_v.direction[p1], img_m.direction)
+        levels = np.ones(len(ev0), dtype=np.int64)  # edges not probed keep level 1
+        levels[probe] = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
+                                                chord[probe], settings.pixel_angle, settings.max_error_px)
         if ring_levels:
-            _raise_ring_levels(levels, src, src_circ, edges, scene, img_v, order, settings)
-        tri_sel = _inside_frustum(img_v, img_m, probe, src.tris, edges, planes)
+            _raise_ring_levels(levels, src, src_circ, img_circ, edges, scene, img_v, order, settings)
+        tri_sel, out_v = _inside_frustum(img_v, img_m, probe, src.tris, edges, planes)
         n_pre = len(src.tris) - len(tri_sel)
         sub = subdivision.subdivide(src.positions, src.tris[tri_sel],
                                     subdivision.Edges(edges.verts, edges.of_tri[tri_sel]), levels)
         img = _map_subdivided(sub, n_pts, img_v, scene, lut, order)
-        keep, report = culling.cull(sub.tris, img.direction, img.valid, sub.positions, scene.camera,
-                                    settings.cull_ratio, planes, img.position, scene.hole, order,
-                                    settings.pixel_angle, settings.max_error_px)
+        face_src = tri_sel[sub.source_tri]  # each face's source triangle (index into src.tris)
+        is_corner = sub.vertex_key < n_pts
+        bits = None
+        if out_v is not None:  # frustum bits of the subdivided vertices: the corners' are known
+            bits = out_v[sub.vertex_key] if is_corner.all() else np.where(
+                is_corner, out_v[np.minimum(sub.vertex_key, n_pts - 1)], 0)
+            if not is_corner.all():
+                bits[~is_corner] = culling.outside_bits(img.position[~is_corner], planes)
+        keep, report = culling.cull(
+            sub.tris, img.direction, img.valid, sub.positions, scene.camera, settings.cull_ratio, planes,
+            img.position, scene.hole, order, settings.pixel_angle, settings.max_error_px,
+            source_circumference=_face_values(sub, face_src, src_circ, lambda t: culling.circumference(
+                culling.unit_directions(sub.positions, scene.camera), t)),
+            image_circumference=_face_values(sub, face_src, img_circ,
+                                             lambda t: culling.circumference(img.direction, t)),
+            image_outside_bits=bits, axis_candidates=src_near_axis[face_src])
         report.outside_frustum += n_pre
         report.extra["bad_source_triangles"] = n_bad
         everything = bool(keep.all())
@@ -194,7 +215,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             remap = np.full(len(sub.positions), -1, dtype=np.int64)
             remap[used] = np.arange(used.size)
             image_tris = remap[tris]
-        src_tri = tri_sel[sub.source_tri if everything else sub.source_tri[keep]]
+        src_tri = face_src if everything else face_src[keep]
         bary = None if sub.identity else (sub.bary if everything else sub.bary[keep])
         corner_uv = None
         if src.corner_uv is not None:
@@ -241,6 +262,29 @@ def _edges_of(tris) -> subdivision.Edges:
     return edges
 
 
+def _chord_lengths(directions, edge_verts) -> np.ndarray:
+    """(E,) chord length between the unit ``directions`` of each edge's end points (dimensionless)."""
+    w = directions[edge_verts[:, 1]] - directions[edge_verts[:, 0]]
+    return np.sqrt(np.einsum("ij,ij->i", w, w))
+
+
+def _circumference_from_edges(chord_lengths, of_tri) -> np.ndarray:
+    """(T,) culling.circumference of the triangles, from the chord lengths of their edges."""
+    return chord_lengths[of_tri[:, 0]] + chord_lengths[of_tri[:, 1]] + chord_lengths[of_tri[:, 2]]
+
+
+def _face_values(sub: subdivision.Subdivided, face_src, per_source, compute) -> np.ndarray:
+    """(F,) a per-triangle quantity for the faces of ``sub``: taken from ``per_source`` (indexed by
+    ``face_src``) for the faces passed through unsplit, ``compute(tris)`` for the split ones."""
+    n = sub.n_pass
+    if n == len(sub.tris):
+        return per_source[face_src]
+    out = np.empty(len(sub.tris))
+    out[:n] = per_source[face_src[:n]]
+    out[n:] = compute(sub.tris[n:])
+    return out
+
+
 def _used_vertices(tris, n_vertices) -> np.ndarray:
     """Sorted indices of the vertices referenced by ``tris`` (like np.unique, without sorting)."""
     mask = np.zeros(n_vertices, dtype=bool)
@@ -267,19 +311,20 @@ of a triangle subdivided uniformly in space cover unequal azimuths, and the cull
 bound (culling.cull) must not catch the widest of them."""
 
 
-def _raise_ring_levels(levels, src, src_circ, edges, scene, img_v: mapping.Images, order, settings: Settings) -> None:
+def _raise_ring_levels(levels, src, src_circ, img_circ, edges, scene, img_v: mapping.Images, order,
+                       settings: Settings) -> None:
     """Raise, in place, the edge levels of strongly magnified source triangles near the axis so that
     their sub-triangles are narrow enough on screen (see culling.ring_sagitta: a piece covering an
     azimuth d at an angular radius R from the hole's direction has straight sides R (1 - cos(d/2))
     inside the ring). A triangle covering D gets level ceil(D / (RING_LEVEL_MARGIN d_max)),
     d_max = culling.max_ring_span(R_px, max_error_px), on all its edges (levels are per edge, so
-    neighbours stay crack-free). Capped at max_tess_level. ``src_circ``: the source triangles'
-    undistorted circumferences (culling.circumference of their directions from the camera)."""
+    neighbours stay crack-free). Capped at max_tess_level. ``src_circ``, ``img_circ``: the source
+    triangles' circumferences (culling.circumference) undistorted and of this order's image."""
     top = int(np.clip(settings.max_tess_level, 1, subdivision.GRID))
     tris = src.tris
     d = img_v.direction
     with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = culling.circumference(d, tris) / src_circ
+        ratio = img_circ / src_circ
     cand = np.flatnonzero(ratio > RING_MAGNIFICATION)
     if cand.size == 0:
         return
@@ -306,20 +351,34 @@ def _below_pixel(img_v: mapping.Images, img_m: mapping.Images, pixel_angle) -> b
     return bool(np.max(subdivision.chord_angle(d, np.broadcast_to(centre, d.shape))) * 2.0 < pixel_angle)
 
 
-def _inside_frustum(img_v: mapping.Images, img_m: mapping.Images, probe, tris, edges, planes) -> np.ndarray:
+def _inside_frustum(img_v: mapping.Images, img_m: mapping.Images, probe, tris, edges, planes):
     """Indices of the source triangles to subdivide: all of them, or with a frustum those not having
-    their three corners and three edge midpoints all mapped outside one frustum plane. Midpoints not
+    their three corners and three edge midpoints all mapped outside one frustum plane; and the
+    culling.outside_bits of the source vertices' images (None without a frustum). Midpoints not
     probed (edges within a pixel) are taken as the mean of their end points' images; points without
-    an image count as inside, so culling reports them under their own reason."""
+    an image count as inside, so culling reports them under their own reason. Midpoints are tested
+    only for triangles whose corners are all outside one plane."""
     if planes is None:
-        return np.arange(len(tris))
-    mid = 0.5 * (img_v.position[edges.verts[:, 0]] + img_v.position[edges.verts[:, 1]])
-    mid[probe] = img_m.position
+        return np.arange(len(tris)), None
     out_v = culling.outside_bits(img_v.position, planes)  # (N,) bit k: outside plane k
-    out_m = culling.outside_bits(mid, planes)  # (E,)
     t, e = tris, edges.of_tri
-    outside = out_v[t[:, 0]] & out_v[t[:, 1]] & out_v[t[:, 2]] & out_m[e[:, 0]] & out_m[e[:, 1]] & out_m[e[:, 2]]
-    return np.flatnonzero(outside == 0)
+    common = out_v[t[:, 0]] & out_v[t[:, 1]] & out_v[t[:, 2]]
+    cand = np.flatnonzero(common)
+    if cand.size == 0:
+        return np.arange(len(tris)), out_v
+    cand_edges, slot = np.unique(e[cand], return_inverse=True)
+    slot = slot.reshape(-1, 3)
+    ev = edges.verts[cand_edges]
+    mid = 0.5 * (img_v.position[ev[:, 0]] + img_v.position[ev[:, 1]])
+    probe_row = np.searchsorted(probe, cand_edges)  # probe is sorted: where each candidate edge would be
+    probed = probe_row < len(probe)
+    probed[probed] = probe[probe_row[probed]] == cand_edges[probed]
+    mid[probed] = img_m.position[probe_row[probed]]
+    out_m = culling.outside_bits(mid, planes)
+    outside = common[cand] & out_m[slot[:, 0]] & out_m[slot[:, 1]] & out_m[slot[:, 2]]
+    inside = np.ones(len(tris), dtype=bool)
+    inside[cand[outside != 0]] = False
+    return np.flatnonzero(inside), out_v
 
 
 def _map_subdivided(sub, n_pts, coarse: mapping.Images, scene, lut, order) -> mapping.Images:

@@ -140,7 +140,9 @@ class Subdivided:
     bary: (F, 3, 3) barycentric coordinates of each face corner in its source triangle (for UVs,
     normals and other corner attributes);
     vertex_key: (V,) the welding keys (stable for unchanged topology and levels);
-    identity: True when nothing was split (all levels 1): positions, tris and bary are the source's.
+    identity: True when nothing was split (all levels 1): positions, tris and bary are the source's;
+    n_pass: the first n_pass faces are source triangles passed through unsplit (level 1 on all edges),
+    so their corners are source vertices and per-triangle values of the source apply to them.
     """
 
     positions: np.ndarray
@@ -149,6 +151,7 @@ class Subdivided:
     bary: np.ndarray
     vertex_key: np.ndarray
     identity: bool = False
+    n_pass: int = 0
 
 
 def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.ndarray) -> Subdivided:
@@ -157,11 +160,12 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     points = np.asarray(points, dtype=np.float64)
     tris = np.asarray(tris, dtype=np.int64)
     n_pts, n_edges = len(points), len(edges.verts)
-    tri_level = levels[edges.of_tri].max(axis=1) if len(tris) else np.zeros(0, np.int64)
+    lev = levels[edges.of_tri]
+    tri_level = np.maximum(np.maximum(lev[:, 0], lev[:, 1]), lev[:, 2])
     if len(tris) and tri_level.max() == 1:  # nothing to split: the source itself
         return Subdivided(positions=points, tris=tris.copy(), source_tri=np.arange(len(tris)),
                           bary=np.broadcast_to(np.eye(3), (len(tris), 3, 3)), vertex_key=np.arange(n_pts),
-                          identity=True)
+                          identity=True, n_pass=len(tris))
     face_parts, src_parts, bary_parts, other_key_parts, other_pos_parts = [], [], [], [], []
     interior_base = n_pts + n_edges * (GRID + 1)
     for L in np.unique(tri_level):
@@ -233,6 +237,8 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     faces = np.where(corner_face, index[np.minimum(face_keys, n_pts - 1)],
                      corners.size + np.searchsorted(uniq, face_keys))
     keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
+    n_unsplit = int(np.count_nonzero(tri_level == 1))  # np.unique put level 1 first
+    n_pass = n_unsplit if keep[:n_unsplit].all() else 0
     return Subdivided(positions=np.concatenate([points[corners], other_pos]), tris=faces[keep],
                       source_tri=np.concatenate(src_parts)[keep], bary=np.concatenate(bary_parts)[keep],
-                      vertex_key=np.concatenate([corners, uniq]))
+                      vertex_key=np.concatenate([corners, uniq]), n_pass=n_pass)
