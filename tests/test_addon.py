@@ -485,3 +485,80 @@ def test_demo_orbit_is_uniform():
         scene.frame_set(frame)
         p = sphere.matrix_world.translation
         assert math.isclose(math.degrees(math.atan2(-p.x, p.y)), deg, abs_tol=1e-3)
+
+
+def _loop_triangle_reference(obj):
+    """World positions, triangles (vertex indices), corner UVs and material indices through Blender's
+    own loop_triangles API (the slow path _extract avoids)."""
+    me = obj.data
+    me.calc_loop_triangles()
+    n_t = len(me.loop_triangles)
+    tris = np.empty(3 * n_t, np.int32)
+    me.loop_triangles.foreach_get("vertices", tris)
+    loops = np.empty(3 * n_t, np.int32)
+    me.loop_triangles.foreach_get("loops", loops)
+    mat = np.empty(n_t, np.int32)
+    me.loop_triangles.foreach_get("material_index", mat)
+    uv = np.empty(2 * len(me.loops), np.float32)
+    me.uv_layers.active.uv.foreach_get("vector", uv)
+    return tris.reshape(-1, 3), uv.reshape(-1, 2)[loops].reshape(-1, 3, 2), mat
+
+
+@pytest.mark.parametrize("kind", ["uv_sphere", "folded_quads", "ngons", "mixed_materials"])
+def test_extract_matches_blenders_loop_triangles(kind):
+    """rebuild._extract derives the triangles' corners from the attribute arrays (core.triangulate);
+    they are Blender's own loop triangles, for triangles, quads (folded ones split on the other
+    diagonal, as Blender does) and, through the fallback, n-gons; UVs and material indices follow."""
+    import bmesh
+
+    from grlens_addon.blender import rebuild
+
+    me = bpy.data.meshes.new(kind)
+    bm = bmesh.new()
+    uv_layer = bm.loops.layers.uv.new("UVMap")
+    if kind in ("uv_sphere", "mixed_materials"):
+        bmesh.ops.create_uvsphere(bm, u_segments=24, v_segments=12, radius=1.0, calc_uvs=True)
+    elif kind == "folded_quads":
+        rng = np.random.default_rng(3)
+        bmesh.ops.create_grid(bm, x_segments=12, y_segments=12, size=1.0, calc_uvs=True)
+        for v in bm.verts:  # strong random displacement: many quads fold over a diagonal
+            v.co.x += rng.normal(scale=0.12)
+            v.co.y += rng.normal(scale=0.12)
+            v.co.z += rng.normal(scale=0.3)
+    else:
+        bmesh.ops.create_circle(bm, cap_ends=True, segments=9, radius=1.0, calc_uvs=True)
+        bmesh.ops.create_cone(bm, cap_ends=True, segments=7, radius1=1.0, radius2=0.5, depth=1.0,
+                              calc_uvs=True)
+    for i, f in enumerate(bm.faces):
+        for loop in f.loops:
+            loop[uv_layer].uv = (0.01 * i + 0.1 * loop.vert.index % 1.0, 0.5 * (i % 3))
+        if kind == "mixed_materials":
+            f.material_index = i % 3
+    bm.to_mesh(me)
+    bm.free()
+    obj = bpy.data.objects.new(kind, me)
+    bpy.context.scene.collection.objects.link(obj)
+    obj.location = (1.0, 2.0, 3.0)
+    obj.rotation_euler = (0.3, 0.2, 0.1)
+    obj.scale = (1.0, 2.0, 0.5)
+    dg = bpy.context.evaluated_depsgraph_get()
+    mesh = rebuild._extract(obj.evaluated_get(dg), with_normals=True)
+    tris, uv, mat = _loop_triangle_reference(obj)
+    assert np.array_equal(mesh.tris, tris)
+    assert np.array_equal(mesh.corner_uv, uv.astype(np.float64))
+    assert np.array_equal(mesh.material, mat)
+    local = np.array([v.co[:] for v in me.vertices])
+    world = local @ np.array(obj.matrix_world)[:3, :3].T + np.array(obj.matrix_world)[:3, 3]
+    np.testing.assert_allclose(mesh.positions, world, atol=1e-5)
+    assert mesh.corner_normals.shape == (len(tris), 3, 3)
+    if kind == "mixed_materials":
+        assert set(np.unique(mat)) == {0, 1, 2}
+    if kind == "folded_quads":  # the test does cover folded quads
+        from grlens_addon.core import triangulate
+
+        fan = triangulate.tri_corners(np.repeat(np.arange(len(me.polygons)), 2), len(me.polygons),
+                                      np.arange(4 * len(me.polygons)), np.zeros((4 * len(me.polygons), 3)))
+        me.calc_loop_triangles()
+        loops = np.empty(3 * len(me.loop_triangles), np.int32)
+        me.loop_triangles.foreach_get("loops", loops)
+        assert (loops.reshape(-1, 3) != fan).any(axis=1).sum() > 5

@@ -8,13 +8,13 @@ restored when they are not: see _set_source_visibility). Units: Blender units; r
 """
 from __future__ import annotations
 
-import hashlib
 import math
+import uuid
 
 import bpy
 import numpy as np
 
-from ..core import culling, mapping, pipeline
+from ..core import culling, mapping, pipeline, triangulate
 from . import lutcache, shading, upload
 
 COLLECTION = "grlens"
@@ -43,36 +43,49 @@ def sources(scene):
 
 def _extract(obj_eval, with_normals: bool = True) -> pipeline.SourceMesh:
     """World-space triangles, corner UVs, material indices and (only GR illumination
-    uses them: ``with_normals``) corner normals of an evaluated object."""
+    uses them: ``with_normals``) corner normals of an evaluated object. Reads Blender's attribute
+    arrays (memory speed) and derives the triangles' corners from them (core.triangulate); only
+    meshes with n-gons use the slower per-triangle API."""
     me = obj_eval.to_mesh()
     try:
-        me.calc_loop_triangles()
-        n_v, n_t = len(me.vertices), len(me.loop_triangles)
+        n_v, n_l, n_p = len(me.vertices), len(me.loops), len(me.polygons)
         co = np.empty(3 * n_v, dtype=np.float32)
-        me.vertices.foreach_get("co", co)
+        me.attributes["position"].data.foreach_get("vector", co)
+        co = co.reshape(-1, 3).astype(np.float64)
         mw = np.array(obj_eval.matrix_world, dtype=np.float64)
-        pos = co.reshape(-1, 3).astype(np.float64) @ mw[:3, :3].T + mw[:3, 3]
-        tris = np.empty(3 * n_t, dtype=np.int32)
-        me.loop_triangles.foreach_get("vertices", tris)
-        loops = np.empty(3 * n_t, dtype=np.int32)
-        me.loop_triangles.foreach_get("loops", loops)
-        mat = np.empty(n_t, dtype=np.int32)
-        me.loop_triangles.foreach_get("material_index", mat)
+        pos = co @ mw[:3, :3].T + mw[:3, 3]
+        n_t = len(me.loop_triangle_polygons)
+        tri_poly = np.empty(n_t, dtype=np.int32)
+        me.loop_triangle_polygons.foreach_get("value", tri_poly)
+        corner_vert = np.empty(n_l, dtype=np.int32)
+        if n_l:
+            me.attributes[".corner_vert"].data.foreach_get("value", corner_vert)
+        loops = triangulate.tri_corners(tri_poly, n_p, corner_vert, co)
+        if loops is None:  # n-gons: Blender's own polygon fill
+            loops = np.empty(3 * n_t, dtype=np.int32)
+            me.loop_triangles.foreach_get("loops", loops)
+        loops = loops.reshape(-1).astype(np.int64)
+        tris = corner_vert[loops].reshape(-1, 3).astype(np.int64)
+        mat = np.zeros(n_t, dtype=np.int64)
+        mi = me.attributes.get("material_index")
+        if mi is not None and n_p and mi.domain == "FACE":
+            poly_mat = np.empty(n_p, dtype=np.int32)
+            mi.data.foreach_get("value", poly_mat)
+            mat = poly_mat[tri_poly].astype(np.int64)
         corner_uv = None
-        if me.uv_layers.active is not None and len(me.loops):
-            uv = np.empty(2 * len(me.loops), dtype=np.float32)
+        if me.uv_layers.active is not None and n_l:
+            uv = np.empty(2 * n_l, dtype=np.float32)
             me.uv_layers.active.uv.foreach_get("vector", uv)
-            corner_uv = uv.reshape(-1, 2)[loops].reshape(-1, 3, 2).astype(np.float64)
+            corner_uv = uv.reshape(-1, 2).take(loops, axis=0).reshape(-1, 3, 2).astype(np.float64)
         normals = None
-        if with_normals and len(me.loops):
-            cn = np.empty(3 * len(me.loops), dtype=np.float32)
+        if with_normals and n_l:
+            cn = np.empty(3 * n_l, dtype=np.float32)
             me.corner_normals.foreach_get("vector", cn)
             nrm = np.linalg.inv(mw[:3, :3]).T
-            n = cn.reshape(-1, 3)[loops].astype(np.float64) @ nrm.T
+            n = cn.reshape(-1, 3).take(loops, axis=0).astype(np.float64) @ nrm.T
             n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
             normals = n.reshape(-1, 3, 3)
-        return pipeline.SourceMesh(pos, tris.reshape(-1, 3).astype(np.int64), corner_uv,
-                                   mat.astype(np.int64), normals)
+        return pipeline.SourceMesh(pos, tris, corner_uv, mat, normals)
     finally:
         obj_eval.to_mesh_clear()
 
@@ -204,19 +217,44 @@ def _disc_emitter(obj_eval):
                                 r_in=g.disc_r_in, t_peak=g.disc_t_peak, exposure=g.disc_exposure)
 
 
-def _input_key(mesh, geo, settings, lut, light, mats, planes, disc=None) -> str:
-    """Digest of everything an image depends on: world-space geometry and attributes, camera, hole,
-    r_s, settings, LUT parameters, light and material slots. Equal digests give identical images."""
-    h = hashlib.blake2b(digest_size=16)
-    for a in (mesh.positions, mesh.tris, mesh.corner_uv, mesh.material, mesh.corner_normals,
-              geo.camera, geo.hole, planes):
-        h.update(b"|" if a is None else np.ascontiguousarray(a).tobytes())
-    h.update(repr((geo.r_s, settings, None if disc is None else (tuple(disc.axis), disc.prograde, disc.mode, disc.r_in,
-                                                                 disc.t_peak, disc.exposure),
-                   tuple(sorted(lut.parameters.items())), [m.name if m else None for m in mats],
-                   None if light is None else (tuple(light.position), light.intensity,
-                                               tuple(sorted(light.lut.parameters.items()))))).encode())
-    return h.hexdigest()
+_INPUTS: dict = {}
+"""Token (the image objects' ``grlens_input`` property) -> the inputs their images were built from.
+Comparing the new inputs with these is cheaper than hashing them every frame (an animated mesh
+differs in its positions, found in one pass); a token not found (after a reload, or an undo step
+that brought back older images) means a rebuild."""
+
+
+def _inputs(mesh, geo, settings, lut, light, mats, planes, disc=None):
+    """Everything an image depends on: world-space geometry and attributes, camera, hole, r_s,
+    settings, LUT parameters, light and material slots. Equal inputs give identical images."""
+    arrays = (mesh.positions, mesh.tris, mesh.corner_uv, mesh.material, mesh.corner_normals,
+              geo.camera, geo.hole, planes)
+    rest = repr((geo.r_s, settings, None if disc is None else (tuple(disc.axis), disc.prograde, disc.mode, disc.r_in,
+                                                               disc.t_peak, disc.exposure),
+                 tuple(sorted(lut.parameters.items())), [m.name if m else None for m in mats],
+                 None if light is None else (tuple(light.position), light.intensity,
+                                             tuple(sorted(light.lut.parameters.items())))))
+    return arrays, rest
+
+
+def _same_inputs(token, inputs) -> bool:
+    old = _INPUTS.get(token)
+    if old is None or old[1] != inputs[1]:
+        return False
+    for a, b in zip(old[0], inputs[0]):
+        if (a is None) != (b is None):
+            return False
+        if a is not None and not (np.shape(a) == np.shape(b) and np.array_equal(a, b)):
+            return False
+    return True
+
+
+def _remember_inputs(objs, inputs) -> str:
+    for o in objs:
+        _INPUTS.pop(o.get("grlens_input"), None)
+    token = uuid.uuid4().hex
+    _INPUTS[token] = inputs
+    return token
 
 
 def rebuild_scene(scene, depsgraph=None) -> dict:
@@ -254,14 +292,16 @@ def rebuild_scene(scene, depsgraph=None) -> dict:
             mats = [shading.image_material(slot.material) for slot in src.material_slots] or \
                 [shading.image_material(None)]
             disc = _disc_emitter(src_eval)
-            key = _input_key(mesh, geo, settings, lut, light, mats, planes, disc)
+            inputs = _inputs(mesh, geo, settings, lut, light, mats, planes, disc)
             objs = {order: _image_object(scene, src, order) for order in settings.orders}
             wanted.update(o.name for o in objs.values())
             _set_source_visibility(src, True)
-            if all(o.get("grlens_input") == key for o in objs.values()):
+            tokens = {o.get("grlens_input") for o in objs.values()}
+            if len(tokens) == 1 and _same_inputs(next(iter(tokens)), inputs):
                 report["objects"][src.name] = "unchanged"  # same geometry, camera and settings: skip
                 continue
             images = pipeline.build_images(mesh, geo, lut, settings, light, planes, disc)
+            key = _remember_inputs(objs.values(), inputs)
             entry = {}
             for order, img in images.items():
                 obj = objs[order]

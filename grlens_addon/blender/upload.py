@@ -6,9 +6,14 @@ length units), ``grlens_order`` (point, float: 1 or 2), ``grlens_irradiance`` (c
 with GR illumination), ``grlens_redshift`` (point, float: 1 + z) and ``grlens_disc_colour`` (point,
 colour: linear RGB) for thin-disc sources, material indices.
 """
-import hashlib
+import uuid
 
 import numpy as np
+
+_TOPOLOGY: dict = {}
+"""Token (the mesh's ``grlens_topology`` property) -> the triangle array last uploaded with it.
+Comparing arrays is cheaper than hashing them every frame; a token not found here (after a reload,
+or an undo step that brought back an older mesh) means a full upload."""
 
 
 def _attr(mesh, name, type_, domain):
@@ -21,12 +26,19 @@ def _attr(mesh, name, type_, domain):
 
 
 def same_topology(mesh, img) -> bool:
-    return (len(mesh.vertices) == len(img.positions) and len(mesh.polygons) == len(img.tris)
-            and mesh.get("grlens_topology") == _topology_key(img))
+    """True if ``mesh`` holds exactly the vertices count and triangles of ``img`` (as last uploaded)."""
+    if len(mesh.vertices) != len(img.positions) or len(mesh.polygons) != len(img.tris):
+        return False
+    last = _TOPOLOGY.get(mesh.get("grlens_topology"))
+    return last is not None and np.array_equal(last, img.tris)
 
 
-def _topology_key(img) -> str:
-    return hashlib.blake2b(np.ascontiguousarray(img.tris, dtype=np.int64).tobytes(), digest_size=8).hexdigest()
+def _remember_topology(mesh, img) -> None:
+    old = mesh.get("grlens_topology")
+    _TOPOLOGY.pop(old, None)
+    token = uuid.uuid4().hex
+    _TOPOLOGY[token] = np.array(img.tris, copy=True)
+    mesh["grlens_topology"] = token
 
 
 def upload(mesh, img, materials) -> None:
@@ -46,18 +58,14 @@ def upload(mesh, img, materials) -> None:
         mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * n_f, 3, dtype=np.int32))
         if n_f:
             mesh.polygons.foreach_set("use_smooth", np.ones(n_f, dtype=bool))
-        mesh["grlens_topology"] = _topology_key(img)
+        _remember_topology(mesh, img)
         mesh.update()
     else:
         mesh.attributes["position"].data.foreach_set("vector", pos)
         mesh.update_tag()
     if img.corner_uv is not None:
         uv = mesh.uv_layers.get("UVMap") or mesh.uv_layers.new(name="UVMap")
-        values = np.ascontiguousarray(img.corner_uv, dtype=np.float32).ravel()
-        key = hashlib.blake2b(values.tobytes(), digest_size=8).hexdigest()
-        if not (same and mesh.get("grlens_uv") == key):  # UVs move only with the topology
-            uv.uv.foreach_set("vector", values)
-            mesh["grlens_uv"] = key
+        uv.uv.foreach_set("vector", np.ascontiguousarray(img.corner_uv, dtype=np.float32).ravel())
     _attr(mesh, "light_travel_time", "FLOAT", "POINT").data.foreach_set(
         "value", np.ascontiguousarray(img.light_travel_time, dtype=np.float32))
     if img.irradiance is not None:
@@ -81,8 +89,9 @@ def upload(mesh, img, materials) -> None:
         mesh.materials.clear()  # (this also resets the faces' material indices: written below)
         for m in materials:
             mesh.materials.append(m)
-    if len(img.tris):
-        mesh.polygons.foreach_set("material_index", np.ascontiguousarray(img.material, dtype=np.int32))
+    if len(img.tris):  # the face attribute (memory speed; polygons.foreach_set goes item by item)
+        _attr(mesh, "material_index", "INT", "FACE").data.foreach_set(
+            "value", np.ascontiguousarray(img.material, dtype=np.int32))
 
 
 def set_order(mesh, order: int) -> None:

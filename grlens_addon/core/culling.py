@@ -37,7 +37,7 @@ class CullReport:
 def circumference(d, tris):
     """Perimeter of each triangle on the unit view sphere, as the sum of its corners' chord lengths
     (dimensionless; equal to the sum of the angles in radians to second order for small triangles)."""
-    a, b, c = d[tris[:, 0]], d[tris[:, 1]], d[tris[:, 2]]
+    a, b, c = d.take(tris[:, 0], axis=0), d.take(tris[:, 1], axis=0), d.take(tris[:, 2], axis=0)
 
     def chord(u, v):
         w = u - v
@@ -234,13 +234,14 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
         straddles[sel], span[sel] = axis_geometry(source_points, tris[sel], np.asarray(camera, np.float64),
                                                   np.asarray(hole, np.float64), order,
                                                   span_of=np.flatnonzero(ring[sel]))
+        wide = np.zeros(len(tris), dtype=bool)
         with np.errstate(invalid="ignore"):
             if pixel_angle and max_error_px:
-                r_px = np.full(len(tris), np.nan)
-                r_px[sel] = hole_angle(image_dirs, camera, hole)[tris[sel]].max(axis=1) / pixel_angle
-                wide = ring_sagitta(r_px, span) > SAGITTA_CULL_FACTOR * max_error_px
+                r_px = hole_angle(image_dirs.take(tris[sel].ravel(), axis=0), camera, hole).reshape(-1, 3)
+                r_px = r_px.max(axis=1) / pixel_angle
+                wide[sel] = ring_sagitta(r_px, span[sel]) > SAGITTA_CULL_FACTOR * max_error_px
             else:
-                wide = span > AZIMUTH_SPAN_MAX
+                wide[sel] = span[sel] > AZIMUTH_SPAN_MAX
             ring = keep & (straddles | (ring & wide))
     rep.einstein_ring = int(ring.sum())
     keep &= ~ring

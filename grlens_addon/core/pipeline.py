@@ -173,11 +173,12 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         # at most one pixel keeps level 1 whatever its curvature (see subdivision.edge_levels)
         probe = np.flatnonzero(~(chord <= settings.pixel_angle)) if settings.pixel_angle else np.arange(len(ev0))
         p0, p1 = ev0[probe], ev1[probe]
-        img_m = mapping.map_vertices(0.5 * (src.positions[p0] + src.positions[p1]), scene, lut, order)
+        img_m = mapping.map_vertices(0.5 * (src.positions.take(p0, axis=0) + src.positions.take(p1, axis=0)),
+                                     scene, lut, order)
         if order == 2 and _below_pixel(img_v, img_m, settings.pixel_angle):
             out[order] = _empty(order, n_bad, below_pixel=len(src.tris))
             continue
-        rho = subdivision.rho(img_v.direction[p0], img_v.direction[p1], img_m.direction)
+        rho = subdivision.rho(img_v.direction.take(p0, axis=0), img_v.direction.take(p1, axis=0), img_m.direction)
         levels = np.ones(len(ev0), dtype=np.int64)  # edges not probed keep level 1
         levels[probe] = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
                                                 chord[probe], settings.pixel_angle, settings.max_error_px)
@@ -219,28 +220,28 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         bary = None if sub.identity else (sub.bary if everything else sub.bary[keep])
         corner_uv = None
         if src.corner_uv is not None:
-            corner_uv = _interpolate(bary, src.corner_uv[src_tri], sub.identity)
+            corner_uv = _interpolate(bary, src.corner_uv.take(src_tri, axis=0), sub.identity)
         irr = None
         if light is not None and src.corner_normals is not None:
-            n = _interpolate(bary, src.corner_normals[src_tri], sub.identity)
+            n = _interpolate(bary, src.corner_normals.take(src_tri, axis=0), sub.identity)
             n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-300)
-            pts = sub.positions[tris].reshape(-1, 3)
+            pts = sub.positions.take(tris.ravel(), axis=0)
             e, _ = illumination.irradiance(pts, n.reshape(-1, 3), light.position, scene.hole, scene.r_s,
                                            light.lut, light.intensity)
             irr = e.reshape(-1, 3)
         redshift = colour = None
         if disc is not None:
-            pts = sub.positions[used]
+            pts = sub.positions.take(used, axis=0)
             redshift = thin_disc.vertex_redshift_from_direction(pts, scene.hole, scene.camera, scene.r_s,
-                                                                disc.axis, img.direction[used], disc.prograde)
+                                                                disc.axis, img.direction.take(used, axis=0), disc.prograde)
             r = np.linalg.norm(pts - scene.hole, axis=1) / scene.r_s
             colour = np.nan_to_num(thin_disc.disc_colour(r, redshift, disc.mode, r_in=disc.r_in,
                                                          t_peak=disc.t_peak, exposure=disc.exposure))
             redshift = np.nan_to_num(redshift, nan=0.0)  # 0: no circular orbit there (r <= 1.5 r_s, axis)
-        out[order] = ImageMesh(order=order, positions=img.position[used], tris=image_tris,
+        out[order] = ImageMesh(order=order, positions=img.position.take(used, axis=0), tris=image_tris,
                                corner_uv=corner_uv, material=src.material[src_tri],
                                light_travel_time=img.distance[used], irradiance=irr, report=report,
-                               source_tri=kept_source[src_tri], source_position=sub.positions[used],
+                               source_tri=kept_source[src_tri], source_position=sub.positions.take(used, axis=0),
                                redshift=redshift, disc_colour=colour)
     return out
 
@@ -264,7 +265,7 @@ def _edges_of(tris) -> subdivision.Edges:
 
 def _chord_lengths(directions, edge_verts) -> np.ndarray:
     """(E,) chord length between the unit ``directions`` of each edge's end points (dimensionless)."""
-    w = directions[edge_verts[:, 1]] - directions[edge_verts[:, 0]]
+    w = directions.take(edge_verts[:, 1], axis=0) - directions.take(edge_verts[:, 0], axis=0)
     return np.sqrt(np.einsum("ij,ij->i", w, w))
 
 
@@ -296,7 +297,7 @@ def _interpolate(bary, corner_values, identity: bool):
     """Corner values (F, 3, K) of the faces from their source triangles' corner values (F, 3, K) and
     the faces' barycentric coordinates (F, 3, 3); unchanged when the subdivision was the identity."""
     if identity:
-        return np.array(corner_values, dtype=np.float64)
+        return np.asarray(corner_values, dtype=np.float64)  # already a copy (gathered by the caller)
     return np.matmul(bary, corner_values)
 
 
@@ -369,7 +370,7 @@ def _inside_frustum(img_v: mapping.Images, img_m: mapping.Images, probe, tris, e
     cand_edges, slot = np.unique(e[cand], return_inverse=True)
     slot = slot.reshape(-1, 3)
     ev = edges.verts[cand_edges]
-    mid = 0.5 * (img_v.position[ev[:, 0]] + img_v.position[ev[:, 1]])
+    mid = 0.5 * (img_v.position.take(ev[:, 0], axis=0) + img_v.position.take(ev[:, 1], axis=0))
     probe_row = np.searchsorted(probe, cand_edges)  # probe is sorted: where each candidate edge would be
     probed = probe_row < len(probe)
     probed[probed] = probe[probe_row[probed]] == cand_edges[probed]
@@ -384,10 +385,12 @@ def _inside_frustum(img_v: mapping.Images, img_m: mapping.Images, probe, tris, e
 def _map_subdivided(sub, n_pts, coarse: mapping.Images, scene, lut, order) -> mapping.Images:
     """Images of the subdivided vertices; source corners (welding keys < n_pts) reuse ``coarse``, the
     images of the source vertices; only the new vertices are looked up."""
+    if sub.identity:  # the source's own vertices, in order
+        return coarse
     is_corner = sub.vertex_key < n_pts
     if is_corner.all():
         idx = sub.vertex_key
-        return mapping.Images(position=coarse.position[idx], direction=coarse.direction[idx],
+        return mapping.Images(position=coarse.position.take(idx, axis=0), direction=coarse.direction.take(idx, axis=0),
                               distance=coarse.distance[idx], valid=coarse.valid[idx], plane=None,
                               xi=coarse.xi[idx], dt=coarse.dt[idx], ux=None, uy=None)
     new = mapping.map_vertices(sub.positions[~is_corner], scene, lut, order)

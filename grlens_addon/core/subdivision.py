@@ -160,19 +160,20 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     points = np.asarray(points, dtype=np.float64)
     tris = np.asarray(tris, dtype=np.int64)
     n_pts, n_edges = len(points), len(edges.verts)
-    lev = levels[edges.of_tri]
+    lev = levels.take(edges.of_tri)
     tri_level = np.maximum(np.maximum(lev[:, 0], lev[:, 1]), lev[:, 2])
     if len(tris) and tri_level.max() == 1:  # nothing to split: the source itself
         return Subdivided(positions=points, tris=tris.copy(), source_tri=np.arange(len(tris)),
                           bary=np.broadcast_to(np.eye(3), (len(tris), 3, 3)), vertex_key=np.arange(n_pts),
                           identity=True, n_pass=len(tris))
-    face_parts, src_parts, bary_parts, other_key_parts, other_pos_parts = [], [], [], [], []
+    src_parts, bary_parts, other_key_parts, other_pos_parts, level_parts = [], [], [], [], []
+    unsplit_faces = None
     interior_base = n_pts + n_edges * (GRID + 1)
     for L in np.unique(tri_level):
         sel = np.flatnonzero(tri_level == L)
         src = tris[sel]  # (S, 3)
         if L == 1:  # unsplit triangles: their corners are source vertices, keyed by their indices
-            face_parts.append(src)
+            unsplit_faces = src
             src_parts.append(sel)
             bary_parts.append(np.broadcast_to(np.eye(3), (sel.size, 3, 3)))
             continue
@@ -212,33 +213,43 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
         other = key >= n_pts
         rows = np.nonzero(other)[0]
         other_key_parts.append(key[other])
-        other_pos_parts.append(np.einsum("mk,mkx->mx", bary[other], points[src[rows]]))
-        face_parts.append(key[:, ttris].reshape(-1, 3))
+        other_pos_parts.append((bary[other], src[rows]))
+        level_parts.append((key, other, ttris))
         src_parts.append(np.repeat(sel, len(ttris)))
         bary_parts.append(bary[:, ttris].reshape(-1, 3, 3))
-    if not face_parts:
+    if not level_parts:
         return Subdivided(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64),
                           np.zeros((0, 3, 3)), np.zeros(0, np.int64))
-    face_keys = np.concatenate(face_parts)
-    # weld: corner keys (< n_pts) are source vertex indices; the others are merged by np.unique.
-    # Vertices come out sorted by key (corners first), so equal inputs give equal meshes.
+    # weld: corner keys (< n_pts) are source vertex indices (every corner of a source triangle is a
+    # corner of one of its pieces); the others are merged by np.unique. Vertices come out sorted by
+    # key (corners first), so equal inputs give equal meshes.
     used = np.zeros(n_pts, dtype=bool)
-    corner_face = face_keys < n_pts
-    used[face_keys[corner_face]] = True
+    used[tris.ravel()] = True
     corners = np.flatnonzero(used)
-    if other_key_parts:
-        okeys = np.concatenate(other_key_parts)
-        uniq, first = np.unique(okeys, return_index=True)
-        other_pos = np.concatenate(other_pos_parts)[first]
-    else:
-        uniq, other_pos = np.zeros(0, np.int64), np.zeros((0, 3))
     index = np.full(n_pts, -1, dtype=np.int64)
     index[corners] = np.arange(corners.size)
-    faces = np.where(corner_face, index[np.minimum(face_keys, n_pts - 1)],
-                     corners.size + np.searchsorted(uniq, face_keys))
+    if other_key_parts:
+        uniq, first, inverse = np.unique(np.concatenate(other_key_parts), return_index=True, return_inverse=True)
+        b = np.concatenate([bp for bp, _ in other_pos_parts])[first]
+        corner_idx = np.concatenate([cp for _, cp in other_pos_parts])[first]
+        other_pos = np.einsum("mk,mkx->mx", b, points.take(corner_idx.ravel(), axis=0).reshape(-1, 3, 3))
+    else:
+        uniq, inverse, other_pos = np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
+    face_parts = [index[unsplit_faces]] if unsplit_faces is not None else []
+    offset = 0
+    for key, other, ttris in level_parts:
+        vid = np.empty(key.shape, dtype=np.int64)
+        vid[~other] = index[key[~other]]
+        n_other = int(np.count_nonzero(other))
+        vid[other] = corners.size + inverse[offset:offset + n_other]
+        offset += n_other
+        face_parts.append(vid[:, ttris].reshape(-1, 3))
+    faces = np.concatenate(face_parts)
     keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
     n_unsplit = int(np.count_nonzero(tri_level == 1))  # np.unique put level 1 first
     n_pass = n_unsplit if keep[:n_unsplit].all() else 0
-    return Subdivided(positions=np.concatenate([points[corners], other_pos]), tris=faces[keep],
-                      source_tri=np.concatenate(src_parts)[keep], bary=np.concatenate(bary_parts)[keep],
-                      vertex_key=np.concatenate([corners, uniq]), n_pass=n_pass)
+    source_tri, bary = np.concatenate(src_parts), np.concatenate(bary_parts)
+    if not keep.all():
+        faces, source_tri, bary = faces[keep], source_tri[keep], bary[keep]
+    return Subdivided(positions=np.concatenate([points.take(corners, axis=0), other_pos]), tris=faces,
+                      source_tri=source_tri, bary=bary, vertex_key=np.concatenate([corners, uniq]), n_pass=n_pass)

@@ -1,0 +1,52 @@
+"""Triangle corners of a polygon mesh from Blender's fast arrays, without its slow per-triangle API.
+
+Blender triangulates a mesh into loop triangles; reading their corners (``loop_triangles.foreach_get
+("loops")``) costs about 70 ns per triangle, while the triangle-to-polygon map
+(``Mesh.loop_triangle_polygons``) and the corner-to-vertex map (the ``.corner_vert`` attribute) read
+at memory speed. Loop triangles are stored polygon by polygon, n - 2 per polygon of n corners, so for
+meshes of triangles and quads the corners follow from these two arrays: a triangle is its own
+corners, a quad is split on its 0-2 diagonal, or on the 1-3 diagonal when it is folded over the 0-2
+one (as Blender does). Meshes with n-gons (more than four corners) need Blender's own polygon fill:
+:func:`tri_corners` returns None for them and the caller falls back to the slow API.
+
+Indices only; no units.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def tri_corners(tri_poly, n_polys, corner_vert, positions):
+    """Corner (loop) indices (T, 3) of the loop triangles, or None if some polygon has more than four
+    corners.
+
+    tri_poly (T,): the polygon of each loop triangle (non-decreasing, n - 2 per polygon of n corners);
+    n_polys: number of polygons; corner_vert (L,): the vertex of each corner; positions (V, 3): vertex
+    positions in any consistent frame (only to decide how quads are split)."""
+    tri_poly = np.asarray(tri_poly, dtype=np.int64)
+    n_t = len(tri_poly)
+    per_poly = np.bincount(tri_poly, minlength=n_polys) if n_t else np.zeros(n_polys, np.int64)
+    if n_t and per_poly.max() > 2:
+        return None
+    sizes = per_poly + 2  # corners per polygon (every polygon has at least one triangle)
+    loop_start = np.zeros(n_polys, dtype=np.int64)
+    np.cumsum(sizes[:-1], out=loop_start[1:])
+    if n_polys and loop_start[-1] + sizes[-1] != len(corner_vert):
+        return None  # not the layout assumed above: let Blender say
+    start = loop_start[tri_poly]
+    k = np.arange(n_t) - (start - 2 * tri_poly)  # 0 for the first triangle of a polygon, 1 for the second
+    out = np.stack([start, start + k + 1, start + k + 2], axis=1)
+    quads = np.flatnonzero(sizes == 4)
+    if quads.size:
+        s = loop_start[quads]
+        p = np.asarray(positions, dtype=np.float64)
+        v0, v1, v2, v3 = (p[corner_vert[s + i]] for i in range(4))
+        # folded over the 0-2 diagonal: the two halves face opposite ways
+        d = v2 - v0
+        flip = np.einsum("ij,ij->i", np.cross(v1 - v0, d), np.cross(d, v3 - v0)) < 0
+        if flip.any():
+            first = s[flip] - 2 * quads[flip]  # index of the quad's first triangle
+            q = s[flip]
+            out[first] = np.stack([q, q + 1, q + 3], axis=1)
+            out[first + 1] = np.stack([q + 1, q + 2, q + 3], axis=1)
+    return out
