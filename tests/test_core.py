@@ -406,3 +406,24 @@ def test_frustum_pre_cull_matches_brute_force(lut):
     assert 0 < out.sum() < len(tris)
     assert np.array_equal(sel, np.flatnonzero(~out))
     assert np.array_equal(out_v, culling.outside_bits(img_v.position, planes))
+
+
+def test_triangulate_tris_quads_and_ngons():
+    """core.triangulate: triangles are their corners, a flat convex quad splits on 0-2, a quad folded
+    over its 0-2 diagonal splits on 1-3, and a mesh with an n-gon is left to Blender (None)."""
+    from grlens_addon.core import triangulate
+
+    pos = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],  # convex quad 0-3
+                    [0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0.8, 0.2, 0],  # quad 4-7: reflex at 7
+                    [5.0, 5, 5], [6, 5, 5], [5, 6, 5]])  # triangle 8-10
+    corner_vert = np.arange(11)
+    tri_poly = np.array([0, 0, 1, 1, 2])
+    out = triangulate.tri_corners(tri_poly, 3, corner_vert, pos)
+    assert out.tolist() == [[0, 1, 2], [0, 2, 3], [4, 5, 7], [5, 6, 7], [8, 9, 10]]
+    # the split keeps the concave quad's area (no triangle outside it)
+    tri_area = lambda t: 0.5 * abs(np.cross(pos[t[1]] - pos[t[0]], pos[t[2]] - pos[t[0]])[2])  # noqa: E731
+    assert tri_area(out[2]) + tri_area(out[3]) == pytest.approx(0.5 - 0.3)
+    # a pentagon (3 triangles for one polygon): Blender's own fill is needed
+    assert triangulate.tri_corners(np.array([0, 0, 0]), 1, np.arange(5), np.zeros((5, 3))) is None
+    # an empty mesh
+    assert triangulate.tri_corners(np.zeros(0, np.int64), 0, np.zeros(0, np.int64), np.zeros((0, 3))).shape == (0, 3)
