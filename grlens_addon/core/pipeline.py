@@ -208,16 +208,17 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         report.outside_frustum += n_pre
         report.extra["bad_source_triangles"] = n_bad
         everything = bool(keep.all())
-        tris = sub.tris if everything else sub.tris[keep]
+        kept = None if everything else np.flatnonzero(keep)
+        tris = sub.tris if everything else sub.tris.take(kept, axis=0)
         used = _used_vertices(tris, len(sub.positions))
         if used.size == len(sub.positions):  # every vertex is used: indices stay as they are
             image_tris = tris
         else:
             remap = np.full(len(sub.positions), -1, dtype=np.int64)
             remap[used] = np.arange(used.size)
-            image_tris = remap[tris]
-        src_tri = face_src if everything else face_src[keep]
-        bary = None if sub.identity else (sub.bary if everything else sub.bary[keep])
+            image_tris = remap.take(tris)
+        src_tri = face_src if everything else face_src.take(kept)
+        bary = None if sub.identity else (sub.bary if everything else sub.bary.take(kept, axis=0))
         corner_uv = None
         if src.corner_uv is not None:
             corner_uv = _interpolate(bary, src.corner_uv.take(src_tri, axis=0), sub.identity)
