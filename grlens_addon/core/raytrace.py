@@ -569,13 +569,9 @@ def _radial_roots(rays: Rays, shells, ray, pair_ids, width, ap, aq, rp, rq):
         with np.errstate(invalid="ignore"):
             kmin = np.ceil((s0 - ang) / TWO_PI)
             kmax = np.floor((s1 - ang) / TWO_PI)
-        nk = np.maximum(np.nan_to_num(np.where(np.isfinite(s0), kmax - kmin + 1, 0), nan=0.0), 0).astype(np.int64)
-        sel = np.flatnonzero(nk)
-        if not sel.size:
+        idx, k = _expand_turns(np.isfinite(s0), kmin, kmax)
+        if not idx.size:
             continue
-        c = nk[sel]
-        idx = np.repeat(sel, c)
-        k = np.repeat(kmin[sel], c) + (np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c))
         x = ang[idx] + TWO_PI * k
         u, _ = rays.u(ray[pid[idx]], x)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -588,6 +584,19 @@ def _radial_roots(rays: Rays, shells, ray, pair_ids, width, ap, aq, rp, rq):
     return np.concatenate(out_p), np.concatenate(out_x)
 
 
+def _expand_turns(ok, kmin, kmax):
+    """Every (row, turn) with kmin <= turn <= kmax for the rows where ``ok``: (row indices, turns k as
+    floats), rows repeated once per turn (NaN or empty ranges give none)."""
+    with np.errstate(invalid="ignore"):
+        nk = np.where(ok, kmax - kmin + 1, 0)
+    nk = np.maximum(np.nan_to_num(nk, nan=0.0), 0).astype(np.int64)
+    sel = np.flatnonzero(nk)
+    c = nk[sel]
+    idx = np.repeat(sel, c)
+    k = np.repeat(kmin[sel], c) + (np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c))
+    return idx, k
+
+
 def _candidates(shells, phi_a, width, pair_ids):
     """Swept-angle intervals (pair index, a, b): the sectors shifted by 2 pi k and clipped to the
     rays' shell intervals ``shells`` (P, 2, 2)."""
@@ -598,14 +607,9 @@ def _candidates(shells, phi_a, width, pair_ids):
         with np.errstate(invalid="ignore"):
             kmin = np.ceil((s0 - phi_a - width) / TWO_PI)
             kmax = np.floor((s1 - phi_a) / TWO_PI)
-        nk = np.where(ok, kmax - kmin + 1, 0)
-        nk = np.maximum(np.nan_to_num(nk, nan=0.0), 0).astype(np.int64)
-        sel = np.flatnonzero(nk)
-        if not sel.size:
+        idx, k = _expand_turns(ok, kmin, kmax)
+        if not idx.size:
             continue
-        c = nk[sel]
-        idx = np.repeat(sel, c)
-        k = np.repeat(kmin[sel], c) + (np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c))
         a = np.maximum(phi_a[idx] + TWO_PI * k, s0[idx])
         b = np.minimum(phi_a[idx] + width[idx] + TWO_PI * k, s1[idx])
         good = a <= b
