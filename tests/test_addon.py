@@ -275,6 +275,31 @@ def test_no_data_block_growth_over_frames():
         assert (len(bpy.data.meshes), len(bpy.data.materials), len(bpy.data.objects)) == counts
 
 
+def test_remembered_inputs_and_topologies_stay_bounded():
+    """The rebuild-skip and topology-reuse checks keep one entry per image mesh: none accumulate over
+    frames or when images are removed, and loading a file forgets them; the skip still works."""
+    from grlens_addon.blender import rebuild, upload
+
+    scene, sphere = _small_demo()
+    scene.grlens.auto_update = False
+    for deg in (90, 60, 90, 120):
+        _place(sphere, deg)
+        rebuild.rebuild_scene(scene)
+    assert len(rebuild._INPUTS) == 1 and len(upload._TOPOLOGY) <= 2
+    assert rebuild.rebuild_scene(scene)["objects"]["OrbitingSphere"] == "unchanged"
+    scene.grlens.show_order_2 = False  # the order-2 image is removed
+    rebuild.rebuild_scene(scene)
+    assert len(rebuild._INPUTS) == 1 and len(upload._TOPOLOGY) <= 1
+    sphere.grlens.enabled = False
+    rebuild.rebuild_scene(scene)
+    assert len(rebuild._INPUTS) == 0 and len(upload._TOPOLOGY) == 0
+    sphere.grlens.enabled = True
+    rebuild.rebuild_scene(scene)
+    assert len(rebuild._INPUTS) == 1
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    assert len(rebuild._INPUTS) == 0 and len(upload._TOPOLOGY) == 0
+
+
 def test_packed_lut_is_saved_and_used_exactly(tmp_path):
     from grlens_addon.blender import lutcache
 

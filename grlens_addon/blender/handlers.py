@@ -58,8 +58,16 @@ def on_depsgraph_update(scene, depsgraph):
         _run(scene, depsgraph)
 
 
+@persistent
+def on_load_pre(*_args):
+    from .rebuild import forget_all
+
+    forget_all()
+
+
 HANDLERS = ((bpy.app.handlers.frame_change_post, on_frame_change),
-            (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update))
+            (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
+            (bpy.app.handlers.load_pre, on_load_pre))
 
 
 def attach():

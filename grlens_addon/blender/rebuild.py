@@ -171,6 +171,9 @@ def _image_object(scene, src, order):
 
 def remove_image_object(obj):
     mesh = obj.data
+    _INPUTS.pop(obj.get("grlens_input"), None)
+    if mesh is not None:
+        upload.forget(mesh)
     bpy.data.objects.remove(obj, do_unlink=True)
     if mesh is not None and mesh.users == 0:
         bpy.data.meshes.remove(mesh)
@@ -235,6 +238,13 @@ def _inputs(mesh, geo, settings, lut, light, mats, planes, disc=None):
                  None if light is None else (tuple(light.position), light.intensity,
                                              tuple(sorted(light.lut.parameters.items())))))
     return arrays, rest
+
+
+def forget_all() -> None:
+    """Drop every remembered input and topology (a new file is being loaded: its images are rebuilt
+    on their first update)."""
+    _INPUTS.clear()
+    upload._TOPOLOGY.clear()
 
 
 def _same_inputs(token, inputs) -> bool:

@@ -33,6 +33,11 @@ def same_topology(mesh, img) -> bool:
     return last is not None and np.array_equal(last, img.tris)
 
 
+def forget(mesh) -> None:
+    """Drop what is remembered of ``mesh`` (before it is removed)."""
+    _TOPOLOGY.pop(mesh.get("grlens_topology"), None)
+
+
 def _remember_topology(mesh, img) -> None:
     old = mesh.get("grlens_topology")
     _TOPOLOGY.pop(old, None)
