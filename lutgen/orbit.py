@@ -300,10 +300,13 @@ def _leg_time(real, lo, hi, e1, e2, delta, m, n, logit_step, v_step):
     return out
 
 
-def radial_travel_time(u_a, u_b) -> np.ndarray:
+def radial_travel_time(u_a, u_b, *, r_a=None, r_b=None) -> np.ndarray:
     """Light travel time (units of r_s/c) of a radial ray between inverse radii u_a and u_b:
-    |Delta r + ln((r_b - 1)/(r_a - 1))|, r = 1/u."""
-    r_a = 1.0 / np.asarray(u_a, dtype=float)
-    r_b = 1.0 / np.asarray(u_b, dtype=float)
+    |Delta r + ln((r_b - 1)/(r_a - 1))|, r = 1/u.
+
+    ``r_a``, ``r_b`` (optional): the radii themselves, used instead of 1/u (pass them for far points:
+    1/u overflows to inf for a subnormal u = 1/r, i.e. r near the largest double)."""
     with np.errstate(divide="ignore"):
+        r_a = 1.0 / np.asarray(u_a, dtype=float) if r_a is None else np.asarray(r_a, dtype=float)
+        r_b = 1.0 / np.asarray(u_b, dtype=float) if r_b is None else np.asarray(r_b, dtype=float)
         return np.abs((r_b - r_a) + (np.log(r_b - 1.0) - np.log(r_a - 1.0)))  # no overflow of the ratio

@@ -90,13 +90,39 @@ def _bracket_root(f, lo, hi, args, *, xatol, xrtol, maxiter=200):
     return res.x
 
 
+_B_SMALL = 0.5  # below this impact parameter _direct_sweep integrates b / S(u) directly
+
+
 def _direct_sweep(b, u, uo):
     """Angle swept by a ray of impact parameter b between uo and u without a turning point."""
-    # Below b = 1e-20 the swept angle is linear in b to double precision; scaling keeps the formulas
-    # (whose roots grow like b^(-2/3)) finite down to the radial ray b = 0.
-    b_eval = np.maximum(b, _B_TINY)
-    orb = _orb.orbit_from_b(b_eval)
-    return np.abs(_orb.sweep(orb, u) - _orb.sweep(orb, uo)) * (b / b_eval)
+    b, u, uo = np.broadcast_arrays(np.asarray(b, dtype=float), u, uo)
+    out = np.empty(b.shape)
+    small = b <= _B_SMALL
+    if small.any():
+        out[small] = _small_b_sweep(b[small], u[small], uo[small])
+    big = ~small
+    if big.any():
+        orb = _orb.orbit_from_b(b[big])
+        out[big] = np.abs(_orb.sweep(orb, u[big]) - _orb.sweep(orb, uo[big]))
+    return out
+
+
+def _small_b_sweep(b, u, uo):
+    """Swept angle of a steep ray (b <= _B_SMALL) between u and uo:
+    b * integral du / S(u), S = sqrt(1 - b^2 u^2 (1 - u)) = b sqrt(P(u)), written as
+    b (|u - uo| + integral (1/S - 1) du) with 1/S - 1 = x / (S (1 + S)), x = b^2 u^2 (1 - u) <= 4 b^2/27.
+
+    The correction is smooth (S >= 0.98) and small, so 12-point Gauss-Legendre gives it to rounding;
+    unlike the difference of the elliptic integrals F(u) - F(uo) (each ~ b^(1/3)) this keeps full
+    relative accuracy for b -> 0 and for u -> uo, and stays finite down to b = 0 (linear in b below
+    ~1e-8)."""
+    lo, hi = np.minimum(u, uo), np.maximum(u, uo)
+    half = 0.5 * (hi - lo)
+    uu = (lo + half)[:, None] + half[:, None] * _orb._GL_X
+    x = (b * b)[:, None] * uu * uu * (1.0 - uu)
+    s = np.sqrt(1.0 - x)
+    corr = (x / (s * (1.0 + s))) @ _orb._GL_W * half
+    return b * ((hi - lo) + corr)
 
 
 def _turning_sweep(eps, u, uo):
@@ -163,6 +189,15 @@ def _solve(r_obs, r, phi, order):
 
     d = np.flatnonzero(direct)
     if d.size:
+        # Below b = _B_TINY the swept angle is linear in b (see _direct_sweep), so a target that needs
+        # no more than the sweep of _B_TINY is solved exactly by proportion (the bracketing root finder
+        # needs ~1.6 iterations per decade of b and ran out of them for phi <~ 1e-46).
+        sweep_tiny = _direct_sweep(np.full(d.size, _B_TINY), u[d], uo)
+        lin = sweep[d] <= sweep_tiny
+        if lin.any():
+            b[d[lin]] = _B_TINY * (sweep[d[lin]] / sweep_tiny[lin])
+        d = d[~lin]
+    if d.size:
         f = lambda bb, uu, uuo, target: _direct_sweep(bb, uu, uuo) - target  # noqa: E731
         b[d] = _bracket_root(f, np.zeros(d.size), b_max[d], (u[d], uo * np.ones(d.size), sweep[d]),
                              xatol=1e-300, xrtol=4e-16)
@@ -176,12 +211,19 @@ def _solve(r_obs, r, phi, order):
         s = _bracket_root(f, s_lo, s_hi, (u[t], uo * np.ones(t.size), sweep[t]), xatol=1e-15, xrtol=0.0)
         eps[t] = np.exp(s)
 
-    return _finish(r_obs, u, uo, phi, order, b, eps, branch)
+    return _finish(r_obs, u, uo, phi, order, b, eps, branch, r=r)
 
 
-def _finish(r_obs, u, uo, phi, order, b, eps, branch):
-    """Initial angle, travel time and arrival direction from the solved orbits."""
+def _finish(r_obs, u, uo, phi, order, b, eps, branch, r=None):
+    """Initial angle, travel time and arrival direction from the solved orbits.
+
+    ``r``: the targets' radii (default 1/u). Passing the exact input keeps r finite where 1/u
+    would not round back to it (u = 1/r is subnormal for r >~ 4.5e307).
+    """
     n = u.size
+    if r is None:
+        with np.errstate(divide="ignore"):
+            r = 1.0 / u
     xi = np.empty(n)
     dt = np.empty(n)
     u_r = np.empty(n)  # dr/dlambda at the target
@@ -193,16 +235,18 @@ def _finish(r_obs, u, uo, phi, order, b, eps, branch):
         inward = u[rad] > uo
         # a point at the observer's own position gets the limit phi -> 0+ of its circle: tangential
         xi[rad] = np.where(inward, np.pi, np.where(u[rad] < uo, 0.0, 0.5 * np.pi))
-        dt[rad] = _orb.radial_travel_time(uo, u[rad])
+        dt[rad] = _orb.radial_travel_time(uo, u[rad], r_a=r_obs, r_b=r[rad])
         u_r[rad] = np.where(inward, -k, k)
 
     dirm = (branch == 1) | (branch == 2)
     if dirm.any():
-        orb = _orb.orbit_from_b(b[dirm])
-        bb = b[dirm]
+        # below _B_TINY the ray is radial to double precision (b sqrt(P) = 1); orbit_from_b itself
+        # overflows for b <~ 1e-154
+        bb = np.maximum(b[dirm], _B_TINY)
+        orb = _orb.orbit_from_b(bb)
         outward = branch[dirm] == 2
         cos_xi = np.where(outward, 1.0, -1.0) * bb * np.sqrt(np.maximum(orb.P(uo), 0.0))
-        xi[dirm] = np.arctan2(bb * k * uo, cos_xi)
+        xi[dirm] = np.arctan2(b[dirm] * k * uo, cos_xi)
         dt[dirm] = _orb.travel_time(orb, uo, u[dirm])
         u_r[dirm] = np.where(outward, 1.0, -1.0) * k * bb * np.sqrt(np.maximum(orb.P(u[dirm]), 0.0))
 
@@ -223,12 +267,12 @@ def _finish(r_obs, u, uo, phi, order, b, eps, branch):
         dt[tm] = _orb.travel_time(orb, uo, orb.e2) + _orb.travel_time(orb, u[tm], orb.e2)
         u_r[tm] = k * bb * np.sqrt(np.maximum(orb.P(u[tm]), 0.0))
 
-    # u^phi = h/r^2 = k b u^2 (negative for order 2, which sweeps towards -phi)
-    u_phi = (1.0 if order == 1 else -1.0) * k * b_out * u * u
-    r = 1.0 / u
+    # r u^phi = h/r = k b u (u^phi negative for order 2, which sweeps towards -phi); formed without
+    # u^2, which underflows for far targets
+    r_u_phi = (1.0 if order == 1 else -1.0) * k * b_out * u
     c, s = np.cos(phi), np.sin(phi)
-    ux = u_r * c - u_phi * r * s
-    uy = u_r * s + u_phi * r * c
+    ux = u_r * c - r_u_phi * s
+    uy = u_r * s + r_u_phi * c
     return dict(xi=xi, dt=dt, ux=ux, uy=uy, b=b_out)
 
 
@@ -301,7 +345,8 @@ def connect_grid(r_obs, r, phi) -> tuple[Connection, Connection]:
             branch[qq.ravel() == 0.0] = 0
             b = np.where(branch == 0, 0.0, b)
             res = _finish(r_obs, uu, uo, np.broadcast_to(ph, qq.shape).ravel(), order, b,
-                          np.full(uu.size, np.nan), branch)
+                          np.full(uu.size, np.nan), branch,
+                          r=np.broadcast_to(r[rows][:, None], qq.shape).ravel())
             for k in Connection._fields:
                 out[order][k][np.ix_(rows, cols)] = res[k].reshape(qq.shape)
     return Connection(**out[1]), Connection(**out[2])

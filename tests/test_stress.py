@@ -27,11 +27,12 @@ does not give F - S (nor how many of outside_frustum are source triangles); the 
 wrapping subdivision.subdivide.
 
 Known failures, each a strict xfail test with the cause in its reason (the adversarial tests leave
-exactly these inputs out of their rule): connect gives NaN for order-1 targets with 0 < phi < ~1e-46
-and for targets within ~1e-13 r_obs of the observer itself; NaN/inf or wrong dt for r >~ 1e14 r_s and
-for the radial ray to r ~ 1e308. (inf dt one ulp above the horizon, out-of-range and negative
-indices, source_tri numbering, NaN 1 + z on disc images and a camera at the hole were bugs found here
-and fixed in 762d530; their tests now check the fixed behaviour.)
+exactly these inputs out of their rule): connect gives NaN for targets within ~1e-13 r_obs of the
+observer itself; NaN/inf or wrong dt for r >~ 1e14 r_s on non-radial rays. (inf dt one ulp above the
+horizon, out-of-range and negative indices, source_tri numbering, NaN 1 + z on disc images and a
+camera at the hole were bugs found here and fixed in 762d530; NaN for order-1 targets with
+0 < phi <~ 1e-46 and inf dt on the radial ray to r ~ 1e308 were fixed later; their tests now check
+the fixed behaviour.)
 
 The fast versions run by default (small LUTs, 1e3-1e5 points or triangles); the full sizes
 (1e6 points, a 1e6-triangle mesh) are marked ``slow`` (``pytest -m slow``).
@@ -380,21 +381,19 @@ def _connect_rule(r, phi):
 
 
 def _known_order1_nan(r, phi, r_obs):
-    """Order-1 targets where connect returns NaN though the input is valid (both xfail below): within
-    ~1e-13 r_obs radially and 1e-6 rad of the observer itself (test_connect_next_to_the_observer_is_finite),
-    and 0 < phi < 1e-30 anywhere (test_connect_tiny_angles_are_finite)."""
+    """Order-1 targets where connect returns NaN though the input is valid (xfail below): within
+    ~1e-13 r_obs radially and 1e-6 rad of the observer itself (test_connect_next_to_the_observer_is_finite)."""
     with np.errstate(invalid="ignore"):
-        return ((np.abs(r / r_obs - 1.0) < 1e-12) & (np.abs(phi) < 1e-6)) | ((phi > 0) & (phi < 1e-30))
+        return (np.abs(r / r_obs - 1.0) < 1e-12) & (np.abs(phi) < 1e-6)
 
 
 def check_connect(r_obs, r, phi, orders=(1, 2)):
     r64, phi64 = np.asarray(r, np.float64), np.asarray(phi, np.float64)
     valid = _connect_rule(r64, phi64)
     known = _known_order1_nan(r64, phi64, r_obs)
-    radial_overflow = (r64 > 1e307) & (phi64 == 0)  # xfail: test_connect_radial_ray_to_huge_radius_is_finite
     for order in orders:
         c = connect(r_obs, r, phi, order)
-        excused = (known | radial_overflow) if order == 1 else np.zeros(r64.shape, bool)
+        excused = known if order == 1 else np.zeros(r64.shape, bool)
         far = (r64 >= 1e14) & ((phi64 != 0) | (order == 2))  # xfail: test_connect_to_far_targets
         for name in ("xi", "dt", "ux", "uy", "b"):
             v = getattr(c, name)
@@ -442,25 +441,33 @@ def test_connect_next_to_the_observer_is_finite():
         assert np.isfinite(c.xi).all() and np.isfinite(c.dt).all()
 
 
-@pytest.mark.xfail(strict=True, reason="lutgen.solver.connect returns NaN (xi, dt, ux, uy, b) for order-1 targets "
-                   "with 0 < phi <~ 1e-46 at any radius: _solve's direct branch brackets b in [0, b_max ~ 2.6] and "
-                   "scipy's find_root (Chandrupatla, maxiter = 200, xrtol = 4e-16) needs ~1.6 iterations per "
-                   "decade of b, so for b <~ 1e-46 it stops unconverged (status -2) and connect returns NaN")
 def test_connect_tiny_angles_are_finite():
-    phi = np.array([1e-50, 1e-100, 1e-300, 5e-324])
+    """(Was NaN for 0 < phi <~ 1e-46: the root finder on b in [0, b_max] ran out of iterations; now
+    b = phi / |1/r - 1/r_obs| to double precision below b = 1e-20, and steep rays (b <= 0.5) sweep
+    b (|du| + a small correction) instead of a difference of elliptic integrals, which lost the
+    relative accuracy of b for b -> 0.)"""
+    phi = np.array([1e-12, 1e-19, 1e-21, 1e-50, 1e-100, 1e-300, 5e-324])
     for r_obs in (1.6, 20.0, 1000.0):
         for r in (1 + 1e-9, 1.2, 5.0, 1e4):
             c = connect(r_obs, r, phi, 1)
-            assert np.isfinite(c.xi).all() and np.isfinite(c.dt).all() and np.isfinite(c.b).all()
+            assert all(np.isfinite(v).all() for v in c)
+            # straight radial-like rays: phi = b |1/r - 1/r_obs| (1 + O(b^2))
+            np.testing.assert_allclose(c.b, phi / abs(1 / r - 1 / r_obs), rtol=1e-13)
+            c0 = connect(r_obs, r, 0.0, 1)
+            np.testing.assert_allclose(c.dt, c0.dt, rtol=1e-9)
+            np.testing.assert_allclose(np.cos(c.xi), np.cos(c0.xi), rtol=0, atol=1e-15)
 
 
-@pytest.mark.xfail(strict=True, reason="lutgen.orbit.radial_travel_time computes log((r_b - 1) / (r_a - 1)); the "
-                   "ratio overflows to inf for r_b >~ 1.8e308 (r_obs - 1), so connect(r_obs, r, phi = 0, order 1) "
-                   "returns dt = inf for finite r near the largest double")
 def test_connect_radial_ray_to_huge_radius_is_finite():
+    """(Was dt = inf: r = 1/u did not round back to the target's r near the largest double; the exact r
+    is now passed through.)"""
+    big = np.finfo(np.float64).max
     for r_obs in (1.6, 20.0):
-        c = connect(r_obs, np.finfo(np.float64).max, 0.0, 1)
-        assert np.isfinite(c.dt)
+        for r in (big, big / 2, 1e308, 1e300):
+            c = connect(r_obs, r, 0.0, 1)
+            assert all(np.isfinite(v) for v in c)
+            assert c.dt == r  # r - r_obs + ln((r - 1)/(r_obs - 1)) rounds to r
+            assert (c.xi, c.b, c.uy) == (0.0, 0.0, 0.0) and c.ux > 0
 
 
 @pytest.mark.xfail(strict=True, reason="lutgen.orbit.travel_time loses accuracy for far targets on non-radial "
