@@ -17,8 +17,10 @@ of the first kind ``F(u) = integral_{e1}^{u} du'/sqrt(P(u'))``, evaluated with C
 R_F (scipy.special.elliprf). Coordinate light travel time along a leg,
 ``dt = integral dphi / (b u^2 (1 - u))``, is integrated with Gauss-Legendre quadrature in a variable
 that removes the square-root singularities of 1/sqrt(P) (turning points, near-double roots near
-the photon sphere), on segments that are uniform in logit(u) (for far points and points next to the
-horizon) and in that variable (for rays that wind).
+the photon sphere), on segments that are uniform in logit(u) (for the growth of 1/u^2 and points next
+to the horizon) and in that variable (for rays that wind); the far part of a leg
+(u < min(0.1, 0.5/b)) is r + ln r in closed form plus a smooth bounded remainder, so far points keep
+full relative accuracy up to the largest double.
 
 Everything here is vectorised over numpy arrays; nothing loops over elements in Python.
 """
@@ -198,16 +200,30 @@ def _logit(u):
     return np.log(u) - np.log1p(-u)
 
 
-def travel_time(orb: Orbit, u_a, u_b, *, logit_step: float = 0.75, v_step: float = 1.5) -> np.ndarray:
+_U_FAR = 0.1
+"""Far legs: the part of a leg with u < min(_U_FAR, 0.5/b) is timed by :func:`_far_time`."""
+_HALVE_X = 2.4
+"""Turning legs: a segment next to the periapsis closer than this (in half-widths) to the pole of the
+integrand at u = 0 is halved (see :func:`_leg_time`)."""
+
+
+def travel_time(orb: Orbit, u_a, u_b, *, r_a=None, r_b=None, logit_step: float = 0.75,
+                v_step: float = 1.5) -> np.ndarray:
     """Coordinate light travel time (units of r_s/c) along one monotone leg between inverse radii
     ``u_a`` and ``u_b`` (either order; for turning orbits both must be <= e2, the periapsis).
 
-    dt = integral |dphi| / (b u^2 (1-u)). The substitution u = e2 - delta sinh^2(v) (turning orbits,
-    dphi = 2 dv/sqrt(u-e1)) or u = m + n sinh(v) (plunging, dphi = dv/sqrt(u-e1)) makes the
-    integrand smooth even next to turning points and for rays that wind around the photon sphere.
-    Quadrature: Gauss-Legendre (order 12) on the union of segments uniform in logit(u) (width at most
-    ``logit_step``, for far points and points next to the horizon) and segments uniform in v (width at
-    most ``v_step``, for rays that wind near the photon sphere).
+    dt = integral |dphi| / (b u^2 (1-u)). The far part of the leg, u < u_far = min(0.1, 0.5/b), is
+    (r_far - 1/u_far) + ln(u_far r_far) plus the integral of a smooth bounded remainder
+    (:func:`_far_time`), so far points keep full relative accuracy up to r = 1.8e308. On the rest
+    the substitution u = e2 - delta sinh^2(v) (turning orbits, dphi = 2 dv/sqrt(u-e1)) or
+    u = m + n sinh(v) (plunging, dphi = dv/sqrt(u-e1)) makes the integrand smooth even next to turning
+    points and for rays that wind around the photon sphere. Quadrature: Gauss-Legendre (order 12) on
+    the union of segments uniform in logit(u) (width at most ``logit_step``, for points next to the
+    horizon) and segments uniform in v (width at most ``v_step``, for rays that wind near the photon
+    sphere).
+
+    ``r_a``, ``r_b`` (optional): the radii 1/u_a, 1/u_b themselves (pass them for far points: 1/u does
+    not round back to r, and overflows, for r near the largest double).
     """
     u_a = np.asarray(u_a, dtype=float)
     u_b = np.asarray(u_b, dtype=float)
@@ -218,18 +234,51 @@ def travel_time(orb: Orbit, u_a, u_b, *, logit_step: float = 0.75, v_step: float
     fields = {f: np.broadcast_to(getattr(orb, f), shape).ravel()
               for f in ("e1", "real", "e2", "e3", "delta", "m", "n")}
     todo = hi > lo
+    # far part of the leg (u < u_far, where S = b sqrt(P) >= sqrt(3)/2)
+    e1 = fields["e1"]
+    with np.errstate(invalid="ignore"):
+        u_far = np.minimum(_U_FAR, 0.5 * (-e1 * np.sqrt(1.0 - e1)))
+        far = todo & (lo < u_far)
+    sel = np.flatnonzero(far)
+    if sel.size:
+        with np.errstate(divide="ignore"):
+            r_lo = np.where(u_a <= u_b, 1.0 / u_a if r_a is None else r_a,
+                            1.0 / u_b if r_b is None else r_b)
+        r_lo = np.broadcast_to(r_lo, shape).ravel()[sel]
+        out[sel] = _far_time(lo[sel], np.minimum(hi[sel], u_far[sel]), r_lo, e1[sel])
+        lo = lo.copy()
+        lo[sel] = np.minimum(hi[sel], u_far[sel])
+        todo = hi > lo
     # Steep plunging rays (far from the critical orbit): integrate in logit(u) directly, where
     # dt = dlogit / (u sqrt(1 - b^2 u^2 (1-u))) is smooth, with no cancellation as b -> 0.
     steep = todo & ~fields["real"] & (fields["n"] >= 0.5)
     sel = np.flatnonzero(steep)
     if sel.size:
-        out[sel] = _leg_time_steep(lo[sel], hi[sel], fields["e1"][sel], logit_step)
+        out[sel] += _leg_time_steep(lo[sel], hi[sel], fields["e1"][sel], logit_step)
     for real in (True, False):
         sel = np.flatnonzero((fields["real"] == real) & todo & ~steep)
         if sel.size:
-            out[sel] = _leg_time(real, lo[sel], hi[sel], *(fields[f][sel] for f in
-                                 ("e1", "e2", "delta", "m", "n")), logit_step, v_step)
+            out[sel] += _leg_time(real, lo[sel], hi[sel], *(fields[f][sel] for f in
+                                  ("e1", "e2", "delta", "m", "n")), logit_step, v_step)
     return out.reshape(shape)
+
+
+def _far_time(lo, hi, r_lo, e1):
+    """Travel time between inverse radii lo < hi <= min(0.1, 0.5/b) (r_lo = 1/lo, exact).
+
+    With S = b sqrt(P) = sqrt(1 - b^2 u^2 (1-u)) the integrand du / (u^2 (1-u) S) splits, by
+    1/(u^2 (1-u)) = 1/u^2 + 1/u + 1/(1-u) and 1/S - 1 = b^2 u^2 (1-u) / (S (1+S)), into
+    1/u^2 + 1/u (integrated exactly: r_lo - 1/hi + ln(hi r_lo)) plus the bounded remainder
+    g(u) = b^2 (1 - u^2) / (S (1+S)) + 1 / ((1-u) S). On this range S >= sqrt(3)/2 and g is analytic
+    (its nearest singularities, the roots of P, lie about 1/b away), so 12-point Gauss-Legendre
+    gives it to rounding. No cancellation at any distance (u = e2 - delta sinh^2(v) of the near part
+    loses ~1e-16 e2 r of relative accuracy far out, and u - e1 goes negative for r >~ 1e15)."""
+    b2 = 1.0 / (e1 * e1 * (1.0 - e1))
+    half = 0.5 * (hi - lo)
+    u = (lo + half)[:, None] + half[:, None] * _GL_X
+    s = np.sqrt(1.0 - b2[:, None] * u * u * (1.0 - u))
+    g = b2[:, None] * (1.0 - u * u) / (s * (1.0 + s)) + 1.0 / ((1.0 - u) * s)
+    return (r_lo - 1.0 / hi) + (np.log(hi) + np.log(r_lo)) + np.einsum("ij,j->i", g, _GL_W) * half
 
 
 def _gauss_nodes(breaks):
@@ -271,14 +320,30 @@ def _leg_time(real, lo, hi, e1, e2, delta, m, n, logit_step, v_step):
     v_span = np.nan_to_num(np.abs(ends[:, 1] - ends[:, 0]), nan=0.0, posinf=0.0)
     n_l = np.clip(np.ceil(l_span / logit_step), 1, 128).astype(np.int64)
     n_v = np.clip(np.ceil(v_span / v_step), 1, 64).astype(np.int64)
-    group = n_l * 1000 + n_v
+    halve = np.zeros(lo.size, dtype=bool)
+    if real:
+        # v ~ sqrt(e2 - u) stretches the segment next to the periapsis side (smallest v, at u = hi):
+        # one reaching from near e2 down to ~e2/2 ends ~0.7 of the way to the pole of 1/u^2 at u = 0
+        # (v0), where 12-point Gauss-Legendre loses up to ~1e-10 relative. Such segments (centre c,
+        # half-width w with v0 - c < _HALVE_X w) are halved in logit(u).
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u_1 = 1.0 / (1.0 + np.exp(-(_logit(hi) - l_span / n_l)))
+            v_a = ends[:, 1]
+            v_b = np.minimum(v_of_u(u_1[:, None], every)[:, 0], v_a + v_span / n_v)
+            v_0 = np.arcsinh(np.sqrt(e2 / delta))
+            halve = (v_0 - 0.5 * (v_a + v_b)) < _HALVE_X * 0.5 * (v_b - v_a)
+    group = (n_l + halve) * 1000 + n_v
     out = np.empty(lo.size)
     inv_b = -e1 * np.sqrt(1.0 - e1)
     for g in np.unique(group):
         k = np.flatnonzero(group == g)
         nl, nv = int(g // 1000), int(g % 1000)
-        t = np.linspace(0.0, 1.0, nl + 1)
-        lam = _logit(lo[k])[:, None] + l_span[k, None] * t[None, :]
+        t = np.linspace(0.0, 1.0, nl + 1)[None, :]
+        if nl > 1 and halve[k].any():
+            # nl - 1 uniform segments, the last (next to hi) halved
+            t_h = np.append(np.linspace(0.0, 1.0, nl)[:-1], [(nl - 1.5) / (nl - 1), 1.0])
+            t = np.where(halve[k, None], t_h[None, :], t)
+        lam = _logit(lo[k])[:, None] + l_span[k, None] * t
         u_break = 1.0 / (1.0 + np.exp(-lam))
         u_break[:, 0], u_break[:, -1] = lo[k], hi[k]
         v_logit = v_of_u(u_break, k)
@@ -289,12 +354,13 @@ def _leg_time(real, lo, hi, e1, e2, delta, m, n, logit_step, v_step):
         v, h = _gauss_nodes(v_logit)
         sh = np.sinh(v)
         if real:
+            # (0 < u <= e2 < 2/3 on these legs: a node a hair outside the leg is harmless)
             u = e2[k, None, None] - delta[k, None, None] * sh * sh
         else:
             u = m[k, None, None] + n[k, None, None] * sh
-        # rounding can put a node a hair outside the leg, e.g. onto u = 1 for a target one ulp off the
-        # horizon, where the integrand is infinite
-        u = np.clip(u, lo[k, None, None], hi[k, None, None])
+            # rounding can put a node a hair outside the leg, e.g. onto u = 1 for a target one ulp off
+            # the horizon, where the integrand is infinite
+            u = np.minimum(np.maximum(u, lo[k, None, None]), hi[k, None, None])
         integrand = 1.0 / (u * u * (1.0 - u) * np.sqrt(u - e1[k, None, None]))
         out[k] = (2.0 if real else 1.0) * inv_b[k] * np.einsum("ijk,k,ij->i", integrand, _GL_W, np.abs(h))
     return out

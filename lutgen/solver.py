@@ -121,7 +121,7 @@ def _small_b_sweep(b, u, uo):
     uu = (lo + half)[:, None] + half[:, None] * _orb._GL_X
     x = (b * b)[:, None] * uu * uu * (1.0 - uu)
     s = np.sqrt(1.0 - x)
-    corr = (x / (s * (1.0 + s))) @ _orb._GL_W * half
+    corr = np.einsum("ij,j->i", x / (s * (1.0 + s)), _orb._GL_W) * half
     return b * ((hi - lo) + corr)
 
 
@@ -247,7 +247,7 @@ def _finish(r_obs, u, uo, phi, order, b, eps, branch, r=None):
         outward = branch[dirm] == 2
         cos_xi = np.where(outward, 1.0, -1.0) * bb * np.sqrt(np.maximum(orb.P(uo), 0.0))
         xi[dirm] = np.arctan2(b[dirm] * k * uo, cos_xi)
-        dt[dirm] = _orb.travel_time(orb, uo, u[dirm])
+        dt[dirm] = _orb.travel_time(orb, uo, u[dirm], r_a=r_obs, r_b=r[dirm])
         u_r[dirm] = np.where(outward, 1.0, -1.0) * k * bb * np.sqrt(np.maximum(orb.P(u[dirm]), 0.0))
 
     tm = branch == 3
@@ -264,7 +264,8 @@ def _finish(r_obs, u, uo, phi, order, b, eps, branch, r=None):
         b_out[tm] = bb
         cos_xi = -bb * np.sqrt(np.maximum(orb.P(uo), 0.0))
         xi[tm] = np.arctan2(bb * k * uo, cos_xi)
-        dt[tm] = _orb.travel_time(orb, uo, orb.e2) + _orb.travel_time(orb, u[tm], orb.e2)
+        dt[tm] = (_orb.travel_time(orb, uo, orb.e2, r_a=r_obs)
+                  + _orb.travel_time(orb, u[tm], orb.e2, r_a=r[tm]))
         u_r[tm] = k * bb * np.sqrt(np.maximum(orb.P(u[tm]), 0.0))
 
     # r u^phi = h/r = k b u (u^phi negative for order 2, which sweeps towards -phi); formed without
