@@ -427,3 +427,27 @@ def test_triangulate_tris_quads_and_ngons():
     assert triangulate.tri_corners(np.array([0, 0, 0]), 1, np.arange(5), np.zeros((5, 3))) is None
     # an empty mesh
     assert triangulate.tri_corners(np.zeros(0, np.int64), 0, np.zeros(0, np.int64), np.zeros((0, 3))).shape == (0, 3)
+
+
+def test_non_finite_corner_attributes_never_reach_an_image(lut):
+    """NaN or inf UVs and normals of the user's mesh come out as 0 (UV) and a zero normal (no GR
+    irradiance); the geometry is unaffected."""
+    from grlens_addon.core import pipeline
+
+    pts, tris = _sphere(np.array([-3.0 * R_S * np.cos(0.4), 3.0 * R_S * np.sin(0.4), 0.02]))
+    rng = np.random.default_rng(2)
+    uv = rng.random((len(tris), 3, 2))
+    nrm = rng.normal(size=(len(tris), 3, 3))
+    uv[::7, 1, 0] = np.nan
+    uv[::11, 2, 1] = np.inf
+    nrm[::5, 0, :] = np.nan
+    scene = mapping.Scene(CAMERA, HOLE, R_S)
+    light = pipeline.Light(np.array([0.0, 0.0, 30.0]), 1.0, build_lut(15.0, 1.05, 40.0, 64, 128))
+    settings = pipeline.Settings(pixel_angle=np.radians(19.0) / 1080)
+    out = pipeline.build_images(pipeline.SourceMesh(pts, tris, uv, None, nrm), scene, lut, settings, light)
+    clean = pipeline.build_images(pipeline.SourceMesh(pts, tris), scene, lut, settings)
+    for order, img in out.items():
+        assert np.isfinite(img.corner_uv).all() and np.isfinite(img.irradiance).all()
+        assert np.array_equal(img.positions, clean[order].positions)
+        bad = np.isin(img.source_tri, np.arange(0, len(tris), 5))  # faces of triangles with a NaN normal
+        assert bad.any() and img.report.kept == len(img.tris)

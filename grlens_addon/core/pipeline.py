@@ -129,10 +129,22 @@ def _clean(src: SourceMesh):
     def sel(a):
         return None if a is None else (np.asarray(a) if all_ok else np.asarray(a)[ok])
 
-    cleaned = SourceMesh(pos, sel(tris), sel(src.corner_uv),
+    cleaned = SourceMesh(pos, sel(tris), _finite_or_zero(sel(src.corner_uv)),
                          sel(src.material) if src.material is not None else np.zeros(int(ok.sum()), np.int64),
-                         sel(src.corner_normals))
+                         _finite_or_zero(sel(src.corner_normals)))
     return cleaned, int((~ok).sum()), np.flatnonzero(ok)
+
+
+def _finite_or_zero(a):
+    """Corner attributes with their non-finite values set to 0 (a NaN UV or normal of the user's mesh
+    must not reach an image mesh; a zero normal receives no GR irradiance). Copies only if needed."""
+    if a is None:
+        return None
+    a = np.asarray(a, dtype=np.float64)
+    bad = ~np.isfinite(a)
+    if bad.any():
+        a = np.where(bad, 0.0, a)
+    return a
 
 
 def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
