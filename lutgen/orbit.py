@@ -119,14 +119,15 @@ def orbit_from_b(b) -> Orbit:
     return _from_sigma_e1(sigma, e1)
 
 
-def orbit_from_turning_point(eps) -> Orbit:
+def orbit_from_turning_point(eps, e2=None) -> Orbit:
     """Turning orbits whose periapsis is u = e2 = 2/3 - eps (0 < eps < 2/3; units of 1/r_s).
 
     Parametrising by the distance ``eps`` of the periapsis from the photon sphere keeps
-    e3 - e2 and sigma accurate for orbits that wind many times (eps -> 0).
+    e3 - e2 and sigma accurate for orbits that wind many times (eps -> 0). ``e2`` (optional): the
+    periapsis itself, where it is known more accurately than 2/3 - eps (e.g. next to a given radius).
     """
     eps = np.asarray(eps, dtype=float)
-    e2 = U_PHOTON - eps
+    e2 = U_PHOTON - eps if e2 is None else np.asarray(e2, dtype=float)
     d2 = np.sqrt((1.0 - e2) * (1.0 + 3.0 * e2))
     e1 = -2.0 * e2 * (1.0 - e2) / ((1.0 - e2) + d2)
     delta = np.where(
@@ -181,6 +182,40 @@ def _pick(a, mask):
     return np.broadcast_to(a, mask.shape)[mask]
 
 
+def sweep_from_turning_point(orb: Orbit, u, sqrt_gap) -> np.ndarray:
+    """F(e2) - F(u): the angle swept between inverse radius u and the periapsis e2 (turning orbits),
+    given ``sqrt_gap`` = sqrt(e2 - u) (units of r_s^-1/2), which may be known more accurately than
+    from e2 - u.
+
+    Carlson's form of the integral from u to the root e2 (A = e2 - e1, B = e3 - e2, g = e2 - u):
+    2 sqrt(g) R_F(A B, B (u - e1), A (B + g)). Unlike the difference of F it keeps full relative
+    accuracy as u -> e2 (the angle ~ sqrt(g) there)."""
+    u, sq = np.asarray(u, dtype=float), np.asarray(sqrt_gap, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = orb.e2 - orb.e1
+        d = orb.delta
+        out = 2.0 * sq * elliprf(a * d, d * (u - orb.e1), a * (d + sq * sq))
+    return np.where(orb.real, out, np.nan)
+
+
+def sweep_between(orb: Orbit, y, x, sqrt_gap_y, sqrt_gap_x) -> np.ndarray:
+    """F(x) - F(y): the angle swept between inverse radii y < x <= e2 of a turning orbit, given
+    sqrt(e2 - y) and sqrt(e2 - x) (see sweep_from_turning_point). Carlson's two-point form (DLMF
+    19.29.4 with one linear factor constant), 2 (x - y) R_F(N12^2, N13^2, N14^2), has only positive
+    terms: full relative accuracy for x - y -> 0 and next to the periapsis, where the difference of F
+    (or of sweep_from_turning_point) cancels."""
+    y, x = np.asarray(y, dtype=float), np.asarray(x, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        x1, y1 = np.sqrt(x - orb.e1), np.sqrt(y - orb.e1)
+        x2, y2 = np.asarray(sqrt_gap_x, dtype=float), np.asarray(sqrt_gap_y, dtype=float)
+        x3, y3 = np.sqrt(orb.delta + x2 * x2), np.sqrt(orb.delta + y2 * y2)
+        n12 = x1 * x2 * y3 + y1 * y2 * x3
+        n13 = x1 * x3 * y2 + y1 * y3 * x2
+        n14 = x1 * y2 * y3 + y1 * x2 * x3
+        out = 2.0 * (x - y) * elliprf(n12 * n12, n13 * n13, n14 * n14)
+    return np.where(orb.real, out, np.nan)
+
+
 def sweep_to_turning_point(orb: Orbit) -> np.ndarray:
     """F(e2): the angle swept from e1 to the periapsis e2 (turning orbits only; NaN otherwise)."""
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -207,14 +242,16 @@ _HALVE_X = 2.4
 integrand at u = 0 is halved (see :func:`_leg_time`)."""
 
 
-def travel_time(orb: Orbit, u_a, u_b, *, r_a=None, r_b=None, logit_step: float = 0.75,
-                v_step: float = 1.5) -> np.ndarray:
+def travel_time(orb: Orbit, u_a, u_b, *, r_a=None, r_b=None, sqrt_gap=None,
+                logit_step: float = 0.75, v_step: float = 1.5) -> np.ndarray:
     """Coordinate light travel time (units of r_s/c) along one monotone leg between inverse radii
     ``u_a`` and ``u_b`` (either order; for turning orbits both must be <= e2, the periapsis).
 
     dt = integral |dphi| / (b u^2 (1-u)). The far part of the leg, u < u_far = min(0.1, 0.5/b), is
     (r_far - 1/u_far) + ln(u_far r_far) plus the integral of a smooth bounded remainder
-    (:func:`_far_time`), so far points keep full relative accuracy up to r = 1.8e308. On the rest
+    (:func:`_far_time`), so far points keep full relative accuracy up to r = 1.8e308. Legs much
+    shorter than their distance from u = 0, the horizon and the roots of P are one Gauss-Legendre
+    segment in u itself (short legs next to the periapsis too, given ``sqrt_gap``). On the rest
     the substitution u = e2 - delta sinh^2(v) (turning orbits, dphi = 2 dv/sqrt(u-e1)) or
     u = m + n sinh(v) (plunging, dphi = dv/sqrt(u-e1)) makes the integrand smooth even next to turning
     points and for rays that wind around the photon sphere. Quadrature: Gauss-Legendre (order 12) on
@@ -223,7 +260,9 @@ def travel_time(orb: Orbit, u_a, u_b, *, r_a=None, r_b=None, logit_step: float =
     sphere).
 
     ``r_a``, ``r_b`` (optional): the radii 1/u_a, 1/u_b themselves (pass them for far points: 1/u does
-    not round back to r, and overflows, for r near the largest double).
+    not round back to r, and overflows, for r near the largest double). ``sqrt_gap`` (optional, turning
+    orbits): a pair (sqrt(e2 - u_a), sqrt(e2 - u_b)), NaN where unknown, for legs next to the
+    periapsis, where e2 - u can be far below the rounding of e2 (their time is ~ sqrt(e2 - u)).
     """
     u_a = np.asarray(u_a, dtype=float)
     u_b = np.asarray(u_b, dtype=float)
@@ -234,6 +273,13 @@ def travel_time(orb: Orbit, u_a, u_b, *, r_a=None, r_b=None, logit_step: float =
     fields = {f: np.broadcast_to(getattr(orb, f), shape).ravel()
               for f in ("e1", "real", "e2", "e3", "delta", "m", "n")}
     todo = hi > lo
+    gap_lo = gap_hi = None
+    if sqrt_gap is not None:
+        g_a, g_b = (np.broadcast_to(np.asarray(g, dtype=float), shape).ravel() for g in sqrt_gap)
+        swap = np.broadcast_to(u_a > u_b, shape).ravel()
+        gap_lo, gap_hi = np.where(swap, g_b, g_a), np.where(swap, g_a, g_b)
+        with np.errstate(invalid="ignore"):
+            todo |= gap_lo > gap_hi  # a leg next to the periapsis can be shorter than the rounding of e2
     # far part of the leg (u < u_far, where S = b sqrt(P) >= sqrt(3)/2)
     e1 = fields["e1"]
     with np.errstate(invalid="ignore"):
@@ -242,33 +288,67 @@ def travel_time(orb: Orbit, u_a, u_b, *, r_a=None, r_b=None, logit_step: float =
     sel = np.flatnonzero(far)
     if sel.size:
         with np.errstate(divide="ignore"):
-            r_lo = np.where(u_a <= u_b, 1.0 / u_a if r_a is None else r_a,
-                            1.0 / u_b if r_b is None else r_b)
-        r_lo = np.broadcast_to(r_lo, shape).ravel()[sel]
-        out[sel] = _far_time(lo[sel], np.minimum(hi[sel], u_far[sel]), r_lo, e1[sel])
+            r_a = 1.0 / u_a if r_a is None else r_a
+            r_b = 1.0 / u_b if r_b is None else r_b
+            r_lo = np.broadcast_to(np.where(u_a <= u_b, r_a, r_b), shape).ravel()[sel]
+            r_hi = np.broadcast_to(np.where(u_a <= u_b, r_b, r_a), shape).ravel()[sel]
+            end = hi[sel] <= u_far[sel]
+            r_hi = np.where(end, r_hi, 1.0 / u_far[sel])
+        out[sel] = _far_time(lo[sel], np.where(end, hi[sel], u_far[sel]), r_lo, r_hi, e1[sel])
         lo = lo.copy()
         lo[sel] = np.minimum(hi[sel], u_far[sel])
         todo = hi > lo
+        if gap_lo is not None:
+            gap_lo[sel] = np.nan  # the near part of a far leg starts at u_far, not at the gap
+            gap_hi = np.where(hi > lo, gap_hi, np.nan)
+    # legs much shorter than their distance from u = 0, the horizon and the roots of P, where S is
+    # not small (S^2 has slope <= 2 b^2 u): one Gauss-Legendre segment in u itself (the difference of
+    # logit(u) or v at the ends would cancel)
+    length = 40.0 * (hi - lo)
+    sel = np.flatnonzero(todo & (length > 0.0) & (length <= np.minimum(lo, 1.0 - hi)))
+    if sel.size:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            b2 = 1.0 / (e1[sel] * e1[sel] * (1.0 - e1[sel]))
+            l_s, h_s = lo[sel], hi[sel]
+            s2_min = 1.0 - b2 * np.maximum(l_s * l_s * (1.0 - l_s), h_s * h_s * (1.0 - h_s))
+            ok = (s2_min >= 1e-3) & (length[sel] * b2 * h_s <= s2_min)
+        sel = sel[ok]
+        out[sel] += _short_leg_time_s(lo[sel], hi[sel], b2[ok])
+        todo = todo.copy()
+        todo[sel] = False
     # Steep plunging rays (far from the critical orbit): integrate in logit(u) directly, where
     # dt = dlogit / (u sqrt(1 - b^2 u^2 (1-u))) is smooth, with no cancellation as b -> 0.
     steep = todo & ~fields["real"] & (fields["n"] >= 0.5)
     sel = np.flatnonzero(steep)
     if sel.size:
         out[sel] += _leg_time_steep(lo[sel], hi[sel], fields["e1"][sel], logit_step)
+    if gap_hi is not None:
+        # legs much shorter than their distance w = e2 - hi from the periapsis (next to the tangent ray
+        # at hi): in v = asinh(sqrt((e2 - u)/delta)) both ends round alike, so integrate in u itself,
+        # where 1/sqrt(P) is smooth (its singularity lies w away), with e2 - u = w + (hi - u) exact
+        with np.errstate(invalid="ignore"):
+            short = (todo & fields["real"] & np.isfinite(gap_lo) & (gap_hi > 0.0)
+                     & (gap_hi * gap_hi >= 3.0 * (hi - lo)))
+        sel = np.flatnonzero(short)
+        if sel.size:
+            out[sel] += _short_leg_time(lo[sel], hi[sel], gap_hi[sel], e1[sel], fields["delta"][sel])
+            todo = todo & ~short
     for real in (True, False):
         sel = np.flatnonzero((fields["real"] == real) & todo & ~steep)
         if sel.size:
+            gaps = None if gap_lo is None or not real else (gap_lo[sel], gap_hi[sel])
             out[sel] += _leg_time(real, lo[sel], hi[sel], *(fields[f][sel] for f in
-                                  ("e1", "e2", "delta", "m", "n")), logit_step, v_step)
+                                  ("e1", "e2", "delta", "m", "n")), logit_step, v_step, sqrt_gap=gaps)
     return out.reshape(shape)
 
 
-def _far_time(lo, hi, r_lo, e1):
-    """Travel time between inverse radii lo < hi <= min(0.1, 0.5/b) (r_lo = 1/lo, exact).
+def _far_time(lo, hi, r_lo, r_hi, e1):
+    """Travel time between inverse radii lo < hi <= min(0.1, 0.5/b) (r_lo = 1/lo, r_hi = 1/hi, exact
+    where they are the leg's ends).
 
     With S = b sqrt(P) = sqrt(1 - b^2 u^2 (1-u)) the integrand du / (u^2 (1-u) S) splits, by
     1/(u^2 (1-u)) = 1/u^2 + 1/u + 1/(1-u) and 1/S - 1 = b^2 u^2 (1-u) / (S (1+S)), into
-    1/u^2 + 1/u (integrated exactly: r_lo - 1/hi + ln(hi r_lo)) plus the bounded remainder
+    1/u^2 + 1/u (integrated exactly: r_lo - r_hi + ln(r_lo / r_hi)) plus the bounded remainder
     g(u) = b^2 (1 - u^2) / (S (1+S)) + 1 / ((1-u) S). On this range S >= sqrt(3)/2 and g is analytic
     (its nearest singularities, the roots of P, lie about 1/b away), so 12-point Gauss-Legendre
     gives it to rounding. No cancellation at any distance (u = e2 - delta sinh^2(v) of the near part
@@ -278,7 +358,31 @@ def _far_time(lo, hi, r_lo, e1):
     u = (lo + half)[:, None] + half[:, None] * _GL_X
     s = np.sqrt(1.0 - b2[:, None] * u * u * (1.0 - u))
     g = b2[:, None] * (1.0 - u * u) / (s * (1.0 + s)) + 1.0 / ((1.0 - u) * s)
-    return (r_lo - 1.0 / hi) + (np.log(hi) + np.log(r_lo)) + np.einsum("ij,j->i", g, _GL_W) * half
+    dr = r_lo - r_hi
+    return dr + np.log1p(dr / r_hi) + np.einsum("ij,j->i", g, _GL_W) * half
+
+
+def _short_leg_time_s(lo, hi, b2):
+    """Travel time of a short leg [lo, hi] on which S = sqrt(1 - b^2 u^2 (1-u)) is not small:
+    12-point Gauss-Legendre in u of 1/(u^2 (1-u) S)."""
+    half = 0.5 * (hi - lo)
+    u = (lo + half)[:, None] + half[:, None] * _GL_X
+    integrand = 1.0 / (u * u * (1.0 - u) * np.sqrt(1.0 - b2[:, None] * u * u * (1.0 - u)))
+    return np.einsum("ij,j->i", integrand, _GL_W) * half
+
+
+def _short_leg_time(lo, hi, sqrt_gap_hi, e1, delta):
+    """Travel time of a turning orbit's leg [lo, hi] with hi - lo <= (e2 - hi)/3 (e2 - hi =
+    sqrt_gap_hi^2): 12-point Gauss-Legendre in u of 1/(b u^2 (1-u) sqrt(P)), P factored with
+    e2 - u = (e2 - hi) + (hi - u)."""
+    half = 0.5 * (hi - lo)
+    t = (1.0 + _GL_X)[None, :] * half[:, None]  # u - lo
+    u = lo[:, None] + t
+    gap = (sqrt_gap_hi * sqrt_gap_hi)[:, None] + (2.0 * half[:, None] - t)
+    p = (u - e1[:, None]) * gap * (delta[:, None] + gap)
+    inv_b = -e1 * np.sqrt(1.0 - e1)
+    integrand = 1.0 / (u * u * (1.0 - u) * np.sqrt(p))
+    return inv_b * np.einsum("ij,j->i", integrand, _GL_W) * half
 
 
 def _gauss_nodes(breaks):
@@ -305,8 +409,10 @@ def _leg_time_steep(lo, hi, e1, logit_step):
     return np.einsum("ijk,k,ij->i", integrand, _GL_W, h)
 
 
-def _leg_time(real, lo, hi, e1, e2, delta, m, n, logit_step, v_step):
-    """Travel time of regularised legs, elements grouped by how many segments they need."""
+def _leg_time(real, lo, hi, e1, e2, delta, m, n, logit_step, v_step, sqrt_gap=None):
+    """Travel time of regularised legs, elements grouped by how many segments they need.
+    ``sqrt_gap`` (turning orbits, optional, NaN where unknown): sqrt(e2 - lo), sqrt(e2 - hi), see
+    travel_time."""
     if real:
         def v_of_u(u, k):
             return np.arcsinh(np.sqrt(np.maximum(e2[k, None] - u, 0.0) / delta[k, None]))
@@ -317,6 +423,9 @@ def _leg_time(real, lo, hi, e1, e2, delta, m, n, logit_step, v_step):
     with np.errstate(invalid="ignore", divide="ignore"):
         l_span = np.nan_to_num(_logit(hi) - _logit(lo), nan=0.0, posinf=0.0, neginf=0.0)
         ends = v_of_u(np.stack([lo, hi], axis=1), every)
+        if sqrt_gap is not None:
+            for j, g in enumerate(sqrt_gap):
+                ends[:, j] = np.where(np.isnan(g), ends[:, j], np.arcsinh(g / np.sqrt(delta)))
     v_span = np.nan_to_num(np.abs(ends[:, 1] - ends[:, 0]), nan=0.0, posinf=0.0)
     n_l = np.clip(np.ceil(l_span / logit_step), 1, 128).astype(np.int64)
     n_v = np.clip(np.ceil(v_span / v_step), 1, 64).astype(np.int64)
@@ -347,6 +456,7 @@ def _leg_time(real, lo, hi, e1, e2, delta, m, n, logit_step, v_step):
         u_break = 1.0 / (1.0 + np.exp(-lam))
         u_break[:, 0], u_break[:, -1] = lo[k], hi[k]
         v_logit = v_of_u(u_break, k)
+        v_logit[:, 0], v_logit[:, -1] = ends[k, 0], ends[k, 1]
         if nv > 1:
             v_lo, v_hi = v_logit[:, :1], v_logit[:, -1:]
             tv = np.linspace(0.0, 1.0, nv + 1)[1:-1]
@@ -375,4 +485,10 @@ def radial_travel_time(u_a, u_b, *, r_a=None, r_b=None) -> np.ndarray:
     with np.errstate(divide="ignore"):
         r_a = 1.0 / np.asarray(u_a, dtype=float) if r_a is None else np.asarray(r_a, dtype=float)
         r_b = 1.0 / np.asarray(u_b, dtype=float) if r_b is None else np.asarray(r_b, dtype=float)
-        return np.abs((r_b - r_a) + (np.log(r_b - 1.0) - np.log(r_a - 1.0)))  # no overflow of the ratio
+        dr = r_b - r_a
+        # ln((r_b - 1)/(r_a - 1)): as a difference of logs (no overflow of the ratio), or as
+        # log1p(dr / (r_a - 1)) for r_b next to r_a (no cancellation)
+        near = np.abs(dr) < 0.5 * (r_a - 1.0)
+        log_ratio = np.where(near, np.log1p(np.where(near, dr, 0.0) / (r_a - 1.0)),
+                             np.log(r_b - 1.0) - np.log(r_a - 1.0))
+        return np.abs(dr + log_ratio)

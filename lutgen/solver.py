@@ -20,7 +20,11 @@ Connecting rays include the ones steeper than the critical angle: they reach poi
 inside the photon sphere too, before they fall in. For every target with r > 1 and each order there is
 exactly one connecting ray: along the family of rays the angle swept on reaching radius r grows
 monotonically from 0 to infinity. Each case is solved with a vectorised bracketing root finder
-(Chandrupatla's method, scipy.optimize.elementwise.find_root) on closed-form swept angles.
+(Chandrupatla's method, scipy.optimize.elementwise.find_root) on closed-form swept angles: direct
+rays by their impact parameter b, rays that pass a periapsis e2 (and direct rays close to the ray
+tangent at the nearer of observer and target, u_turn) by a label of e2 that keeps both
+e2 - u_turn and 2/3 - e2 to full relative accuracy (_periapsis), with Carlson's forms of the swept
+angle, so targets next to the observer's own radius at angles down to 5e-324 are solved too.
 """
 from __future__ import annotations
 
@@ -97,7 +101,14 @@ def _direct_sweep(b, u, uo):
     """Angle swept by a ray of impact parameter b between uo and u without a turning point."""
     b, u, uo = np.broadcast_arrays(np.asarray(b, dtype=float), u, uo)
     out = np.empty(b.shape)
-    small = b <= _B_SMALL
+    # b / S(u) is also smooth on legs much shorter than their distance from the nearest root of
+    # S^2 = 1 - b^2 u^2 (1 - u) (estimated from its slope <= 2 b^2 u); there the difference of the
+    # elliptic integrals cancels (it would need to resolve |u - uo| ~ 1e-17)
+    with np.errstate(invalid="ignore"):
+        b2, u_max = b * b, np.maximum(u, uo)
+        s2_min = 1.0 - b2 * np.maximum(u * u * (1.0 - u), uo * uo * (1.0 - uo))
+        short = (s2_min >= 1e-3) & (np.abs(u - uo) * 40.0 * b2 * u_max <= s2_min)
+    small = (b <= _B_SMALL) | short
     if small.any():
         out[small] = _small_b_sweep(b[small], u[small], uo[small])
     big = ~small
@@ -108,7 +119,7 @@ def _direct_sweep(b, u, uo):
 
 
 def _small_b_sweep(b, u, uo):
-    """Swept angle of a steep ray (b <= _B_SMALL) between u and uo:
+    """Swept angle of a steep ray (b <= _B_SMALL, or a short leg, see _direct_sweep) between u and uo:
     b * integral du / S(u), S = sqrt(1 - b^2 u^2 (1 - u)) = b sqrt(P(u)), written as
     b (|u - uo| + integral (1/S - 1) du) with 1/S - 1 = x / (S (1 + S)), x = b^2 u^2 (1 - u) <= 4 b^2/27.
 
@@ -125,10 +136,35 @@ def _small_b_sweep(b, u, uo):
     return b * ((hi - lo) + corr)
 
 
-def _turning_sweep(eps, u, uo):
-    """Angle swept from uo in to the periapsis e2 = 2/3 - eps and back out to u."""
-    orb = _orb.orbit_from_turning_point(eps)
-    return 2.0 * _orb.sweep_to_turning_point(orb) - _orb.sweep(orb, uo) - _orb.sweep(orb, u)
+_Z_MIN = -1500.0  # exp(_Z_MIN / 2) underflows to 0: the tangent ray at u_turn itself
+
+
+def _periapsis(z, u_turn, span):
+    """Turning orbits labelled by z in R: periapsis e2 = u_turn + w between u_turn (z -> -inf) and the
+    photon sphere (z -> +inf), w = span / (1 + e^-z), eps = 2/3 - e2 = span / (1 + e^z), with
+    span = 2/3 - u_turn. Returns (orbit, sqrt(w), eps); both w (down to ~1e-600 through sqrt(w)) and
+    eps keep their relative accuracy, unlike e2 itself next to u_turn."""
+    ez = np.exp(np.minimum(z, 700.0))
+    sq_w = np.sqrt(span) * np.exp(0.5 * z) / np.sqrt(1.0 + ez)
+    eps = span / (1.0 + ez)
+    return _orb.orbit_from_turning_point(eps, e2=u_turn + sq_w * sq_w), sq_w, eps
+
+
+def _turning_sweep(z, u_turn, span, du):
+    """Angle swept by orbit z (see _periapsis) from inverse radius u_turn - du (the farther of observer
+    and target) in to its periapsis and back out to u_turn."""
+    orb, sq_w, _ = _periapsis(z, u_turn, span)
+    return (_orb.sweep_from_turning_point(orb, u_turn, sq_w)
+            + _orb.sweep_from_turning_point(orb, u_turn - du, np.hypot(sq_w, np.sqrt(du))))
+
+
+def _near_tangent_sweep(z, u_turn, span, du):
+    """Angle swept by orbit z (see _periapsis) directly from u_turn - du to u_turn (short of its
+    periapsis): direct rays close to the tangent one, where F(u_turn) - F(u_turn - du) would need e2
+    far below its rounding (and cancels for small du). Decreases from the tangent ray's sweep
+    (z -> -inf) as z grows."""
+    orb, sq_w, _ = _periapsis(z, u_turn, span)
+    return _orb.sweep_between(orb, u_turn - du, u_turn, np.hypot(sq_w, np.sqrt(du)), sq_w)
 
 
 def connect(r_obs, r, phi, order: int = 1) -> Connection:
@@ -165,6 +201,7 @@ def _solve(r_obs, r, phi, order):
     n = u.size
     b = np.zeros(n)
     eps = np.full(n, np.nan)
+    sq_w = np.full(n, np.nan)
     branch = np.zeros(n, dtype=np.int8)  # 0 radial, 1 direct inbound, 2 direct outbound, 3 turning
 
     radial = sweep == 0.0
@@ -175,11 +212,14 @@ def _solve(r_obs, r, phi, order):
     with np.errstate(divide="ignore", invalid="ignore"):
         b_turn = np.where(can_turn, 1.0 / (u_turn * np.sqrt(1.0 - u_turn)), _orb.B_CRIT)
         b_max = np.where(can_turn, b_turn, _orb.B_CRIT * (1.0 - 1e-15))
+    span = _orb.U_PHOTON - u_turn
+    du = np.abs(u - uo)
     sweep_turn = np.full(n, np.inf)
     ct = np.flatnonzero(can_turn & ~radial)
     if ct.size:
-        orb = _orb.orbit_from_turning_point(_orb.U_PHOTON - u_turn[ct])
-        sweep_turn[ct] = np.abs(_orb.sweep_to_turning_point(orb) - _orb.sweep(orb, np.where(inward[ct], uo, u[ct])))
+        # the tangent ray at u_turn: exactly the turning sweep of z = _Z_MIN, so the turning bracket
+        # below always has its sign change
+        sweep_turn[ct] = _turning_sweep(np.full(ct.size, _Z_MIN), u_turn[ct], span[ct], du[ct])
 
     direct = ~radial & (sweep <= sweep_turn)
     turning = ~radial & ~direct
@@ -188,6 +228,21 @@ def _solve(r_obs, r, phi, order):
     branch[turning] = 3
 
     d = np.flatnonzero(direct)
+    # direct rays close to the tangent one (the orbit's periapsis just beyond u_turn): solved in the
+    # periapsis label z in [_Z_MIN, 0] (f(_Z_MIN) = sweep_turn - phi >= 0 by construction)
+    dc = d[can_turn[d]]
+    if dc.size:
+        z0 = np.zeros(dc.size)
+        sweep_mid = _near_tangent_sweep(z0, u_turn[dc], span[dc], du[dc])
+        b_max[dc] = 1.0 / _periapsis(z0, u_turn[dc], span[dc])[0].inv_b
+        nt = dc[sweep[dc] > sweep_mid]
+        if nt.size:
+            f = lambda z, uu, sp, dd, target: _near_tangent_sweep(z, uu, sp, dd) - target  # noqa: E731
+            z = _bracket_root(f, np.full(nt.size, _Z_MIN), np.zeros(nt.size),
+                              (u_turn[nt], span[nt], du[nt], sweep[nt]), xatol=1e-15, xrtol=2.5e-16)
+            orb, sq_w[nt], eps[nt] = _periapsis(z, u_turn[nt], span[nt])
+            b[nt] = 1.0 / orb.inv_b
+            d = np.setdiff1d(d, nt, assume_unique=True)
     if d.size:
         # Below b = _B_TINY the swept angle is linear in b (see _direct_sweep), so a target that needs
         # no more than the sweep of _B_TINY is solved exactly by proportion (the bracketing root finder
@@ -198,32 +253,76 @@ def _solve(r_obs, r, phi, order):
             b[d[lin]] = _B_TINY * (sweep[d[lin]] / sweep_tiny[lin])
         d = d[~lin]
     if d.size:
+        # the two forms of the swept angle at b_max agree only to rounding: a target between them
+        # gets b_max (the root finder would see no sign change)
+        edge = _direct_sweep(b_max[d], u[d], uo) <= sweep[d]
+        b[d[edge]] = b_max[d[edge]]
+        d = d[~edge]
+    if d.size:
         f = lambda bb, uu, uuo, target: _direct_sweep(bb, uu, uuo) - target  # noqa: E731
         b[d] = _bracket_root(f, np.zeros(d.size), b_max[d], (u[d], uo * np.ones(d.size), sweep[d]),
                              xatol=1e-300, xrtol=4e-16)
     t = np.flatnonzero(turning)
     if t.size:
-        # solve in s = log(eps), eps = 2/3 - e2: the swept angle grows like -log(eps) as the periapsis
-        # approaches the photon sphere, so it is nearly linear in s.
-        f = lambda s, uu, uuo, target: _turning_sweep(np.exp(s), uu, uuo) - target  # noqa: E731
-        s_hi = np.log(_orb.U_PHOTON - u_turn[t])
-        s_lo = np.full(t.size, np.log(1e-15))
-        s = _bracket_root(f, s_lo, s_hi, (u[t], uo * np.ones(t.size), sweep[t]), xatol=1e-15, xrtol=0.0)
-        eps[t] = np.exp(s)
+        # solve in z = log(w / eps) (see _periapsis): the swept angle grows like -log(eps) ~ z as the
+        # periapsis approaches the photon sphere, and like sqrt(w) ~ e^(z/2) above the tangent ray's
+        # (the periapsis next to u_turn: targets next to the observer's radius at tiny angles)
+        f = lambda z, uu, sp, dd, target: _turning_sweep(z, uu, sp, dd) - target  # noqa: E731
+        args = (u_turn[t], span[t], du[t], sweep[t])
+        z_lo = np.full(t.size, -20.0)  # w ~ 2e-9 span: a shorter bracket where it is one
+        z_lo[f(z_lo, *args) > 0.0] = _Z_MIN
+        z_hi = np.log(span[t] / 1e-15)  # eps >= ~1e-15
+        z = _bracket_root(f, z_lo, z_hi, args, xatol=1e-15, xrtol=2.5e-16)
+        _, sq_w[t], eps[t] = _periapsis(z, u_turn[t], span[t])
 
-    return _finish(r_obs, u, uo, phi, order, b, eps, branch, r=r)
+    return _finish(r_obs, u, uo, phi, order, b, eps, branch, r=r, sq_w=sq_w)
 
 
-def _finish(r_obs, u, uo, phi, order, b, eps, branch, r=None):
+def _labelled_orbits(b, eps, sq_w, u, uo):
+    """Orbits labelled by their periapsis (eps = 2/3 - e2 and sq_w = sqrt(e2 - u_turn), u_turn =
+    max(u, uo), see _periapsis) or, where eps is NaN, by b. Returns (orbit, b, sqrt(e2 - uo),
+    sqrt(e2 - u)); the square roots come from the label (NaN for orbits labelled by b, NaN sq_w
+    counts as 0): next to the tangent ray e2 - x is far below the rounding of e2."""
+    by_b = np.isnan(eps)
+    if by_b.all():  # (the grid solver's rays)
+        orb = _orb.orbit_from_b(b)
+        return orb, 1.0 / orb.inv_b, None, None
+    w = np.where(by_b | np.isnan(sq_w), 0.0, sq_w)
+    u_turn = np.maximum(u, uo)
+    orb = _orb.orbit_from_turning_point(np.where(by_b, 0.1, eps), e2=np.where(by_b, 0.1, u_turn + w * w))
+    if by_b.any():
+        ob = _orb.orbit_from_b(b[by_b])
+        for f in ("e1", "real", "e2", "e3", "delta", "m", "n"):
+            getattr(orb, f)[by_b] = getattr(ob, f)
+    with np.errstate(invalid="ignore"):
+        sq_far = np.hypot(w, np.sqrt(np.abs(u - uo)))  # at the farther point, u_turn - |u - uo|
+    sq_o = np.where(by_b, np.nan, np.where(u > uo, sq_far, w))
+    sq_u = np.where(by_b, np.nan, np.where(u > uo, w, sq_far))
+    return orb, 1.0 / orb.inv_b, sq_o, sq_u
+
+
+def _sqrt_p(orb, x, sq):
+    """sqrt(P(x)) = sqrt((x - e1)(e2 - x)(e3 - x)), with e2 - x = sq^2 where sq is known (not NaN)."""
+    if sq is None:
+        return np.sqrt(np.maximum(orb.P(x), 0.0))
+    with np.errstate(invalid="ignore"):
+        known = np.sqrt((x - orb.e1) * (orb.delta + sq * sq)) * sq
+    return np.where(np.isnan(sq), np.sqrt(np.maximum(orb.P(x), 0.0)), known)
+
+
+def _finish(r_obs, u, uo, phi, order, b, eps, branch, r=None, sq_w=None):
     """Initial angle, travel time and arrival direction from the solved orbits.
 
     ``r``: the targets' radii (default 1/u). Passing the exact input keeps r finite where 1/u
-    would not round back to it (u = 1/r is subnormal for r >~ 4.5e307).
+    would not round back to it (u = 1/r is subnormal for r >~ 4.5e307). ``sq_w`` (optional, with
+    ``eps``): sqrt(e2 - max(u, uo)) of turning orbits labelled by their periapsis (see _periapsis).
     """
     n = u.size
     if r is None:
         with np.errstate(divide="ignore"):
             r = 1.0 / u
+    if sq_w is None:
+        sq_w = np.full(n, np.nan)
     xi = np.empty(n)
     dt = np.empty(n)
     u_r = np.empty(n)  # dr/dlambda at the target
@@ -242,31 +341,30 @@ def _finish(r_obs, u, uo, phi, order, b, eps, branch, r=None):
     if dirm.any():
         # below _B_TINY the ray is radial to double precision (b sqrt(P) = 1); orbit_from_b itself
         # overflows for b <~ 1e-154
-        bb = np.maximum(b[dirm], _B_TINY)
-        orb = _orb.orbit_from_b(bb)
+        orb, bb, sq_o, sq_u = _labelled_orbits(np.maximum(b[dirm], _B_TINY), eps[dirm], sq_w[dirm],
+                                               u[dirm], uo)
+        b_out[dirm] = np.where(np.isnan(eps[dirm]), b[dirm], bb)
         outward = branch[dirm] == 2
-        cos_xi = np.where(outward, 1.0, -1.0) * bb * np.sqrt(np.maximum(orb.P(uo), 0.0))
-        xi[dirm] = np.arctan2(b[dirm] * k * uo, cos_xi)
-        dt[dirm] = _orb.travel_time(orb, uo, u[dirm], r_a=r_obs, r_b=r[dirm])
-        u_r[dirm] = np.where(outward, 1.0, -1.0) * k * bb * np.sqrt(np.maximum(orb.P(u[dirm]), 0.0))
+        cos_xi = np.where(outward, 1.0, -1.0) * bb * _sqrt_p(orb, uo, sq_o)
+        xi[dirm] = np.arctan2(b_out[dirm] * k * uo, cos_xi)
+        dt[dirm] = _orb.travel_time(orb, uo, u[dirm], r_a=r_obs, r_b=r[dirm],
+                                    sqrt_gap=None if sq_o is None else (sq_o, sq_u))
+        u_r[dirm] = np.where(outward, 1.0, -1.0) * k * bb * _sqrt_p(orb, u[dirm], sq_u)
 
     tm = branch == 3
     if tm.any():
-        # turning orbits come either labelled by their periapsis (eps = 2/3 - e2) or by b (eps NaN)
-        e = eps[tm]
-        by_b = np.isnan(e)
-        orb = _orb.orbit_from_turning_point(np.where(by_b, 0.1, e))
-        if by_b.any():
-            ob = _orb.orbit_from_b(b[tm][by_b])
-            for f in ("e1", "real", "e2", "e3", "delta", "m", "n"):
-                getattr(orb, f)[by_b] = getattr(ob, f)
-        bb = 1.0 / orb.inv_b
+        orb, bb, sq_o, sq_u = _labelled_orbits(b[tm], eps[tm], sq_w[tm], u[tm], uo)
         b_out[tm] = bb
-        cos_xi = -bb * np.sqrt(np.maximum(orb.P(uo), 0.0))
+        cos_xi = -bb * _sqrt_p(orb, uo, sq_o)
         xi[tm] = np.arctan2(bb * k * uo, cos_xi)
-        dt[tm] = (_orb.travel_time(orb, uo, orb.e2, r_a=r_obs)
-                  + _orb.travel_time(orb, u[tm], orb.e2, r_a=r[tm]))
-        u_r[tm] = k * bb * np.sqrt(np.maximum(orb.P(u[tm]), 0.0))
+        if sq_o is None:
+            gaps_o = gaps_u = None
+        else:
+            zero = np.where(np.isnan(sq_o), np.nan, 0.0)  # sqrt(e2 - e2)
+            gaps_o, gaps_u = (sq_o, zero), (sq_u, zero)
+        dt[tm] = (_orb.travel_time(orb, uo, orb.e2, r_a=r_obs, sqrt_gap=gaps_o)
+                  + _orb.travel_time(orb, u[tm], orb.e2, r_a=r[tm], sqrt_gap=gaps_u))
+        u_r[tm] = k * bb * _sqrt_p(orb, u[tm], sq_u)
 
     # r u^phi = h/r = k b u (u^phi negative for order 2, which sweeps towards -phi); formed without
     # u^2, which underflows for far targets

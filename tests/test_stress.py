@@ -26,13 +26,12 @@ i.e. ``>= T``, with equality exactly when nothing is split (max_tess_level = 1).
 does not give F - S (nor how many of outside_frustum are source triangles); the tests get it by
 wrapping subdivision.subdivide.
 
-Known failures, each a strict xfail test with the cause in its reason (the adversarial tests leave
-exactly these inputs out of their rule): connect gives NaN for targets within ~1e-13 r_obs of the
-observer itself. (inf dt one ulp above the horizon, out-of-range and negative indices, source_tri
-numbering, NaN 1 + z on disc images and a camera at the hole were bugs found here and fixed in
-762d530; NaN for order-1 targets with 0 < phi <~ 1e-46, inf dt on the radial ray to r ~ 1e308 and
-NaN/inf or inaccurate dt for r >~ 1e9 r_s on non-radial rays were fixed later; their tests now check
-the fixed behaviour.)
+Known failures: none (the adversarial rules above hold for every input). Bugs found here and fixed,
+whose tests now check the fixed behaviour: inf dt one ulp above the horizon, out-of-range and
+negative indices, source_tri numbering, NaN 1 + z on disc images and a camera at the hole (762d530);
+NaN for order-1 targets with 0 < phi <~ 1e-46, inf dt on the radial ray to r ~ 1e308, NaN/inf and
+inaccurate dt for r >~ 1e9 r_s on non-radial rays, and NaN for order-1 targets within ~1e-13 r_obs
+of the observer at angles below ~1e-7 (lutgen, later).
 
 The fast versions run by default (small LUTs, 1e3-1e5 points or triangles); the full sizes
 (1e6 points, a 1e6-triangle mesh) are marked ``slow`` (``pytest -m slow``).
@@ -380,28 +379,18 @@ def _connect_rule(r, phi):
         return np.isfinite(r) & np.isfinite(phi) & (r > 1.0) & (phi >= 0.0) & (phi <= np.pi)
 
 
-def _known_order1_nan(r, phi, r_obs):
-    """Order-1 targets where connect returns NaN though the input is valid (xfail below): within
-    ~1e-13 r_obs radially and 1e-6 rad of the observer itself (test_connect_next_to_the_observer_is_finite)."""
-    with np.errstate(invalid="ignore"):
-        return (np.abs(r / r_obs - 1.0) < 1e-12) & (np.abs(phi) < 1e-6)
-
-
 def check_connect(r_obs, r, phi, orders=(1, 2)):
     r64, phi64 = np.asarray(r, np.float64), np.asarray(phi, np.float64)
     valid = _connect_rule(r64, phi64)
-    known = _known_order1_nan(r64, phi64, r_obs)
     for order in orders:
         c = connect(r_obs, r, phi, order)
-        excused = known if order == 1 else np.zeros(r64.shape, bool)
         for name in ("xi", "dt", "ux", "uy", "b"):
             v = getattr(c, name)
             assert v.shape == r64.shape
-            inf = np.isinf(v) & ~excused
+            inf = np.isinf(v)
             assert not inf.any(), f"inf {name} at r = {r64[inf][:5]}, phi = {phi64[inf][:5]}"
             assert np.isnan(v[~valid]).all(), f"{name} not NaN for invalid input"
-            ok = valid & ~excused
-            bad = ok & ~np.isfinite(v)
+            bad = valid & ~np.isfinite(v)
             assert not bad.any(), (f"r_obs = {r_obs}, order {order}: NaN {name} at r = {r64[bad][:5]}, "
                                    f"phi = {phi64[bad][:5]}")
         fin = valid & np.isfinite(c.xi)
@@ -432,16 +421,49 @@ def test_connect_adversarial_points_full():
         check_connect(r_obs, r, phi)
 
 
-@pytest.mark.xfail(strict=True, reason="lutgen.solver.connect returns NaN xi (dt = 0) for order-1 targets at "
-                   "the observer's radius (|r/r_obs - 1| <~ 1e-13) and 0 < phi <~ 1e-7: the turning-branch "
-                   "bracket [log 1e-15, log(2/3 - 1/r_obs)] of the periapsis has no sign change once phi is "
-                   "below the rounding of the swept angle near the periapsis, and find_root gives NaN")
 def test_connect_next_to_the_observer_is_finite():
-    r_obs = 20.0
-    phi = np.array([1e-300, 1e-15, 1e-10, 1e-8])
-    for r in (r_obs, np.nextafter(r_obs, 0.0)):
-        c = connect(r_obs, r, phi, 1)
-        assert np.isfinite(c.xi).all() and np.isfinite(c.dt).all()
+    """(Was NaN xi for order-1 targets at the observer's radius, |r/r_obs - 1| <~ 1e-13, and
+    0 < phi <~ 1e-7: the periapsis 2/3 - eps of such rays lies within the rounding of e2 of the
+    observer's radius. Rays next to the tangent one are now labelled by sqrt(e2 - u_turn), with
+    Carlson's forms of the swept angle.) Finite, and the local geometry of the static frame: at r_obs
+    itself the chord of a circle, tan(xi - pi/2) = (1 - 3u/2) (phi/2) / sqrt(1 - u) and
+    dt = r phi / sqrt(1 - u), u = 1/r_obs, up to O(phi^2)."""
+    for r_obs in (1.6, 20.0, 1000.0):
+        uo = 1.0 / r_obs
+        phi = np.array([5e-324, 1e-300, 1e-15, 1e-10, 1e-8, 1e-6])
+        for r in (r_obs, np.nextafter(r_obs, 0.0), np.nextafter(r_obs, 2 * r_obs)):
+            c = connect(r_obs, r, phi, 1)
+            assert all(np.isfinite(v).all() for v in c), (r_obs, r)
+            assert np.all((c.dt >= 0) & (c.xi >= 0) & (c.xi <= np.pi))
+        c = connect(r_obs, r_obs, phi, 1)
+        np.testing.assert_allclose(c.dt, r_obs * phi / np.sqrt(1 - uo), rtol=1e-12, atol=1e-320)
+        big = phi >= 1e-10
+        np.testing.assert_allclose(c.xi[big] - np.pi / 2, (1 - 1.5 * uo) * phi[big] / 2 / np.sqrt(1 - uo),
+                                   rtol=1e-5, atol=4e-16)
+
+
+def test_connect_next_to_the_observer_is_flat_locally():
+    """Targets within ~1e-10 r_obs of the observer, at angles 1e-300 to 1e-8: direction and coordinate
+    time are those of flat space in the static frame, proper offsets (dr / sqrt(1 - u), r_obs phi),
+    dt = distance / sqrt(1 - u), to O(distance / r_obs) and the rounding of r (the radial offset is
+    that of u = 1/r as rounded; dt to a few ulp of r)."""
+    for r_obs in (1.6, 20.0, 1000.0):
+        uo = 1.0 / r_obs
+        phi = np.array([1e-300, 1e-18, 1e-17, 1e-16, 1e-15, 1e-12, 1e-10, 1e-8])
+        radii = [np.nextafter(r_obs, 0.0), np.nextafter(r_obs, 2 * r_obs)]
+        radii += [r_obs * (1 + f) for f in (1e-13, -1e-13, 1e-11, -1e-11)]
+        for r in radii:
+            c = connect(r_obs, r, phi, 1)
+            u = 1.0 / r
+            radial = (uo - u) / (u * uo) / np.sqrt(1 - uo)  # proper radial offset (dr ~ 1e-10 r at most)
+            tangential = r_obs * phi
+            angle = np.arctan2(tangential, radial)  # from the outward radial direction
+            err = np.abs(c.xi - angle)
+            # (the chord's own bend, ~phi/2 at r = r_obs, is O(distance / r_obs))
+            assert np.all(err <= 1e-6 * np.abs(np.pi / 2 - angle) + phi + 1e-15), (r_obs, r, err)
+            dist = np.hypot(radial, tangential)
+            err = np.abs(c.dt - dist / np.sqrt(1 - uo))
+            assert np.all(err <= 1e-6 * c.dt + 4 * np.spacing(r_obs)), (r_obs, r, err)
 
 
 def test_connect_tiny_angles_are_finite():
