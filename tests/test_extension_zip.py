@@ -164,3 +164,16 @@ def test_install_enable_uninstall(zip_path, tmp_path):
     assert again["after_uninstall"]["enabled"] is False
     assert not again["package_dir_left"]
     assert not {"lutgen", "scipy"} & set(again["site_listing_after"]), again["site_listing_after"]
+
+
+def test_root_init_imports_as_a_plain_module():
+    """pytest imports the repository's root __init__.py as a top-level module when the checkout's folder
+    name is not an identifier (e.g. a CI checkout in ``grlens.git``): that must not fail."""
+    import importlib.util
+    import os
+
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "__init__.py")
+    spec = importlib.util.spec_from_file_location("__init__", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert not hasattr(module, "register")
