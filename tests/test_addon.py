@@ -206,11 +206,14 @@ def test_gr_illumination_attribute_and_node_group():
     scene.collection.objects.link(light)
     g = scene.grlens
     g.light = light
-    g.use_gr_illumination = True
-    bpy.ops.grlens.rebuild()
     from grlens_addon.blender.shading import GROUP_NAME
 
+    g.auto_update = False
+    assert GROUP_NAME not in bpy.data.node_groups
+    g.use_gr_illumination = True  # the node group exists at once, before any rebuild (material set-up)
     assert GROUP_NAME in bpy.data.node_groups
+    g.auto_update = True
+    bpy.ops.grlens.rebuild()
     mesh = bpy.data.objects["OrbitingSphere.GR1"].data
     a = mesh.attributes["grlens_irradiance"]
     assert a.domain == "CORNER"

@@ -13,6 +13,16 @@ def _changed(self, context):
     handlers.request_rebuild(context.scene if context else None)
 
 
+def _gr_illumination_changed(self, context):
+    """Switching GR illumination on creates its node group at once (for material set-up before any
+    rebuild), then rebuilds like any setting."""
+    if self.use_gr_illumination:
+        from . import shading
+
+        shading.ensure_node_group()
+    _changed(self, context)
+
+
 class GRLENS_SceneSettings(bpy.types.PropertyGroup):
     black_hole: PointerProperty(
         name="Black Hole", type=bpy.types.Object, update=_changed,
@@ -58,7 +68,7 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
     show_order_2: BoolProperty(name="Second-order Images", default=True, update=_changed,
                                description="Show the images seen along the ray around the other side of the hole")
     use_gr_illumination: BoolProperty(
-        name="GR Illumination", default=False, update=_changed,
+        name="GR Illumination", default=False, update=_gr_illumination_changed,
         description="Compute the irradiance of a point light along both connecting geodesics into the "
                     "'grlens_irradiance' attribute (use the 'grlens GR Illumination' node group)")
     light: PointerProperty(name="Light", type=bpy.types.Object, update=_changed,
