@@ -244,7 +244,7 @@ def forget_all() -> None:
     """Drop every remembered input and topology (a new file is being loaded: its images are rebuilt
     on their first update)."""
     _INPUTS.clear()
-    upload._TOPOLOGY.clear()
+    upload.forget_all()
 
 
 def _same_inputs(token, inputs) -> bool:

@@ -38,6 +38,11 @@ def forget(mesh) -> None:
     _TOPOLOGY.pop(mesh.get("grlens_topology"), None)
 
 
+def forget_all() -> None:
+    """Drop every remembered topology (a new file is being loaded)."""
+    _TOPOLOGY.clear()
+
+
 def _remember_topology(mesh, img) -> None:
     old = mesh.get("grlens_topology")
     _TOPOLOGY.pop(old, None)

@@ -34,16 +34,17 @@ class CullReport:
                 + self.below_pixel)
 
 
+def chord_length(u, v):
+    """(N,) distance between unit vectors ``u`` and ``v`` (N, 3): the chord on the view sphere."""
+    w = u - v
+    return np.sqrt(np.einsum("ij,ij->i", w, w))
+
+
 def circumference(d, tris):
     """Perimeter of each triangle on the unit view sphere, as the sum of its corners' chord lengths
     (dimensionless; equal to the sum of the angles in radians to second order for small triangles)."""
     a, b, c = d.take(tris[:, 0], axis=0), d.take(tris[:, 1], axis=0), d.take(tris[:, 2], axis=0)
-
-    def chord(u, v):
-        w = u - v
-        return np.sqrt(np.einsum("ij,ij->i", w, w))
-
-    return chord(a, b) + chord(b, c) + chord(c, a)
+    return chord_length(a, b) + chord_length(b, c) + chord_length(c, a)
 
 
 def unit_directions(points, camera):
@@ -91,6 +92,17 @@ def max_ring_span(radius, sagitta):
     return 2.0 * np.arccos(np.clip(1.0 - sagitta / radius, -1.0, 1.0))
 
 
+def _axis_coordinates(source_points, camera, hole):
+    """Coordinates (x, y, z) of ``source_points`` (N, 3; BU) relative to the hole: z along the axis
+    towards the camera, x and y across it (a fixed perpendicular pair)."""
+    e1 = np.asarray(camera, np.float64) - hole
+    e1 = e1 / np.linalg.norm(e1)
+    u = any_perpendicular(e1)
+    v = np.cross(e1, u)
+    p = np.asarray(source_points, dtype=np.float64) - hole
+    return p @ u, p @ v, p @ e1
+
+
 def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     """Per triangle: (straddles, span).
 
@@ -107,12 +119,7 @@ def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     triangles, the others get NaN.
     """
     tris = np.asarray(tris, dtype=np.int64)
-    e1 = camera - hole
-    e1 = e1 / np.linalg.norm(e1)
-    u = any_perpendicular(e1)
-    v = np.cross(e1, u)
-    p = np.asarray(source_points, dtype=np.float64) - hole
-    x, y, z = p @ u, p @ v, p @ e1
+    x, y, z = _axis_coordinates(source_points, camera, hole)
     xa, xb, xc = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
     ya, yb, yc = y[tris[:, 0]], y[tris[:, 1]], y[tris[:, 2]]
     # twice the signed areas of (origin, b, c), (origin, c, a), (origin, a, b): barycentrics of the axis
@@ -143,13 +150,9 @@ def near_axis(source_points, tris, camera, hole, margin=1e-9) -> np.ndarray:
     finds crossed, and of every sub-triangle of theirs (sub-triangles lie inside their source
     triangle), for ``cull(..., axis_candidates=...)``. Non-finite corners make a candidate."""
     tris = np.asarray(tris, dtype=np.int64)
-    e1 = np.asarray(camera, np.float64) - hole
-    e1 = e1 / np.linalg.norm(e1)
-    u = any_perpendicular(e1)
-    v = np.cross(e1, u)
-    p = np.asarray(source_points, dtype=np.float64) - hole
-    x, y = p @ u, p @ v
-    tol = margin * np.linalg.norm(p, axis=1)
+    p = np.asarray(source_points, dtype=np.float64)
+    x, y, _ = _axis_coordinates(p, camera, hole)
+    tol = margin * np.linalg.norm(p - hole, axis=1)
     with np.errstate(invalid="ignore"):  # NaN compares False: no side, so never excluded
         side = ((x > tol).astype(np.uint8) | ((x < -tol).astype(np.uint8) << 1)
                 | ((y > tol).astype(np.uint8) << 2) | ((y < -tol).astype(np.uint8) << 3))
@@ -227,8 +230,7 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     ring = keep & ~(ratio <= cull_ratio)
     if hole is not None and order is not None:
         # the axis test and the azimuth span only where they can matter: candidates and ring triangles
-        test = ring if axis_candidates is None else ring | axis_candidates
-        sel = np.arange(len(tris)) if axis_candidates is None else np.flatnonzero(test)
+        sel = np.arange(len(tris)) if axis_candidates is None else np.flatnonzero(ring | axis_candidates)
         straddles = np.zeros(len(tris), dtype=bool)
         span = np.full(len(tris), np.nan)
         straddles[sel], span[sel] = axis_geometry(source_points, tris[sel], np.asarray(camera, np.float64),

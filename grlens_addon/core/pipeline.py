@@ -180,7 +180,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         img_v = images_v[order]
         img_chord_len = _chord_lengths(img_v.direction, edges.verts)
         img_circ = _circumference_from_edges(img_chord_len, edges.of_tri)
-        chord = 2.0 * np.arcsin(np.clip(0.5 * img_chord_len, 0.0, 1.0))  # subdivision.chord_angle
+        chord = subdivision.angle_of_chord(img_chord_len)
         # edge midpoints are mapped only where a level above 1 is possible: an edge whose image spans
         # at most one pixel keeps level 1 whatever its curvature (see subdivision.edge_levels)
         probe = np.flatnonzero(~(chord <= settings.pixel_angle)) if settings.pixel_angle else np.arange(len(ev0))
@@ -202,13 +202,12 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                                     subdivision.Edges(edges.verts, edges.of_tri[tri_sel]), levels)
         img = _map_subdivided(sub, n_pts, img_v, scene, lut, order)
         face_src = tri_sel[sub.source_tri]  # each face's source triangle (index into src.tris)
-        is_corner = sub.vertex_key < n_pts
         bits = None
-        if out_v is not None:  # frustum bits of the subdivided vertices: the corners' are known
-            bits = out_v[sub.vertex_key] if is_corner.all() else np.where(
-                is_corner, out_v[np.minimum(sub.vertex_key, n_pts - 1)], 0)
-            if not is_corner.all():
-                bits[~is_corner] = culling.outside_bits(img.position[~is_corner], planes)
+        if out_v is not None:  # frustum bits of the subdivided vertices: the source corners' are known
+            is_corner = sub.vertex_key < n_pts
+            bits = np.empty(len(sub.vertex_key), dtype=np.int64)
+            bits[is_corner] = out_v[sub.vertex_key[is_corner]]
+            bits[~is_corner] = culling.outside_bits(img.position[~is_corner], planes)
         keep, report = culling.cull(
             sub.tris, img.direction, img.valid, sub.positions, scene.camera, settings.cull_ratio, planes,
             img.position, scene.hole, order, settings.pixel_angle, settings.max_error_px,
@@ -278,8 +277,8 @@ def _edges_of(tris) -> subdivision.Edges:
 
 def _chord_lengths(directions, edge_verts) -> np.ndarray:
     """(E,) chord length between the unit ``directions`` of each edge's end points (dimensionless)."""
-    w = directions.take(edge_verts[:, 1], axis=0) - directions.take(edge_verts[:, 0], axis=0)
-    return np.sqrt(np.einsum("ij,ij->i", w, w))
+    return culling.chord_length(directions.take(edge_verts[:, 1], axis=0),
+                                directions.take(edge_verts[:, 0], axis=0))
 
 
 def _circumference_from_edges(chord_lengths, of_tri) -> np.ndarray:

@@ -64,7 +64,12 @@ def edge_levels(rho: np.ndarray, max_tess_level: int, a: float, b: float,
 
 def chord_angle(d_a: np.ndarray, d_b: np.ndarray) -> np.ndarray:
     """Angle (radians) between unit directions (E, 3): an edge's image size on the view sphere."""
-    return 2.0 * np.arcsin(np.clip(0.5 * np.linalg.norm(d_b - d_a, axis=1), 0.0, 1.0))
+    return angle_of_chord(np.linalg.norm(d_b - d_a, axis=1))
+
+
+def angle_of_chord(chord):
+    """Angle (radians) subtended by a chord of the unit sphere of length ``chord``."""
+    return 2.0 * np.arcsin(np.clip(0.5 * chord, 0.0, 1.0))
 
 
 def rho(d_a: np.ndarray, d_b: np.ndarray, d_mid: np.ndarray) -> np.ndarray:
