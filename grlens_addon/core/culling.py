@@ -150,9 +150,8 @@ def near_axis(source_points, tris, camera, hole, margin=1e-9) -> np.ndarray:
     finds crossed, and of every sub-triangle of theirs (sub-triangles lie inside their source
     triangle), for ``cull(..., axis_candidates=...)``. Non-finite corners make a candidate."""
     tris = np.asarray(tris, dtype=np.int64)
-    p = np.asarray(source_points, dtype=np.float64)
-    x, y, _ = _axis_coordinates(p, camera, hole)
-    tol = margin * np.linalg.norm(p - hole, axis=1)
+    x, y, z = _axis_coordinates(source_points, camera, hole)
+    tol = margin * np.sqrt(x * x + y * y + z * z)  # margin times the distance from the hole (orthonormal axes)
     with np.errstate(invalid="ignore"):  # NaN compares False: no side, so never excluded
         side = ((x > tol).astype(np.uint8) | ((x < -tol).astype(np.uint8) << 1)
                 | ((y > tol).astype(np.uint8) << 2) | ((y < -tol).astype(np.uint8) << 3))
