@@ -179,9 +179,10 @@ def other_surface_notes(angles, results):
         return []
     return [f"Pixels showing the sphere in the right order but another part of it (seen points more than "
             f"{OTHER_SURFACE:g} r_s apart; the coverage mismatch cannot see these, the UV error does): "
-            + "; ".join(parts) + ". Next to the ring the near side's image has gaps where the "
-            "ring culling drops pieces of the triangles next to the axis that are still too wide for the "
-            "ring at max_tess_level, and the far side shows through them.", ""]
+            + "; ".join(parts) + ". Next to the ring (170 deg: the sphere passes beside the axis, so there is no axis patch) "
+            "the near side's image has gaps where the ring culling drops pieces of the triangles next to "
+            "the axis that are still too wide for the ring at max_tess_level, and the far side shows "
+            "through them.", ""]
 
 
 def ring_notes(angles, results):
@@ -204,10 +205,12 @@ def ring_notes(angles, results):
     return ["Einstein-ring views (the sphere straddles the camera-hole axis; see accuracy_NNN.png from "
             "`--png-dir` for pictures): " + "; ".join(parts) + ". The second-order rings are less than a "
             "pixel wide, so nearly all their pixels are edge pixels: a boundary that is off by a tenth of a "
-            "pixel changes the coverage by tens of percent. The polygon rings are wider (ranges above): the "
-            "straight sides of their pieces may deviate from the curved ring by up to the subdivision's "
-            "screen-space tolerance (`max_error_px`, default 0.25 px), which the Pareto sweep below trades "
-            "against time.", ""]
+            "pixel changes the coverage by tens of percent. The ring's edge at the Einstein radius is drawn "
+            "by the axis patches (grlens_addon/core/axis_patch.py: chords between exact points of the ring, "
+            "sagging by max_error_px / 16); the other edge is the sphere's silhouette along the rays, "
+            "subdivided to max_error_px / 4 (core/silhouette.py); what is left is the straight sides of "
+            "the pieces, within those tolerances of the curved edges, which the Pareto sweep below "
+            "trades against time.", ""]
 
 
 def sweep_settings():

@@ -20,9 +20,11 @@ triangles; ``invalid_vertex``, ``degenerate_source``, ``einstein_ring``, the res
 triangles of which S reach subdivision.subdivide and come out as F >= S faces (every one of the S
 keeps at least one face):
 
-    kept + total_culled() + bad_source_triangles == T + (F - S)
+    kept - patch_faces + total_culled() + patch_replaced + bad_source_triangles == T + (F - S)
 
-i.e. ``>= T``, with equality exactly when nothing is split (max_tess_level = 1). The report alone
+i.e. ``>= T``, with equality exactly when nothing is split (max_tess_level = 1, which also means no
+Einstein-ring patches: ``patch_replaced`` source triangles are drawn by ``patch_faces`` faces of
+axis_patch.py instead of being subdivided). The report alone
 does not give F - S (nor how many of outside_frustum are source triangles); the tests get it by
 wrapping subdivision.subdivide.
 
@@ -319,7 +321,8 @@ def check_images(out, src, scene, settings, spy_calls=None, light=None, disc=Non
             assert isinstance(getattr(rep, k), int) and getattr(rep, k) >= 0, k
         assert rep.kept == F
         assert rep.extra["bad_source_triangles"] == n_bad
-        total = rep.kept + rep.total_culled() + n_bad
+        assert 0 <= rep.patch_faces <= rep.kept
+        total = rep.kept - rep.patch_faces + rep.total_culled() + rep.patch_replaced + n_bad
         assert total >= n_src
         if rep.below_pixel or n_clean == 0:  # nothing built, nothing subdivided
             assert rep.below_pixel in (0, n_clean) and F == 0
@@ -331,7 +334,8 @@ def check_images(out, src, scene, settings, spy_calls=None, light=None, disc=Non
             assert f >= s
             extra = f - s
             assert total == n_src + extra, (total, n_src, extra, rep)
-            assert rep.outside_frustum >= n_clean - s  # the pre-subdivision cull is part of it
+            # the pre-subdivision cull is part of it; triangles replaced by a patch are not subdivided
+            assert rep.outside_frustum + rep.patch_replaced >= n_clean - s
         else:
             extra = None
         if settings.max_tess_level == 1:
@@ -663,6 +667,7 @@ def test_accounting_is_exact_without_subdivision():
         for img in out.values():
             rep = img.report
             assert rep.kept + rep.total_culled() + rep.extra["bad_source_triangles"] == len(src.tris)
+            assert rep.patch_faces == rep.patch_replaced == 0  # no Einstein-ring patch without subdivision
 
 
 def test_source_tri_indexes_the_callers_triangles():

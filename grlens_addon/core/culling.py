@@ -27,6 +27,8 @@ class CullReport:
     outside_frustum: int = 0
     below_pixel: int = 0  # whole image smaller than a pixel: not built
     kept: int = 0
+    patch_replaced: int = 0  # source triangles drawn by an Einstein-ring patch instead (not culled)
+    patch_faces: int = 0  # of the kept faces, those of Einstein-ring patches (axis_patch.py)
     extra: dict = field(default_factory=dict)
 
     def total_culled(self) -> int:

@@ -27,25 +27,44 @@ def irradiance(points, normals, light, hole, r_s, lut, intensity=1.0, orders=(1,
     if abs(lut.r_obs / scene.r_obs - 1.0) > R_OBS_TOLERANCE:
         raise ValueError(f"the light's LUT was built for r = {lut.r_obs:.9g} r_s, the light is at "
                          f"{scene.r_obs:.9g} r_s")
-    plane = plane_coordinates(points, scene)
-    e1 = scene.e1
-    c, s = np.cos(plane.phi), np.sin(plane.phi)
-    e_r = c[:, None] * e1 + s[:, None] * plane.e2
-    e_phi = -s[:, None] * e1 + c[:, None] * plane.e2
     normals = np.asarray(normals, dtype=np.float64)
-    total = np.zeros(len(plane.r))
+    total = np.zeros(len(normals))
     parts = {}
-    for order in orders:
-        look = lut.lookup(plane.r, plane.phi, order, quantities=("dt", "ux", "uy"))
-        u_r = look.ux * c + look.uy * s  # dr/dlambda
-        r_uphi = -look.ux * s + look.uy * c  # r dphi/dlambda
+    for order, (d, dt) in towards_observer(points, scene, lut, orders).items():
         with np.errstate(invalid="ignore", divide="ignore"):
-            f_r = u_r / np.sqrt(1.0 - 1.0 / plane.r)  # local static frame components
-            d = -(f_r[:, None] * e_r + r_uphi[:, None] * e_phi)
-            d /= np.linalg.norm(d, axis=1)[:, None]
-            dist = look.dt * r_s
+            dist = dt * r_s
             part = intensity * np.maximum(0.0, np.einsum("ij,ij->i", normals, d)) / dist**2
         part = np.nan_to_num(part, nan=0.0, posinf=0.0)
         parts[order] = part
         total += part
     return total, parts
+
+
+def towards_observer(points, scene: Scene, lut, orders=(1, 2)) -> dict:
+    """For each order, (d, dt): the unit direction d (N, 3; world axes) in which the connecting ray
+    leaves (or, for a light, reaches) each of ``points`` (N, 3; BU) towards ``scene.camera``, measured
+    in the point's static frame, and the travel time dt (N,; r_s / c) from the LUT (built for the
+    camera's radius). A surface with unit normal n at the point faces the observer along that ray
+    when n . d > 0. NaN where the point has no ray of that order (outside the LUT, on the axis)."""
+    plane = plane_coordinates(points, scene)
+    looks = lut.lookup_orders(plane.r, plane.phi, tuple(orders), quantities=("dt", "ux", "uy"))
+    return {order: (leaving_direction(plane, scene, looks[order].ux, looks[order].uy), looks[order].dt)
+            for order in orders}
+
+
+def leaving_direction(plane, scene: Scene, ux, uy) -> np.ndarray:
+    """(N, 3) unit direction, in the static frame of points with plane coordinates ``plane``
+    (mapping.PlaneCoordinates), opposite to the tangent (ux, uy) of their connecting rays from the
+    LUT (components along e1 and e2 of the plane, see lutgen): the way the light leaves the point
+    towards the observer. NaN where the ray is undefined."""
+    e1 = scene.e1
+    c, s = np.cos(plane.phi), np.sin(plane.phi)
+    e_r = c[:, None] * e1 + s[:, None] * plane.e2
+    e_phi = -s[:, None] * e1 + c[:, None] * plane.e2
+    u_r = ux * c + uy * s  # dr/dlambda
+    r_uphi = -ux * s + uy * c  # r dphi/dlambda
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f_r = u_r / np.sqrt(1.0 - 1.0 / plane.r)  # local static frame components
+        d = -(f_r[:, None] * e_r + r_uphi[:, None] * e_phi)
+        d /= np.linalg.norm(d, axis=1)[:, None]
+    return d

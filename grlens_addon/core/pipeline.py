@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import culling, illumination, mapping, subdivision, thin_disc
+from . import axis_patch, culling, illumination, mapping, silhouette, subdivision, thin_disc
 
 
 @dataclass
@@ -169,14 +169,26 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
     ev0, ev1 = edges.verts[:, 0], edges.verts[:, 1]
     plane_v = mapping.plane_coordinates(src.positions, scene)
     planes = None if frustum_planes is None or not len(frustum_planes) else np.asarray(frustum_planes, np.float64)
+    ring_levels = bool(settings.pixel_angle and settings.max_error_px)
     images_v = mapping.map_vertices_orders(src.positions, scene, lut, settings.orders, plane_v)
-    ring_levels = settings.pixel_angle and settings.max_error_px
     # per source triangle, the same for both orders: undistorted circumference (from its edges' chords
     # on the view sphere), and whether the observer-hole axis may pass through it
     src_circ = _circumference_from_edges(
         _chord_lengths(culling.unit_directions(src.positions, scene.camera), edges.verts), edges.of_tri)
     src_near_axis = culling.near_axis(src.positions, src.tris, scene.camera, scene.hole)
+    patches = axis_patch.build_patches(src.positions, src.tris, edges.of_tri, len(edges.verts), scene, lut,
+                                       settings.orders, settings.pixel_angle, settings.max_error_px,
+                                       candidates=src_near_axis,
+                                       closed=lambda: (is_closed_outward(src.positions, src.tris, edges) and
+                                                       winding_number(src.positions, src.tris, scene.camera) < 0.5),
+                                       ) if ring_levels and settings.max_tess_level > 1 else []
     for order in settings.orders:
+        order_patches = [p for p in patches if order in p.orders]
+        replaced = None
+        if order_patches:
+            replaced = np.zeros(len(src.tris), bool)
+            for p in order_patches:
+                replaced[p.replaced] = True
         img_v = images_v[order]
         img_chord_len = _chord_lengths(img_v.direction, edges.verts)
         img_circ = _circumference_from_edges(img_chord_len, edges.of_tri)
@@ -195,9 +207,27 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         levels[probe] = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
                                                 chord[probe], settings.pixel_angle, settings.max_error_px)
         if ring_levels:
-            _raise_ring_levels(levels, src, src_circ, img_circ, edges, scene, img_v, order, settings)
+            # silhouette edges (and the ring levels of silhouette triangles) aim at the tighter
+            # tolerance; the silhouette is found only around the edges whose level that would change
+            tight = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
+                                            chord[probe], settings.pixel_angle,
+                                            settings.max_error_px * SILHOUETTE_FACTOR)
+            raise_edges = tight != levels[probe]
+            cand, want, sharp = _ring_levels(src, src_circ, img_circ, scene, img_v, order, settings, replaced)
+            maybe = sharp != want
+            if raise_edges.any() or maybe.any():
+                sil_edge, sil_tri = _silhouette(src, edges, scene, lut, order, np.concatenate(
+                    [probe[raise_edges], edges.of_tri[cand[maybe]].ravel()]))
+                up = raise_edges & sil_edge[probe]
+                levels[probe[up]] = tight[up]
+                want = np.where(maybe & sil_tri[cand] & (sharp <= SILHOUETTE_RING_LEVEL_MAX), sharp, want)
+            np.maximum.at(levels, edges.of_tri[cand].ravel(), np.repeat(want, 3))
         tri_sel, out_v = _inside_frustum(img_v, img_m, probe, src.tris, edges, planes)
         n_pre = len(src.tris) - len(tri_sel)
+        if replaced is not None:  # drawn by the axis patches instead
+            by_patch = replaced[tri_sel]
+            n_replaced = int(by_patch.sum())
+            tri_sel = tri_sel[~by_patch]
         sub = subdivision.subdivide(src.positions, src.tris[tri_sel],
                                     subdivision.Edges(edges.verts, edges.of_tri[tri_sel]), levels)
         img = _map_subdivided(sub, n_pts, img_v, scene, lut, order)
@@ -230,32 +260,84 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             image_tris = remap.take(tris)
         src_tri = face_src if everything else face_src.take(kept)
         bary = None if sub.identity else (sub.bary if everything else sub.bary.take(kept, axis=0))
+        v_pos, v_dir = img.position.take(used, axis=0), img.direction.take(used, axis=0)
+        v_dist, v_src = img.distance[used], sub.positions.take(used, axis=0)
+        identity = sub.identity
+        if order_patches:
+            report.patch_replaced = n_replaced
+            parts = _patch_parts(order_patches, order, planes, len(used))
+            if parts is not None:
+                p_tris, p_src, p_bary, p_pos, p_dir, p_dist, p_spos = parts
+                if bary is None:
+                    bary = np.broadcast_to(np.eye(3), (len(src_tri), 3, 3))
+                image_tris = np.concatenate([image_tris, p_tris])
+                src_tri = np.concatenate([src_tri, p_src])
+                bary = np.concatenate([bary, p_bary])
+                v_pos, v_dir = np.concatenate([v_pos, p_pos]), np.concatenate([v_dir, p_dir])
+                v_dist, v_src = np.concatenate([v_dist, p_dist]), np.concatenate([v_src, p_spos])
+                identity = False
+                report.kept += len(p_tris)
+                report.patch_faces = len(p_tris)
         corner_uv = None
         if src.corner_uv is not None:
-            corner_uv = _interpolate(bary, src.corner_uv.take(src_tri, axis=0), sub.identity)
+            corner_uv = _interpolate(bary, src.corner_uv.take(src_tri, axis=0), identity)
         irr = None
         if light is not None and src.corner_normals is not None:
-            n = _interpolate(bary, src.corner_normals.take(src_tri, axis=0), sub.identity)
+            n = _interpolate(bary, src.corner_normals.take(src_tri, axis=0), identity)
             n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-300)
-            pts = sub.positions.take(tris.ravel(), axis=0)
+            pts = v_src.take(image_tris.ravel(), axis=0)
             e, _ = illumination.irradiance(pts, n.reshape(-1, 3), light.position, scene.hole, scene.r_s,
                                            light.lut, light.intensity)
             irr = e.reshape(-1, 3)
         redshift = colour = None
         if disc is not None:
-            pts = sub.positions.take(used, axis=0)
+            pts = v_src
             redshift = thin_disc.vertex_redshift_from_direction(pts, scene.hole, scene.camera, scene.r_s,
-                                                                disc.axis, img.direction.take(used, axis=0), disc.prograde)
+                                                                disc.axis, v_dir, disc.prograde)
             r = np.linalg.norm(pts - scene.hole, axis=1) / scene.r_s
             colour = np.nan_to_num(thin_disc.disc_colour(r, redshift, disc.mode, r_in=disc.r_in,
                                                          t_peak=disc.t_peak, exposure=disc.exposure))
             redshift = np.nan_to_num(redshift, nan=0.0)  # 0: no circular orbit there (r <= 1.5 r_s, axis)
-        out[order] = ImageMesh(order=order, positions=img.position.take(used, axis=0), tris=image_tris,
+        out[order] = ImageMesh(order=order, positions=v_pos, tris=image_tris,
                                corner_uv=corner_uv, material=src.material[src_tri],
-                               light_travel_time=img.distance[used], irradiance=irr, report=report,
-                               source_tri=kept_source[src_tri], source_position=sub.positions.take(used, axis=0),
+                               light_travel_time=v_dist, irradiance=irr, report=report,
+                               source_tri=kept_source[src_tri], source_position=v_src,
                                redshift=redshift, disc_colour=colour)
     return out
+
+
+def is_closed_outward(points, tris, edges: subdivision.Edges | None = None) -> bool:
+    """True if the triangles ``tris`` of ``points`` (BU) form closed surfaces with consistent winding
+    (every edge used by exactly two triangles, once in each direction) that enclose a positive
+    volume (normals from the winding point outwards)."""
+    tris = np.asarray(tris, dtype=np.int64)
+    if len(tris) == 0:
+        return False
+    edges = edges if edges is not None else subdivision.mesh_edges(tris)
+    forward = np.where(tris < np.roll(tris, -1, axis=1), 1, -1)  # edge k: corner k -> k+1
+    n_e = len(edges.verts)
+    uses = np.bincount(edges.of_tri.ravel(), minlength=n_e)
+    balance = np.bincount(edges.of_tri.ravel(), weights=forward.ravel(), minlength=n_e)
+    if not (np.all(uses == 2) and np.all(balance == 0)):
+        return False
+    p = np.asarray(points, dtype=np.float64)
+    p = p - p[tris[0, 0]]  # volume about a vertex: no cancellation far from the origin
+    p0, p1, p2 = (p.take(tris[:, k], axis=0) for k in range(3))
+    return bool(np.einsum("ij,ij->", p0, np.cross(p1, p2)) > 0)
+
+
+def winding_number(points, tris, query) -> float:
+    """How many times the triangles ``tris`` of ``points`` (BU) wind around the point ``query`` (3,; BU):
+    1 inside a closed surface with outward winding, 0 outside (the sum of the solid angles the
+    triangles subtend at ``query`` over 4 pi; Van Oosterom and Strackee's formula)."""
+    tris = np.asarray(tris, dtype=np.int64)
+    p = np.asarray(points, dtype=np.float64) - np.asarray(query, np.float64)
+    a, b, c = (p.take(tris[:, k], axis=0) for k in range(3))
+    la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
+    num = np.einsum("ij,ij->i", a, np.cross(b, c))
+    den = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", b, c) * la
+           + np.einsum("ij,ij->i", c, a) * lb)
+    return float(np.nansum(2.0 * np.arctan2(num, den)) / (4.0 * np.pi))
 
 
 _EDGE_CACHE: dict = {}
@@ -318,37 +400,117 @@ RING_MAGNIFICATION = 2.0
 lying in a strongly lensed (Einstein-ring) region by :func:`_raise_ring_levels`."""
 
 
+SILHOUETTE_FACTOR = 0.25
+"""Silhouette edges (silhouette.py) are subdivided to this fraction of ``max_error_px``: they alone
+decide which pixels an image covers, and next to the Einstein ring the second-order images are less
+than a pixel wide, so a tenth of a pixel there changes the coverage by tens of percent. Levels grow
+as the square root of the inverse tolerance, so this costs twice the segments on those edges only."""
+
+
+SILHOUETTE_RING_LEVEL_MAX = 24
+"""Ring levels (_ring_levels) of silhouette triangles aim at the silhouette's tolerance only up to this
+level. Beyond it a triangle lies so close to the axis that doubling its level quadruples tens of
+thousands of pieces, most of which the ring culling drops anyway (the sphere grazing the axis at 171
+degrees of its orbit went from 38k to 100k pieces per order); up to it the tighter tolerance is what
+brings the 180-degree view's second-order ring to the target (benchmarks/bench_accuracy.py)."""
+
+
 RING_LEVEL_MARGIN = 0.75
 """Fraction of the largest allowed azimuth per piece that :func:`_raise_ring_levels` aims at: pieces
 of a triangle subdivided uniformly in space cover unequal azimuths, and the culling test of the same
 bound (culling.cull) must not catch the widest of them."""
 
 
-def _raise_ring_levels(levels, src, src_circ, img_circ, edges, scene, img_v: mapping.Images, order,
-                       settings: Settings) -> None:
-    """Raise, in place, the edge levels of strongly magnified source triangles near the axis so that
-    their sub-triangles are narrow enough on screen (see culling.ring_sagitta: a piece covering an
-    azimuth d at an angular radius R from the hole's direction has straight sides R (1 - cos(d/2))
-    inside the ring). A triangle covering D gets level ceil(D / (RING_LEVEL_MARGIN d_max)),
-    d_max = culling.max_ring_span(R_px, max_error_px), on all its edges (levels are per edge, so
-    neighbours stay crack-free). Capped at max_tess_level. ``src_circ``, ``img_circ``: the source
-    triangles' circumferences (culling.circumference) undistorted and of this order's image."""
+def _silhouette(src, edges, scene, lut, order, of_edges):
+    """silhouette.silhouette of ``order`` as (edge mask (E,), triangle mask (T,)), right for the edges
+    ``of_edges`` (indices) and for the triangles whose three edges are among them; only the corners of
+    the triangles around those edges are looked up."""
+    mark = np.zeros(len(edges.verts), bool)
+    mark[of_edges] = True
+    near = np.flatnonzero(mark.take(edges.of_tri).any(axis=1))
+    tris = src.tris.take(near, axis=0)
+    corners, local = np.unique(tris, return_inverse=True)
+    pts = src.positions.take(corners, axis=0)
+    d, _ = illumination.towards_observer(pts, scene, lut, (order,))[order]
+    edge, tri_near = silhouette.silhouette(pts, local.reshape(-1, 3), edges.of_tri.take(near, axis=0),
+                                           len(edges.verts), d)
+    tri = np.zeros(len(src.tris), bool)
+    tri[near] = tri_near
+    return edge, tri
+
+
+def _ring_candidates(src_circ, img_circ) -> np.ndarray:
+    """Indices of the source triangles magnified more than RING_MAGNIFICATION (see _raise_ring_levels)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.flatnonzero(img_circ > RING_MAGNIFICATION * src_circ)
+
+
+def _ring_levels(src, src_circ, img_circ, scene, img_v: mapping.Images, order, settings: Settings, skip=None):
+    """The levels that strongly magnified source triangles near the axis need so that their
+    sub-triangles are narrow enough on screen (see culling.ring_sagitta: a piece covering an azimuth d
+    at an angular radius R from the hole's direction has straight sides R (1 - cos(d/2)) inside the
+    ring): a triangle covering D gets level ceil(D / (RING_LEVEL_MARGIN d_max)),
+    d_max = culling.max_ring_span(R_px, tolerance), on all its edges (levels are per edge, so
+    neighbours stay crack-free), capped at max_tess_level. ``src_circ``, ``img_circ``: the source
+    triangles' circumferences (culling.circumference) undistorted and of this order's image;
+    ``skip`` (T,) bool: triangles left alone (replaced by an axis patch).
+
+    Returns (cand, want, sharp): the candidate triangles (indices) and their levels for
+    ``max_error_px`` and for SILHOUETTE_FACTOR * max_error_px (the silhouette's tolerance)."""
     top = int(np.clip(settings.max_tess_level, 1, subdivision.GRID))
     tris = src.tris
-    d = img_v.direction
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = img_circ / src_circ
-    cand = np.flatnonzero(ratio > RING_MAGNIFICATION)
+    cand = _ring_candidates(src_circ, img_circ)
+    if skip is not None:
+        cand = cand[~skip[cand]]
     if cand.size == 0:
-        return
+        return cand, np.ones(0, np.int64), np.ones(0, np.int64)
     _, span = culling.axis_geometry(src.positions, tris[cand], scene.camera, scene.hole, order)
     with np.errstate(invalid="ignore", divide="ignore"):
-        radius = culling.hole_angle(d, scene.camera, scene.hole) / settings.pixel_angle  # pixels
-        d_max = culling.max_ring_span(radius[tris[cand]].max(axis=1), settings.max_error_px)
-        # the subdivision is uniform in space, not in azimuth: aim at RING_LEVEL_MARGIN of d_max
-        want = np.clip(np.nan_to_num(np.ceil(span / (RING_LEVEL_MARGIN * d_max)), nan=1.0), 1, top)
-        want = want.astype(levels.dtype)
-    np.maximum.at(levels, edges.of_tri[cand].ravel(), np.repeat(want, 3))
+        radius = culling.hole_angle(img_v.direction, scene.camera, scene.hole) / settings.pixel_angle  # px
+        r_px = radius[tris[cand]].max(axis=1)
+        out = []
+        for tol in (settings.max_error_px, settings.max_error_px * SILHOUETTE_FACTOR):
+            # the subdivision is uniform in space, not in azimuth: aim at RING_LEVEL_MARGIN of d_max
+            n = np.ceil(span / (RING_LEVEL_MARGIN * culling.max_ring_span(r_px, tol)))
+            out.append(np.clip(np.nan_to_num(n, nan=1.0), 1, top).astype(np.int64))
+    return cand, out[0], out[1]
+
+
+def _patch_parts(patches, order, planes, offset):
+    """The faces of the axis patches (axis_patch.Patch) of ``order`` as arrays to append to an image
+    mesh whose vertex count is ``offset``: (tris, source triangle, bary, image positions, directions,
+    c*dt, source positions), without faces that have a corner without an image or lie outside one
+    frustum plane; None when no face is left."""
+    out = [[] for _ in range(7)]
+    for p in patches:
+        im = p.images.get(order)
+        if im is None:  # hidden (back faces of a closed surface)
+            continue
+        faces = p.tris
+        ok = im.valid.take(faces).all(axis=1) & p.facing[order]
+        if planes is not None:
+            bits = culling.outside_bits(np.where(im.valid[:, None], im.position, 0.0), planes)
+            fb = bits.take(faces)
+            ok &= (fb[:, 0] & fb[:, 1] & fb[:, 2]) == 0
+        faces = faces[ok]
+        if len(faces) == 0:
+            continue
+        used = _used_vertices(faces, len(p.source_position))
+        remap = np.full(len(p.source_position), -1, dtype=np.int64)
+        remap[used] = np.arange(used.size)
+        out[0].append(remap.take(faces) + offset)
+        out[1].append(p.face_src[ok])
+        out[2].append(p.bary[ok])
+        out[3].append(im.position.take(used, axis=0))
+        out[4].append(im.direction.take(used, axis=0))
+        out[5].append(im.distance.take(used))
+        out[6].append(p.source_position.take(used, axis=0))
+        offset += used.size
+    if not out[0]:
+        return None
+    return tuple(np.concatenate(a) for a in out)
+
+
 
 
 def _below_pixel(img_v: mapping.Images, img_m: mapping.Images, pixel_angle) -> bool:

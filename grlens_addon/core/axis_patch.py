@@ -1,0 +1,417 @@
+"""Einstein-ring patches: the source surface around each point where the observer-hole axis crosses
+it, meshed on a log-polar grid about the axis.
+
+Why. A source point on the observer-hole axis, behind the hole (both orders) or in front of it
+(order 2, whose ray sweeps 2 pi), has a whole circle as its image: the Einstein ring, at an angle
+theta_E from the hole's direction. Near such a point the mapping turns the azimuth psi about the
+axis into position angle along the ring, so a piece of surface of size h at a distance delta from
+the axis covers an azimuth of about h / delta on screen. No uniform subdivision (subdivision.py)
+makes pieces that small as delta -> 0; the ring culling (culling.py) drops what is left, and the
+ring's edge ends up as a polygon whose straight sides sag short of the true circle.
+
+The patch. Around each crossing point P, the surface is sampled on a grid of circles about the axis,
+delta_i = radius * q^(i - K) (i = 0 .. K, innermost first) and psi_j = 2 pi j / N, plus one ring of
+*limit vertices* at delta = 0: the source point P itself, whose image in the direction psi_j is the
+exact point of the Einstein ring (theta_E at position angle psi_j for order 1, psi_j + pi for order
+2). Grid points are found on the surface by casting lines parallel to the axis through the triangles
+connected to the crossing (nearest to P along the axis when several are hit). The patch's images are
+quads (two triangles each) between consecutive circles, so:
+
+* the ring's edge is drawn by chords between exact points of the circle theta_E, N per turn, chosen
+  so they sag by at most ``EDGE_FACTOR * max_error_px`` pixels;
+* the ratio q keeps the tangential error of the linear interpolation inside a piece (a point of the
+  surface is drawn at the azimuth of its corners' mean, not its own) within ``max_error_px``;
+* the innermost circle is where the image is within ``BAND_FACTOR * max_error_px`` pixels of theta_E,
+  so the band between it and the limit vertices is thinner than that.
+
+The source triangles entirely inside the patch's outer circle (and connected to the crossing) are
+*replaced*: the pipeline does not subdivide them. Triangles that reach beyond it are kept as they
+are, so the patch overlaps them on the same surface (no cracks; the two draw the same points).
+Where the surface does not cover a whole circle (a mesh boundary or hole near the axis), the patch
+stops at the last complete circle inside it; with none, there is no patch.
+
+Units: positions in Blender units (BU); delta in BU; angles in radians; pixel quantities in pixels
+of ``pixel_angle`` radians. Axis coordinates: (x, y, z) relative to the hole, z along the axis
+towards the camera (culling._axis_coordinates).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import illumination, mapping
+from .culling import _axis_coordinates, max_ring_span
+
+EDGE_FACTOR = 1.0 / 16.0
+"""The ring's edge is drawn with chords that sag by at most this times ``max_error_px``: a second-order
+ring is less than a pixel wide, so its coverage follows its edges to a small fraction of a pixel."""
+
+BAND_FACTOR = 0.25
+"""The innermost circle of a patch lies where the image is within this times ``max_error_px`` of the
+Einstein ring; the band inside it is drawn with pieces that span the whole distance to the ring."""
+
+RADIUS_FACTOR = 2.0
+"""A patch reaches this many times the largest distance from the axis of the crossed triangle's
+corners, so it covers that triangle and most of its neighbours."""
+
+MAX_PATCHES = 8
+"""At most this many patches per mesh (the crossings with the largest triangles): a closed surface
+crosses the axis a few times; a triangle soup may cross it thousands of times, and there the ring
+culling (culling.py) does."""
+
+MAX_AZIMUTHS = 1024
+MAX_CIRCLES = 64
+MAX_GRID = 32768
+"""Bounds of one patch's grid: azimuths per turn, circles, and their product (a patch has twice as
+many faces). Beyond them the ring's edge gets coarser chords or a wider innermost band."""
+
+
+@dataclass
+class Crossing:
+    """A point where the axis crosses the source surface: ``tri`` the crossed source triangle, ``point``
+    (3,) BU, ``along`` (BU) its coordinate along the axis (negative: behind the hole)."""
+
+    tri: int
+    point: np.ndarray
+    along: float
+
+
+@dataclass
+class Patch:
+    """The log-polar patch about one crossing (see the module docstring).
+
+    source_position (V, 3) BU: the surface point of each vertex (the first ``n_azimuths`` are the
+    limit vertices, all at the crossing point); tris (F, 3), wound like the crossed source triangle;
+    face_src (F,) the source triangle of each face (the one under its outer corner); bary (F, 3, 3) the
+    barycentric coordinates of each face corner in that triangle (projected along the axis;
+    extrapolated for corners in a neighbouring triangle); replaced: source triangles the patch stands
+    in for; radius (BU): its outer circle's distance from the axis; orders: the image orders whose
+    Einstein ring it is; images: {order: mapping.Images} of its vertices; facing: {order: (F,) bool}
+    the faces to draw (all, unless back faces of a closed surface are left out, see
+    :func:`build_patches`).
+    """
+
+    crossing: Crossing
+    n_azimuths: int
+    source_position: np.ndarray
+    tris: np.ndarray
+    face_src: np.ndarray
+    bary: np.ndarray
+    replaced: np.ndarray
+    radius: float
+    orders: tuple
+    images: dict = field(default_factory=dict, repr=False)
+    facing: dict = field(default_factory=dict, repr=False)
+
+
+def find_crossings(points, tris, camera, hole, candidates=None) -> list[Crossing]:
+    """The points where the observer-hole axis crosses the triangles ``tris`` of ``points`` (BU), one
+    per point (a crossing through a shared edge or vertex is found once). ``candidates``: indices or a
+    mask of the triangles to test (e.g. culling.near_axis); default all. Ordered along the axis."""
+    tris = np.asarray(tris, dtype=np.int64)
+    idx = np.arange(len(tris)) if candidates is None else np.arange(len(tris))[candidates]
+    if idx.size == 0:
+        return []
+    x, y, z = _axis_coordinates(points, camera, hole)
+    t = tris[idx]
+    xa, xb, xc = x[t[:, 0]], x[t[:, 1]], x[t[:, 2]]
+    ya, yb, yc = y[t[:, 0]], y[t[:, 1]], y[t[:, 2]]
+    la, lb, lc = xb * yc - xc * yb, xc * ya - xa * yc, xa * yb - xb * ya
+    total = la + lb + lc
+    with np.errstate(invalid="ignore", divide="ignore"):
+        inside = (((la >= 0) & (lb >= 0) & (lc >= 0)) | ((la <= 0) & (lb <= 0) & (lc <= 0))) & (total != 0)
+        along = (la * z[t[:, 0]] + lb * z[t[:, 1]] + lc * z[t[:, 2]]) / np.where(total != 0, total, np.nan)
+    sel = np.flatnonzero(inside & np.isfinite(along))
+    if sel.size == 0:
+        return []
+    # one crossing per point: crossings closer along the axis than a millionth of their triangle's size
+    # are the same point seen from the triangles around a shared edge or vertex
+    size = np.maximum(np.maximum(np.hypot(xa - xb, ya - yb), np.hypot(xb - xc, yb - yc)), np.hypot(xc - xa, yc - ya))
+    sel = sel[np.argsort(along[sel], kind="stable")]
+    e1 = np.asarray(camera, np.float64) - hole
+    e1 = e1 / np.linalg.norm(e1)
+    out: list[Crossing] = []
+    for k in sel:  # a handful per mesh
+        if out and abs(along[k] - out[-1].along) <= 1e-6 * size[k]:
+            continue
+        out.append(Crossing(tri=int(idx[k]), point=np.asarray(hole, np.float64) + along[k] * e1, along=float(along[k])))
+    return out
+
+
+def ring_orders(crossing: Crossing, orders) -> tuple:
+    """The orders among ``orders`` whose image of the crossing point is an Einstein ring: both behind
+    the hole, order 2 only in front of it."""
+    return tuple(o for o in orders if crossing.along < 0 or o == 2)
+
+
+def limit_images(crossing: Crossing, psi, scene: mapping.Scene, lut, order) -> mapping.Images:
+    """Images of order ``order`` of the crossing point approached from azimuth ``psi`` (K,) radians
+    about the axis (measured in the frame of culling._axis_coordinates): the points of its Einstein
+    ring, at the LUT's angle xi for phi = pi (behind the hole) or 0 (in front), at position angle psi
+    (order 1) or psi + pi (order 2)."""
+    psi = np.asarray(psi, np.float64)
+    e1 = scene.e1
+    u = mapping.any_perpendicular(e1)
+    v = np.cross(e1, u)
+    e2 = np.cos(psi)[:, None] * u + np.sin(psi)[:, None] * v
+    r = np.full(psi.shape, np.linalg.norm(crossing.point - scene.hole) / scene.r_s)
+    phi = np.full(psi.shape, np.pi if crossing.along < 0 else 0.0)
+    look = lut.lookup(r, phi, order, quantities=("xi", "dt"))
+    sign = 1.0 if order == 1 else -1.0
+    c, s = np.cos(look.xi), np.sin(look.xi)
+    direction = c[:, None] * e1 + (sign * s)[:, None] * e2
+    distance = look.dt * scene.r_s
+    position = scene.camera + distance[:, None] * direction
+    valid = np.isfinite(distance) & np.isfinite(c)
+    position[~valid] = np.nan
+    plane = mapping.PlaneCoordinates(r=r, phi=phi, e2=e2, on_axis=np.ones(psi.shape, bool))
+    return mapping.Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
+                          xi=look.xi, dt=look.dt, ux=None, uy=None)
+
+
+def _angle_from_hole(direction, scene) -> np.ndarray:
+    """Angle (radians) between apparent directions (N, 3) and the hole's direction from the camera."""
+    return np.arccos(np.clip(-(direction @ scene.e1), -1.0, 1.0))
+
+
+def _triangle_distance(x, y, tris) -> np.ndarray:
+    """Distance (BU) from the axis to each triangle projected along it (0 when the axis crosses it)."""
+    px, py = x[tris], y[tris]  # (T, 3)
+    qx, qy = np.roll(px, -1, axis=1), np.roll(py, -1, axis=1)
+    cross = px * qy - py * qx  # twice the signed areas of (origin, corner k, corner k+1)
+    inside = (cross >= 0).all(axis=1) | (cross <= 0).all(axis=1)
+    dx, dy = qx - px, qy - py
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.clip(-(px * dx + py * dy) / (dx * dx + dy * dy), 0.0, 1.0)
+    t = np.nan_to_num(t)
+    d = np.hypot(px + t * dx, py + t * dy).min(axis=1)
+    return np.where(inside, 0.0, d)
+
+
+def _connected(seed, cand, of_tri, n_edges) -> np.ndarray:
+    """Mask over ``cand`` (indices of triangles) of those connected to triangle ``seed`` through shared
+    edges without leaving ``cand``."""
+    reached = cand == seed
+    cand_edges = of_tri[cand]
+    while True:
+        lit = np.zeros(n_edges, bool)
+        lit[cand_edges[reached].ravel()] = True
+        new = ~reached & lit[cand_edges].any(axis=1)
+        if not new.any():
+            return reached
+        reached |= new
+
+
+def _locate(radii, n_az, cand_tris, x, y, z, z_target):
+    """For the grid points (radii[i] cos psi_j, radii[i] sin psi_j), psi_j = 2 pi j / n_az, in axis
+    coordinates, the triangle among ``cand_tris`` (C, 3) whose projection along the axis contains each
+    (nearest to ``z_target`` along the axis when several do): (index into cand_tris or -1, barycentrics
+    (M, 3)), M = len(radii) * n_az, points ordered circle by circle. Only the pairs of a point and a
+    triangle whose ranges of distance from the axis and of azimuth contain it are tested."""
+    n_c = len(radii)
+    m = n_c * n_az
+    best = np.full(m, -1, np.int64)
+    bary = np.full((m, 3), np.nan)
+    if len(cand_tris) == 0 or m == 0:
+        return best, bary
+    px, py = x[cand_tris], y[cand_tris]  # (C, 3)
+    d_lo = _triangle_distance(x, y, cand_tris)
+    d_hi = np.hypot(px, py).max(axis=1)
+    step = 2.0 * np.pi / n_az
+    ang = np.arctan2(py, px)
+    rel = np.angle(np.exp(1j * (ang - ang[:, :1])))  # corners' azimuths relative to corner 0, (-pi, pi]
+    a_lo = ang[:, 0] + rel.min(axis=1)
+    a_hi = ang[:, 0] + rel.max(axis=1)
+    j_lo = np.floor(a_lo / step).astype(np.int64)
+    j_hi = np.ceil(a_hi / step).astype(np.int64)
+    full = d_lo == 0.0  # the axis crosses the projection: every azimuth
+    j_lo = np.where(full, 0, j_lo)
+    j_hi = np.where(full, n_az - 1, j_hi)
+    count = np.minimum(j_hi - j_lo + 1, n_az)
+    # (circle, triangle) pairs whose distance ranges meet, then their azimuth indices
+    ci, ti = np.nonzero((radii[:, None] >= d_lo[None, :] * (1 - 1e-12)) & (radii[:, None] <= d_hi[None, :] * (1 + 1e-12)))
+    if ci.size == 0:
+        return best, bary
+    reps = count[ti]
+    pc = np.repeat(ci, reps)
+    pt = np.repeat(ti, reps)
+    offs = np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps)
+    pj = (np.repeat(j_lo[ti], reps) + offs) % n_az
+    qx = radii[pc] * np.cos(pj * step)
+    qy = radii[pc] * np.sin(pj * step)
+    tr = cand_tris[pt]
+    ax, bx, cx = x[tr[:, 0]], x[tr[:, 1]], x[tr[:, 2]]
+    ay, by, cy = y[tr[:, 0]], y[tr[:, 1]], y[tr[:, 2]]
+    det = (bx - ax) * (cy - ay) - (cx - ax) * (by - ay)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        l1 = ((qx - ax) * (cy - ay) - (cx - ax) * (qy - ay)) / det
+        l2 = ((bx - ax) * (qy - ay) - (qx - ax) * (by - ay)) / det
+    l0 = 1.0 - l1 - l2
+    eps = 1e-12
+    inside = (det != 0) & (l0 >= -eps) & (l1 >= -eps) & (l2 >= -eps)
+    if not inside.any():
+        return best, bary
+    sel = np.flatnonzero(inside)
+    point = pc[sel] * n_az + pj[sel]
+    gap = np.abs(l0[sel] * z[tr[sel, 0]] + l1[sel] * z[tr[sel, 1]] + l2[sel] * z[tr[sel, 2]] - z_target)
+    order = np.lexsort((gap, point))
+    first = order[np.r_[True, point[order][1:] != point[order][:-1]]]
+    pts = point[first]
+    k = sel[first]
+    best[pts] = pt[k]
+    bary[pts] = np.column_stack([l0[k], l1[k], l2[k]])
+    return best, bary
+
+
+def _projected_bary(qx, qy, tris, x, y) -> np.ndarray:
+    """(M, 3) barycentrics of points (qx, qy) (M,) in the projections of triangles ``tris`` (M, 3)
+    along the axis (extrapolated outside them)."""
+    ax, bx, cx = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
+    ay, by, cy = y[tris[:, 0]], y[tris[:, 1]], y[tris[:, 2]]
+    det = (bx - ax) * (cy - ay) - (cx - ax) * (by - ay)
+    l1 = ((qx - ax) * (cy - ay) - (cx - ax) * (qy - ay)) / det
+    l2 = ((bx - ax) * (qy - ay) - (qx - ax) * (by - ay)) / det
+    return np.column_stack([1.0 - l1 - l2, l1, l2])
+
+
+def grid_shape(ring_radius_px, max_error_px) -> tuple[int, float]:
+    """(N, q): the number of azimuths per turn and the ratio of consecutive circles of a patch whose
+    Einstein ring is ``ring_radius_px`` pixels from the hole's direction (see the module docstring)."""
+    s = float(max_ring_span(ring_radius_px, EDGE_FACTOR * max_error_px))
+    n = int(np.clip(np.ceil(2.0 * np.pi / max(s, 1e-12)), 16, MAX_AZIMUTHS))
+    s = 2.0 * np.pi / n
+    # a piece spanning circles delta and q delta and one azimuth step draws its interior up to
+    # R s (q - 1) / (2 (q + 1)) pixels along the ring from where it belongs
+    a = min(0.5, 2.0 * max_error_px / (ring_radius_px * s))
+    return n, (1.0 + a) / (1.0 - a)
+
+
+def build_patches(src_positions, src_tris, edges_of_tri, n_edges, scene: mapping.Scene, lut, orders,
+                  pixel_angle, max_error_px, candidates=None, closed=False) -> list[Patch]:
+    """The patches of a source mesh (positions (N, 3) BU, triangles (T, 3), ``edges_of_tri`` (T, 3) edge
+    indices of subdivision.Edges) for the image ``orders``, with their images. ``candidates``: the
+    triangles the axis may cross (culling.near_axis). See the module docstring.
+
+    ``closed`` (bool, or a function giving it, called only when the axis crosses the mesh): the mesh
+    is a closed surface with outward winding (pipeline.is_closed_outward) seen from outside, so
+    its points whose connecting ray starts into the surface (n . d < 0, with n the geometric normal of
+    the face's source triangle and d from illumination.towards_observer) are hidden by the surface
+    itself. Patch faces whose grid corners all face away are then left out (``Patch.facing``): on
+    the side of a closed object turned away from the hole, the whole patch is hidden and its images
+    are not computed (``images`` lacks that order), but it still replaces its triangles."""
+    if not pixel_angle or not max_error_px:
+        return []
+    points = np.asarray(src_positions, np.float64)
+    tris = np.asarray(src_tris, np.int64)
+    crossings = find_crossings(points, tris, scene.camera, scene.hole, candidates)
+    if not crossings:
+        return []
+    if callable(closed):
+        closed = bool(closed())
+    x, y, z = _axis_coordinates(points, scene.camera, scene.hole)
+    if len(crossings) > MAX_PATCHES:
+        size = [np.ptp(x[tris[c.tri]]) + np.ptp(y[tris[c.tri]]) for c in crossings]
+        keep = np.sort(np.argsort(size, kind="stable")[::-1][:MAX_PATCHES])
+        crossings = [crossings[k] for k in keep]
+    out = []
+    for cr in crossings:
+        ords = ring_orders(cr, orders)
+        if ords:
+            patch = _build_one(cr, ords, points, tris, edges_of_tri, n_edges, x, y, z, scene, lut,
+                               pixel_angle, max_error_px, closed)
+            if patch is not None:
+                out.append(patch)
+    return out
+
+
+def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, scene, lut, pixel_angle, max_error_px,
+               closed=False):
+    t0 = tris[cr.tri]
+    radius = RADIUS_FACTOR * float(np.hypot(x[t0], y[t0]).max())
+    if not np.isfinite(radius) or radius <= 0:
+        return None
+    # the ring's radius on screen, per order
+    ring = {o: limit_images(cr, np.zeros(1), scene, lut, o) for o in orders}
+    if not all(bool(im.valid[0]) for im in ring.values()):
+        return None
+    theta_e = {o: float(_angle_from_hole(im.direction, scene)[0]) for o, im in ring.items()}
+    n_az, q = grid_shape(max(theta_e.values()) / pixel_angle, max_error_px)
+    # the innermost circle: probe the image along one azimuth in the crossed triangle's plane
+    k = np.arange(MAX_CIRCLES + 1)
+    probe_delta = radius * q ** (-k.astype(np.float64))
+    lam = _projected_bary(probe_delta, np.zeros_like(probe_delta), np.repeat(t0[None], len(k), axis=0), x, y)
+    probe = lam @ points[t0]
+    band = BAND_FACTOR * max_error_px * pixel_angle
+    close = np.ones(len(k), bool)
+    for o, img in mapping.map_vertices_orders(probe, scene, lut, orders).items():
+        gap = np.abs(_angle_from_hole(img.direction, scene) - theta_e[o])
+        if not np.isfinite(gap).all():  # part of the disc has no image (outside the LUT, horizon)
+            return None
+        close &= gap <= band
+    first = np.flatnonzero(close)
+    n_circles = int(first[0]) + 1 if first.size else len(k)  # circles delta_p q^-k, k = first .. 0
+    n_circles = max(1, min(n_circles, MAX_GRID // n_az))
+    radii = radius * q ** (-np.arange(n_circles - 1, -1, -1, dtype=np.float64))
+    # the surface under the grid: triangles connected to the crossed one whose projection meets the disc
+    near = np.flatnonzero(_triangle_distance(x, y, tris) <= radius)
+    cand = near[_connected(cr.tri, near, of_tri, n_edges)]
+    psi = 2.0 * np.pi * np.arange(n_az) / n_az
+    qx = (radii[:, None] * np.cos(psi)[None, :]).ravel()
+    qy = (radii[:, None] * np.sin(psi)[None, :]).ravel()
+    hit, lam = _locate(radii, n_az, tris[cand], x, y, z, cr.along)
+    complete = (hit.reshape(n_circles, n_az) >= 0).all(axis=1)
+    n_ok = n_circles if complete.all() else int(np.argmin(complete))
+    if n_ok == 0:
+        return None
+    radii = radii[:n_ok]
+    m = n_ok * n_az
+    hit, lam, qx, qy = hit[:m], lam[:m], qx[:m], qy[:m]
+    grid_pos = np.einsum("mk,mkx->mx", lam, points[tris[cand[hit]]])
+    src_pos = np.concatenate([np.repeat(cr.point[None], n_az, axis=0), grid_pos])
+    vx = np.concatenate([np.zeros(n_az), qx])
+    vy = np.concatenate([np.zeros(n_az), qy])
+    # quads between consecutive circles (circle 0: the limit vertices)
+    i = np.arange(n_ok)[:, None]
+    j = np.arange(n_az)[None, :]
+    a = i * n_az + j
+    b = (i + 1) * n_az + j
+    c = (i + 1) * n_az + (j + 1) % n_az
+    d = i * n_az + (j + 1) % n_az
+    faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    # counter-clockwise seen from the camera's side of the axis; flip to the crossed triangle's winding
+    area = (x[t0[1]] - x[t0[0]]) * (y[t0[2]] - y[t0[0]]) - (x[t0[2]] - x[t0[0]]) * (y[t0[1]] - y[t0[0]])
+    if area < 0:
+        faces = faces[:, ::-1]
+    # each face's source triangle: the one under its corner of largest index (on its outer circle;
+    # faces are small, so their centroid lies in that triangle or next to it)
+    where = hit[faces.max(axis=1) - n_az]
+    face_src = cand[where]
+    bary = _projected_bary(vx[faces].ravel(), vy[faces].ravel(), np.repeat(tris[face_src], 3, axis=0), x, y)
+    outer = radii[-1]
+    corner_d = np.hypot(x[tris[cand]], y[tris[cand]]).max(axis=1)
+    replaced = cand[corner_d <= outer]
+    patch = Patch(crossing=cr, n_azimuths=n_az, source_position=src_pos, tris=faces.astype(np.int64),
+                  face_src=face_src, bary=bary.reshape(-1, 3, 3), replaced=replaced, radius=float(outer),
+                  orders=tuple(orders))
+    if closed:
+        p0, p1, p2 = (points[tris[face_src, k]] for k in range(3))
+        normal = np.cross(p1 - p0, p2 - p0)  # (F, 3) geometric normals of the faces' source triangles
+        grid_corner = faces >= n_az  # limit vertices have no direction of their own
+        for o, (d, _) in illumination.towards_observer(grid_pos, scene, lut, orders).items():
+            with np.errstate(invalid="ignore"):
+                dots = np.einsum("fx,fcx->fc", normal, d[np.maximum(faces - n_az, 0)])
+            away = np.where(grid_corner, dots < 0, True)  # NaN (no ray) counts as facing
+            patch.facing[o] = ~away.all(axis=1)
+    shown = tuple(o for o in orders if o not in patch.facing or patch.facing[o].any())
+    for o in orders:
+        patch.facing.setdefault(o, np.ones(len(faces), bool))
+    for o, reg in (mapping.map_vertices_orders(grid_pos, scene, lut, shown).items() if shown else ()):
+        lim = limit_images(cr, psi, scene, lut, o)
+        patch.images[o] = mapping.Images(
+            position=np.concatenate([lim.position, reg.position]),
+            direction=np.concatenate([lim.direction, reg.direction]),
+            distance=np.concatenate([lim.distance, reg.distance]),
+            valid=np.concatenate([lim.valid, reg.valid]), plane=None,
+            xi=np.concatenate([lim.xi, reg.xi]), dt=np.concatenate([lim.dt, reg.dt]), ux=None, uy=None)
+    return patch

@@ -1,0 +1,267 @@
+"""Einstein-ring patches (grlens_addon.core.axis_patch), the silhouette (core.silhouette) and the
+closed-surface helpers of the pipeline, without Blender."""
+import math
+
+import numpy as np
+import pytest
+
+from grlens_addon.core import axis_patch, culling, illumination, mapping, pipeline, silhouette, subdivision
+from lutgen import build_lut, connect
+from meshes import uv_sphere
+
+R_S = 1.0
+CAMERA = np.array([20.0, 0.0, 0.0])  # r_obs = 20 r_s, the axis is the x axis
+HOLE = np.zeros(3)
+SCENE = mapping.Scene(CAMERA, HOLE, R_S)
+PIXEL = math.radians(19.0) / 360  # the accuracy benchmark's pixels (640x360, 19 deg vertical)
+MAX_ERROR = 0.25
+
+
+@pytest.fixture(scope="module")
+def lut():
+    return build_lut(20.0, 1.05, 40.0, 256, 512)
+
+
+def _sphere(centre, radius=0.5, segments=36, rings=18):
+    """A UV sphere with outward winding (poles on z)."""
+    return uv_sphere(centre, radius, segments, rings)
+
+
+def _grid(x, half, n, tilt=0.0, hole_radius=0.0):
+    """A square grid of (2n)^2 quads (split in two) in the plane x = const (tilted by ``tilt`` radians
+    about z), centred on the axis, optionally without the quads within ``hole_radius`` of it."""
+    u = np.linspace(-half, half, 2 * n + 1)
+    Y, Z = np.meshgrid(u, u, indexing="ij")
+    pts = np.stack([x + Y * math.sin(tilt), Y * math.cos(tilt), Z], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(2 * n), np.arange(2 * n), indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    m = 2 * n + 1
+    a, b, c, d = i * m + j, (i + 1) * m + j, (i + 1) * m + j + 1, i * m + j + 1
+    tris = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    if hole_radius:
+        centre = pts[tris].mean(axis=1)
+        tris = tris[np.hypot(centre[:, 1], centre[:, 2]) > hole_radius]
+    return pts, tris
+
+
+def _patches(pts, tris, lut, orders=(1, 2), closed=False, pixel=PIXEL):
+    edges = subdivision.mesh_edges(tris)
+    return axis_patch.build_patches(pts, tris, edges.of_tri, len(edges.verts), SCENE, lut, orders, pixel,
+                                    MAX_ERROR, closed=closed)
+
+
+def _angle_from_hole(d):
+    return np.arccos(np.clip(-(d @ SCENE.e1), -1.0, 1.0))
+
+
+def test_crossings_of_a_sphere_on_the_axis():
+    pts, tris = _sphere([-3.0, 0.0, 0.01])
+    cr = axis_patch.find_crossings(pts, tris, CAMERA, HOLE)
+    assert len(cr) == 2
+    # on the sphere (the mesh's chords lie at most 0.5 (1 - cos 5 deg) inside it)
+    along = sorted(c.along for c in cr)
+    exact = -3.0 - math.sqrt(0.25 - 0.01 ** 2), -3.0 + math.sqrt(0.25 - 0.01 ** 2)
+    np.testing.assert_allclose(along, exact, atol=0.5 * (1 - math.cos(math.radians(5))))
+    for c in cr:  # on the axis, inside the triangle it names
+        np.testing.assert_allclose(c.point[1:], 0.0, atol=1e-15)
+    assert axis_patch.ring_orders(cr[0], (1, 2)) == (1, 2)
+    # beside the axis: none; in front of the hole: order 2 only
+    assert axis_patch.find_crossings(*_sphere([-3.0, 0.7, 0.0]), CAMERA, HOLE) == []
+    front = axis_patch.find_crossings(*_sphere([5.0, 0.0, 0.01]), CAMERA, HOLE)
+    assert len(front) == 2 and all(axis_patch.ring_orders(c, (1, 2)) == (2,) for c in front)
+
+
+def test_a_crossing_through_a_shared_vertex_is_found_once():
+    """A fan of triangles around a vertex on the axis: every triangle touches the axis there."""
+    a = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    pts = np.vstack([[-4.0, 0, 0], np.stack([np.full(8, -4.2), np.cos(a), np.sin(a)], 1)])
+    tris = np.array([(0, 1 + k, 1 + (k + 1) % 8) for k in range(8)])
+    cr = axis_patch.find_crossings(pts, tris, CAMERA, HOLE)
+    assert len(cr) == 1
+    np.testing.assert_allclose(cr[0].point, [-4.0, 0, 0], atol=1e-12)
+
+
+@pytest.mark.parametrize("x", [-3.0, -8.0, 5.0])
+def test_limit_images_are_the_einstein_ring(lut, x):
+    """The limit vertices of a crossing are the exact points of its Einstein ring: the angle of
+    lutgen.connect at phi = pi (behind the hole) or 0 (order 2, in front), at position angle psi for
+    order 1 and psi + pi for order 2; and points approaching the axis map onto them."""
+    cr = axis_patch.Crossing(tri=0, point=np.array([x, 0.0, 0.0]), along=x)
+    psi = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    u = mapping.any_perpendicular(SCENE.e1)
+    v = np.cross(SCENE.e1, u)
+    for order in axis_patch.ring_orders(cr, (1, 2)):
+        im = axis_patch.limit_images(cr, psi, SCENE, lut, order)
+        assert im.valid.all()
+        exact = connect(20.0, abs(x), np.pi if x < 0 else 0.0, order)
+        np.testing.assert_allclose(_angle_from_hole(im.direction), np.pi - exact.xi, atol=1e-9)
+        np.testing.assert_allclose(im.distance, exact.dt * R_S, rtol=1e-6)  # the LUT's accuracy
+        side = im.direction - (im.direction @ SCENE.e1)[:, None] * SCENE.e1
+        pa = np.arctan2(side @ v, side @ u)
+        want = psi if order == 1 else psi + np.pi
+        np.testing.assert_allclose(np.angle(np.exp(1j * (pa - want))), 0.0, atol=1e-12)
+        # continuity: a point 1e-7 from the axis at azimuth psi
+        near = cr.point + 1e-7 * (np.cos(psi)[:, None] * u + np.sin(psi)[:, None] * v)
+        img = mapping.map_vertices(near, SCENE, lut, order)
+        assert np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", img.direction, im.direction), -1, 1))).max() < 1e-5
+
+
+def test_patch_on_a_tilted_plane(lut):
+    """Grid points lie on the surface at their circle's distance from the axis and their azimuth; faces
+    are wound like the source; the triangles inside the patch are replaced, the ones reaching out are
+    not; the ring's edge is drawn by chords between exact ring points, sagging by at most
+    EDGE_FACTOR * max_error_px."""
+    pts, tris = _grid(-4.0, 1.0, 10, tilt=0.5)
+    (p,) = _patches(pts, tris, lut)
+    n = p.n_azimuths
+    grid = p.source_position[n:]
+    x, y, z = culling._axis_coordinates(grid, CAMERA, HOLE)
+    # on the plane through (-4, 0, 0) with normal (cos 0.5, -sin 0.5, 0)
+    np.testing.assert_allclose((grid - [-4.0, 0, 0]) @ [math.cos(0.5), -math.sin(0.5), 0.0], 0.0, atol=1e-12)
+    delta = np.hypot(x, y).reshape(-1, n)
+    np.testing.assert_allclose(delta, delta[:, :1] * np.ones((1, n)), rtol=1e-9)
+    assert np.all(np.diff(delta[:, 0]) > 0) and delta[-1, 0] == pytest.approx(p.radius)
+    np.testing.assert_allclose(p.source_position[:n], p.crossing.point[None].repeat(n, 0))
+    # winding: the faces' normals (where not degenerate) point like the source triangles'
+    src_n = np.cross(pts[tris[:, 1]] - pts[tris[:, 0]], pts[tris[:, 2]] - pts[tris[:, 0]])[0]
+    f = p.source_position[p.tris]
+    fn = np.cross(f[:, 1] - f[:, 0], f[:, 2] - f[:, 0])
+    big = np.linalg.norm(fn, axis=1) > 1e-12
+    assert big.sum() > len(fn) // 2 and np.all(fn[big] @ src_n > 0)
+    # barycentrics reproduce the corners (in the plane, projected along the axis: exact)
+    rebuilt = np.einsum("fck,fkx->fcx", p.bary, pts[tris[p.face_src]])
+    np.testing.assert_allclose(rebuilt, f, atol=1e-12)
+    # replaced: all corners inside the outer circle
+    cd = np.hypot(*culling._axis_coordinates(pts, CAMERA, HOLE)[:2])
+    assert len(p.replaced) > 0 and np.all(cd[tris[p.replaced]].max(axis=1) <= p.radius)
+    rest = np.setdiff1d(np.arange(len(tris)), p.replaced)
+    assert np.all(cd[tris[rest]].max(axis=1) > p.radius)
+    for order in p.orders:
+        im = p.images[order]
+        assert im.valid.all()
+        ring = im.direction[:n]
+        theta = _angle_from_hole(ring)
+        np.testing.assert_allclose(theta, theta[0], rtol=1e-12)
+        chord_mid = 0.5 * (ring + np.roll(ring, -1, axis=0))
+        sag = (theta - _angle_from_hole(chord_mid / np.linalg.norm(chord_mid, axis=1)[:, None])) / PIXEL
+        assert 0 < sag.max() <= axis_patch.EDGE_FACTOR * MAX_ERROR * 1.0001
+        # the innermost circle is within BAND_FACTOR * max_error_px of the ring
+        inner = _angle_from_hole(im.direction[n:2 * n])
+        assert np.abs(inner - theta[0]).max() / PIXEL <= axis_patch.BAND_FACTOR * MAX_ERROR * 1.5
+
+
+def test_patch_stops_at_the_mesh(lut):
+    """A small plane: the patch ends at the last circle the plane covers all round; a plane with a hole
+    around the axis (nothing crosses it) and a plane whose hole reaches the crossing's circles give
+    no patch."""
+    pts, tris = _grid(-4.0, 0.06, 3)
+    (p,) = _patches(pts, tris, lut)
+    assert p.radius <= 0.06 and p.radius > 0.06 / 1.5
+    assert len(p.replaced) > 0
+    assert _patches(*_grid(-4.0, 1.0, 10, hole_radius=0.15), lut) == []
+    # crossed, but the triangles next to the crossed one are missing
+    pts, tris = _grid(-4.0, 1.0, 10)
+    centre = pts[tris].mean(axis=1)
+    d = np.hypot(centre[:, 1], centre[:, 2])
+    keep = (d < 0.06) | (d > 0.3)
+    assert _patches(pts, tris[keep], lut) == []
+
+
+def test_patch_limits(lut, monkeypatch):
+    """Many crossings (a stack of planes): at most MAX_PATCHES patches; a grid never exceeds
+    MAX_GRID points."""
+    parts = [_grid(-2.5 - 0.3 * k, 0.3, 2) for k in range(12)]
+    pts = np.concatenate([p for p, _ in parts])
+    tris = np.concatenate([t + 25 * k for k, (_, t) in enumerate(parts)])
+    patches = _patches(pts, tris, lut)
+    assert len(patches) == axis_patch.MAX_PATCHES
+    monkeypatch.setattr(axis_patch, "MAX_GRID", 2000)
+    for p in _patches(*_grid(-4.0, 1.0, 10), lut, pixel=PIXEL / 8):
+        assert len(p.source_position) <= 2000 + p.n_azimuths
+
+
+def test_back_faces_of_a_closed_sphere(lut):
+    """Behind the hole the axis crosses the sphere twice. With ``closed`` the far crossing's patch has
+    no image (its rays start into the sphere) but still replaces its triangles; the near one is drawn."""
+    pts, tris = _sphere([-3.0, 0.0, 0.01])
+    patches = sorted(_patches(pts, tris, lut, closed=True), key=lambda p: p.crossing.along)
+    assert len(patches) == 2
+    far, near = patches
+    assert far.images == {} and all(not f.any() for f in far.facing.values()) and len(far.replaced)
+    assert set(near.images) == {1, 2} and all(f.mean() > 0.5 for f in near.facing.values())
+    both = _patches(pts, tris, lut, closed=False)
+    assert all(set(p.images) == {1, 2} for p in both)
+
+
+def test_winding_number_and_closed_surfaces():
+    pts, tris = _sphere([-3.0, 0.0, 0.0])
+    assert pipeline.is_closed_outward(pts, tris)
+    assert not pipeline.is_closed_outward(pts, tris[:, ::-1])
+    assert not pipeline.is_closed_outward(pts, tris[1:])
+    assert pipeline.winding_number(pts, tris, [-3.0, 0.1, 0.2]) == pytest.approx(1.0, abs=1e-9)
+    assert pipeline.winding_number(pts, tris, CAMERA) == pytest.approx(0.0, abs=1e-9)
+    assert pipeline.winding_number(pts, tris[:, ::-1], [-3.0, 0, 0]) == pytest.approx(-1.0, abs=1e-9)
+
+
+def test_camera_inside_a_closed_shell_still_sees_the_patch(lut):
+    """A closed shell around camera and hole is seen from inside (its back faces): the pipeline draws
+    the patch where the axis crosses it behind the hole."""
+    pts, tris = _sphere([0.0, 0.0, 0.0], radius=30.0, segments=48, rings=24)
+    lut40 = build_lut(20.0, 1.05, 40.0, 128, 256)
+    settings = pipeline.Settings(pixel_angle=PIXEL)
+    out = pipeline.build_images(pipeline.SourceMesh(pts, tris), SCENE, lut40, settings)
+    assert out[1].report.patch_faces > 0
+
+
+def test_silhouette_of_a_sphere_is_its_limb(lut):
+    """With straight lines of sight (d towards the camera) the silhouette of a sphere is its limb:
+    the edges whose midpoints see the camera at 90 degrees from the normal, to within the mesh's
+    angular step. Along the lensed order-1 rays it is a band of similar size, shifted by the bending."""
+    centre = np.array([-2.0, 9.0, 1.0])
+    pts, tris = _sphere(centre, radius=0.5)
+    edges = subdivision.mesh_edges(tris)
+    straight = (CAMERA - pts) / np.linalg.norm(CAMERA - pts, axis=1)[:, None]
+    e_flat, t_flat = silhouette.silhouette(pts, tris, edges.of_tri, len(edges.verts), straight)
+    mid = 0.5 * (pts[edges.verts[e_flat, 0]] + pts[edges.verts[e_flat, 1]])
+    n = (mid - centre) / np.linalg.norm(mid - centre, axis=1)[:, None]
+    view = (CAMERA - mid) / np.linalg.norm(CAMERA - mid, axis=1)[:, None]
+    assert np.degrees(np.abs(np.arcsin(np.einsum("ij,ij->i", n, view)))).max() < 10.0
+    assert 36 <= e_flat.sum() < 0.2 * len(e_flat)
+    # the limb is a closed loop: every silhouette edge's triangles are silhouette triangles
+    assert np.all(t_flat[np.flatnonzero(e_flat.take(edges.of_tri).any(axis=1))])
+    d, _ = illumination.towards_observer(pts, SCENE, lut, (1,))[1]
+    e_lens, t_lens = silhouette.silhouette(pts, tris, edges.of_tri, len(edges.verts), d)
+    assert 0.5 * e_flat.sum() < e_lens.sum() < 2 * e_flat.sum()
+    sign = silhouette.facing_signs(pts, tris, d)
+    assert np.all(t_lens[(sign != sign[:, :1]).any(axis=1)])  # split triangles are on it
+
+
+def test_silhouette_of_an_open_disc_is_its_boundary(lut):
+    pts, tris = _grid(-4.0, 1.0, 4, tilt=0.3)
+    pts = pts + [0.0, 3.0, 0.0]  # off the axis
+    edges = subdivision.mesh_edges(tris)
+    d, _ = illumination.towards_observer(pts, SCENE, lut, (1,))[1]
+    e, _ = silhouette.silhouette(pts, tris, edges.of_tri, len(edges.verts), d)
+    boundary = np.bincount(edges.of_tri.ravel(), minlength=len(edges.verts)) == 1
+    np.testing.assert_array_equal(e, boundary)
+
+
+def test_pipeline_ring_reaches_the_einstein_radius(lut):
+    """Behind the hole, the order-1 image of the sphere starts at the Einstein ring of the crossing
+    point, all round (no culled gap), and order 2 ends there."""
+    pts, tris = _sphere([-3.0, 0.0, 0.01])
+    settings = pipeline.Settings(pixel_angle=PIXEL)
+    out = pipeline.build_images(pipeline.SourceMesh(pts, tris), SCENE, lut, settings)
+    near = max(axis_patch.find_crossings(pts, tris, CAMERA, HOLE), key=lambda c: c.along)
+    theta_e = np.pi - connect(20.0, abs(near.along), np.pi, 1).xi
+    for order in (1, 2):
+        img = out[order]
+        assert img.report.patch_faces > 0 and img.report.einstein_ring <= 10
+        d = img.positions - CAMERA
+        d /= np.linalg.norm(d, axis=1)[:, None]
+        theta = _angle_from_hole(d)
+        if order == 1:  # nothing of order 1 lies inside the ring (order 2 also shows the far side)
+            assert abs(theta.min() - theta_e) < 1e-6
+        at_ring = np.abs(theta - theta_e) < 1e-7
+        pa = np.arctan2(d[at_ring, 2], d[at_ring, 1])
+        assert len(np.unique(((pa + np.pi) / (2 * np.pi) * 64).astype(int) % 64)) == 64
