@@ -134,11 +134,10 @@ def main_table(angles, cam, lut, repeat, refs, png_dir=None):
         src, sc = sphere_scene(a)
         ref, t_ref = refs[a]
         poly, t_poly, t_ras, ntri = polygon_image(src, cam, lut, settings, repeat)
-        m = image_metrics.compare(ref, poly, texture_size=TEXTURE, wrap_uv=(True, False))
+        m = image_metrics.compare(ref, poly, texture_size=TEXTURE, wrap_uv=(True, False), other_surface=OTHER_SURFACE)
         results[a] = m
         m["_t_poly"] = t_poly
         m["_radii"] = {o: (_radial_range(ref, o, cam), _radial_range(poly, o, cam)) for o in (1, 2)}
-        m["_other_surface"] = _other_surface(ref, poly)
         lines.append(f"| {a} | {t_ref:.2f} | {1000 * t_poly:.1f} | {t_ref / t_poly:.0f}x | {t_ras:.2f} | "
                      f"{ntri.get(1, 0)} / {ntri.get(2, 0)} |")
         rows += image_metrics.markdown_rows(m, f"{a} deg")
@@ -164,17 +163,10 @@ OTHER_SURFACE = 0.25 * RADIUS
 (BU) apart, show another part of the sphere (e.g. its far side through a gap of the near side)."""
 
 
-def _other_surface(ref, poly):
-    """(pixels showing another part of the object, pixels where both show it in the same order)."""
-    same = (ref.object_id >= 0) & (ref.object_id == poly.object_id) & (ref.order == poly.order)
-    far = np.linalg.norm(poly.point[same] - ref.point[same], axis=-1) > OTHER_SURFACE
-    return int(np.count_nonzero(far)), int(np.count_nonzero(same))
-
-
 def other_surface_notes(angles, results):
     """Generated remark on the pixels that show another part of the sphere than the reference."""
-    parts = [f"{a} deg: {results[a]['_other_surface'][0]} of {results[a]['_other_surface'][1]}"
-             for a in angles if results[a]["_other_surface"][0]]
+    both = {a: results[a]["orders"]["all"] for a in angles}
+    parts = [f"{a} deg: {both[a]['other_surface']} of {both[a]['matched']}" for a in angles if both[a]["other_surface"]]
     if not parts:
         return []
     return [f"Pixels showing the sphere in the right order but another part of it (seen points more than "

@@ -293,6 +293,20 @@ def test_metrics_identical_and_shifted():
     assert image_metrics.compare(ref, other)["orders"][1]["mismatch"] == 200
 
 
+def test_metrics_other_surface():
+    """Matched pixels whose world points lie farther apart than ``other_surface`` (BU) are counted:
+    the same object in the same order, but another part of it."""
+    ref, test = _synthetic(), _synthetic()
+    ref.point[ref.hit] = (0.0, 0.0, 0.0)
+    test.point[test.hit] = (0.0, 0.0, 0.0)
+    far = test.hit & (np.arange(60)[None, :] < 15)  # columns 10..14 of the rectangle: 50 pixels
+    test.point[far] = (0.0, 0.0, 0.3)
+    m = image_metrics.compare(ref, test, other_surface=0.2)
+    assert m["orders"][1]["other_surface"] == m["orders"]["all"]["other_surface"] == 50
+    assert image_metrics.compare(ref, test, other_surface=0.5)["orders"][1]["other_surface"] == 0
+    assert "other_surface" not in image_metrics.compare(ref, test)["orders"][1]
+
+
 def test_debug_png(tmp_path):
     ref, test = _synthetic(), _synthetic(shift=2)
     path = tmp_path / "dbg.png"

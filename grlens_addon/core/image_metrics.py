@@ -85,12 +85,16 @@ def uv_gradient(buf, wrap_uv=(False, False), seam: float = 0.25) -> np.ndarray:
     return out
 
 
-def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(False, False)) -> dict:
+def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(False, False),
+            other_surface: float | None = None) -> dict:
     """Metrics between the reference buffers ``ref`` and ``test`` (see the module docstring).
 
     Returns {"orders": {1: {...}, 2: {...}, "all": {...}}, "higher_ref": int, "higher_test": int,
     "pixels": int}; each order's dict holds covered_ref, covered_test, mismatch, mismatch_frac,
-    matched, uv_texel / uv_px / lt_rel (dicts p50, p99, max) and uv_px_n.
+    matched, uv_texel / uv_px / lt_rel (dicts p50, p99, max) and uv_px_n. With ``other_surface`` (a
+    distance in BU) also other_surface: the matched pixels (same object, same order) whose world
+    points (``point`` buffers) are farther apart than that, i.e. that show another part of the object
+    (such as its far side through a gap in the near side), which the coverage mismatch cannot see.
     """
     if ref.shape != test.shape:
         raise ValueError(f"buffers of different shapes: {ref.shape} vs {test.shape}")
@@ -123,6 +127,9 @@ def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(Fals
         with np.errstate(invalid="ignore", divide="ignore"):
             lt = np.abs(test.light_time[matched] - ref.light_time[matched]) / ref.light_time[matched]
         res["lt_rel"] = _stats(lt)
+        if other_surface is not None:
+            far = np.linalg.norm(test.point[matched] - ref.point[matched], axis=-1) > other_surface
+            res["other_surface"] = int(np.count_nonzero(far))
         out["orders"][o] = res
     return out
 
