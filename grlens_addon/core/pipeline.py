@@ -397,7 +397,7 @@ def _interpolate(bary, corner_values, identity: bool):
 
 RING_MAGNIFICATION = 2.0
 """Source triangles whose image circumference exceeds this many times their own are treated as
-lying in a strongly lensed (Einstein-ring) region by :func:`_raise_ring_levels`."""
+lying in a strongly lensed (Einstein-ring) region by :func:`_ring_levels`."""
 
 
 SILHOUETTE_FACTOR = 0.25
@@ -416,7 +416,7 @@ brings the 180-degree view's second-order ring to the target (benchmarks/bench_a
 
 
 RING_LEVEL_MARGIN = 0.75
-"""Fraction of the largest allowed azimuth per piece that :func:`_raise_ring_levels` aims at: pieces
+"""Fraction of the largest allowed azimuth per piece that :func:`_ring_levels` aims at: pieces
 of a triangle subdivided uniformly in space cover unequal azimuths, and the culling test of the same
 bound (culling.cull) must not catch the widest of them."""
 
@@ -440,7 +440,7 @@ def _silhouette(src, edges, scene, lut, order, of_edges):
 
 
 def _ring_candidates(src_circ, img_circ) -> np.ndarray:
-    """Indices of the source triangles magnified more than RING_MAGNIFICATION (see _raise_ring_levels)."""
+    """Indices of the source triangles magnified more than RING_MAGNIFICATION (see _ring_levels)."""
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.flatnonzero(img_circ > RING_MAGNIFICATION * src_circ)
 
