@@ -350,7 +350,10 @@ def test_sphere_polygon_method_vs_reference(lut, angle):
 def test_sphere_ring_views_vs_reference(lut, angle, bound):
     """The paper's sphere next to and on the observer-hole axis at 320x180, where the second-order
     rings are a third of a pixel wide: coverage mismatch within ``bound`` of the covered pixels
-    (before the Einstein-ring patches and the silhouette tolerance: 8.0%, 1.1%, 1.6%)."""
+    (before the Einstein-ring patches and the silhouette tolerance: 8.0%, 1.1%, 1.6%). Beside the
+    axis (170 deg) the near side has no gaps the far side shows through: under 1% of the pixels
+    show a point of the sphere more than a quarter of its radius from the reference's (6.7% before
+    the first split next to the axis, pipeline._presplit_levels)."""
     bench = _bench_accuracy()
     cam = bench.camera(320, 180)
     src, scene = bench.sphere_scene(angle)
@@ -358,11 +361,13 @@ def test_sphere_ring_views_vs_reference(lut, angle, bound):
     images = pipeline.build_images(src, mapping.Scene(cam.position, HOLE, 1.0), lut, bench.make_settings(cam),
                                    frustum_planes=cam.frustum_planes())
     poly = rasterize.rasterize(rasterize.from_images(images), cam)
-    a = image_metrics.compare(ref, poly, wrap_uv=(True, False))["orders"]["all"]
+    a = image_metrics.compare(ref, poly, wrap_uv=(True, False), other_surface=0.125)["orders"]["all"]
     print(f"\nsphere {angle} deg 320x180: mismatch {a['mismatch']} of {a['covered_ref']} "
-          f"({100 * a['mismatch_frac']:.2f}%)")
+          f"({100 * a['mismatch_frac']:.2f}%), other surface {a['other_surface']} of {a['matched']}")
     assert a["covered_ref"] > 500
     assert a["mismatch_frac"] < bound
+    if angle == 170:
+        assert a["other_surface"] < 0.01 * a["matched"]
 
 
 def _annulus(r_in, r_out, n_r, n_a, z=0.0):

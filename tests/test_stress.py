@@ -20,11 +20,13 @@ triangles; ``invalid_vertex``, ``degenerate_source``, ``einstein_ring``, the res
 triangles of which S reach subdivision.subdivide and come out as F >= S faces (every one of the S
 keeps at least one face):
 
-    kept - patch_faces + total_culled() + patch_replaced + bad_source_triangles == T + (F - S)
+    kept - patch_faces + total_culled() + patch_replaced + bad_source_triangles - presplit == T + (F - S)
 
 i.e. ``>= T``, with equality exactly when nothing is split (max_tess_level = 1, which also means no
 Einstein-ring patches: ``patch_replaced`` source triangles are drawn by ``patch_faces`` faces of
-axis_patch.py instead of being subdivided). The report alone
+axis_patch.py instead of being subdivided). ``presplit``: triangles that a first split next to the
+axis added (pipeline._presplit_levels); the counts are then of the split mesh, whose S and F are
+those of the second subdivide call. The report alone
 does not give F - S (nor how many of outside_frustum are source triangles); the tests get it by
 wrapping subdivision.subdivide.
 
@@ -278,6 +280,9 @@ def check_images(out, src, scene, settings, spy_calls=None, light=None, disc=Non
     calls = list(spy_calls) if spy_calls is not None else None
     summary = {}
     assert sorted(out) == sorted(settings.orders)
+    if calls and any(img.report.presplit for img in out.values()):
+        s, f, covered = calls.pop(0)  # the first split next to the axis, once for all orders
+        assert s == n_clean and covered == s and f == n_clean + next(iter(out.values())).report.presplit
     for order in settings.orders:
         img = out[order]
         rep = img.report
@@ -322,7 +327,8 @@ def check_images(out, src, scene, settings, spy_calls=None, light=None, disc=Non
         assert rep.kept == F
         assert rep.extra["bad_source_triangles"] == n_bad
         assert 0 <= rep.patch_faces <= rep.kept
-        total = rep.kept - rep.patch_faces + rep.total_culled() + rep.patch_replaced + n_bad
+        assert rep.presplit >= 0
+        total = rep.kept - rep.patch_faces + rep.total_culled() + rep.patch_replaced + n_bad - rep.presplit
         assert total >= n_src
         if rep.below_pixel or n_clean == 0:  # nothing built, nothing subdivided
             assert rep.below_pixel in (0, n_clean) and F == 0
@@ -335,7 +341,7 @@ def check_images(out, src, scene, settings, spy_calls=None, light=None, disc=Non
             extra = f - s
             assert total == n_src + extra, (total, n_src, extra, rep)
             # the pre-subdivision cull is part of it; triangles replaced by a patch are not subdivided
-            assert rep.outside_frustum + rep.patch_replaced >= n_clean - s
+            assert rep.outside_frustum + rep.patch_replaced >= n_clean + rep.presplit - s
         else:
             extra = None
         if settings.max_tess_level == 1:
@@ -656,6 +662,24 @@ def test_build_images_adversarial_million_vertices(seed, monkeypatch):
     spy = SubdivideSpy(monkeypatch)
     out = pipeline.build_images(src, scene, lut, settings, light, frustum)
     check_images(out, src, scene, settings, spy.calls, light)
+
+
+def test_accounting_with_the_first_split_next_to_the_axis(monkeypatch):
+    """The paper's sphere beside the axis (170 degrees of its orbit): the pipeline first splits the
+    triangles next to the axis; every rule above holds, counted on the split mesh."""
+    sys.path.insert(0, os.path.dirname(__file__))
+    from meshes import uv_sphere
+
+    a = math.radians(170.0)
+    pts, tris = uv_sphere([3 * math.cos(a), 3 * math.sin(a), 0.01], 0.5, 36, 18)
+    src = pipeline.SourceMesh(pts, tris, material=np.arange(len(tris)) % 3)
+    scene = mapping.Scene([20.0, 0, 0], [0, 0, 0], 1.0)
+    settings = pipeline.Settings(pixel_angle=math.radians(19.0) / 360)
+    lut = small_lut(20.0, 1.05, 40.0)
+    spy = SubdivideSpy(monkeypatch)
+    out = pipeline.build_images(src, scene, lut, settings)
+    assert all(img.report.presplit > 0 for img in out.values())
+    check_images(out, src, scene, settings, spy.calls)
 
 
 def test_accounting_is_exact_without_subdivision():

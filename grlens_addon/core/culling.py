@@ -29,6 +29,7 @@ class CullReport:
     kept: int = 0
     patch_replaced: int = 0  # source triangles drawn by an Einstein-ring patch instead (not culled)
     patch_faces: int = 0  # of the kept faces, those of Einstein-ring patches (axis_patch.py)
+    presplit: int = 0  # source triangles added by the pipeline's first split next to the axis (counted above)
     extra: dict = field(default_factory=dict)
 
     def total_culled(self) -> int:

@@ -149,7 +149,7 @@ def _finite_or_zero(a):
 
 def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                  light: Light | None = None, frustum_planes=None,
-                 disc: DiscEmitter | None = None) -> dict[int, ImageMesh]:
+                 disc: DiscEmitter | None = None, _presplit: bool = True) -> dict[int, ImageMesh]:
     """Image meshes of the requested orders for one source mesh (see the module docstring).
 
     ``frustum_planes`` (K, 4), rows (n, d) with n . x + d >= 0 inside (world space, BU): image
@@ -176,6 +176,21 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
     src_circ = _circumference_from_edges(
         _chord_lengths(culling.unit_directions(src.positions, scene.camera), edges.verts), edges.of_tri)
     src_near_axis = culling.near_axis(src.positions, src.tris, scene.camera, scene.hole)
+    if (_presplit and ring_levels and settings.max_tess_level > 1
+            and not axis_patch.find_crossings(src.positions, src.tris, scene.camera, scene.hole, src_near_axis)):
+        pre = _presplit_levels(src, edges, src_circ, images_v, scene, settings)
+        if pre is not None:
+            sub = subdivision.subdivide(src.positions, src.tris, edges, pre)
+            fine = SourceMesh(sub.positions, sub.tris,
+                              None if src.corner_uv is None else np.matmul(sub.bary, src.corner_uv[sub.source_tri]),
+                              src.material[sub.source_tri],
+                              None if src.corner_normals is None else np.matmul(sub.bary, src.corner_normals[sub.source_tri]))
+            out = build_images(fine, scene, lut, settings, light, frustum_planes, disc, _presplit=False)
+            for img in out.values():
+                img.source_tri = kept_source[sub.source_tri[img.source_tri]]
+                img.report.extra["bad_source_triangles"] = n_bad
+                img.report.presplit = len(sub.tris) - len(src.tris)
+            return out
     patches = axis_patch.build_patches(src.positions, src.tris, edges.of_tri, len(edges.verts), scene, lut,
                                        settings.orders, settings.pixel_angle, settings.max_error_px,
                                        candidates=src_near_axis,
@@ -474,6 +489,50 @@ def _ring_levels(src, src_circ, img_circ, scene, img_v: mapping.Images, order, s
             n = np.ceil(span / (RING_LEVEL_MARGIN * culling.max_ring_span(r_px, tol)))
             out.append(np.clip(np.nan_to_num(n, nan=1.0), 1, top).astype(np.int64))
     return cand, out[0], out[1]
+
+
+PRESPLIT_MIN = 12
+"""A magnified source triangle beside the axis whose pieces would need more than this level is split
+first (see :func:`_presplit_levels`)."""
+
+
+def _presplit_levels(src, edges, src_circ, images_v, scene, settings):
+    """Per-edge levels of a first, coarse split of the source mesh, or None when none is needed.
+
+    A strongly magnified triangle (RING_MAGNIFICATION) of projected size h whose closest point lies at
+    d_min from the axis needs pieces of size RING_LEVEL_MARGIN * d_max * d_min next to that point
+    (d_max: the azimuth allowed at its ring radius, culling.max_ring_span), i.e. a level
+    need = h / (RING_LEVEL_MARGIN d_max d_min). The ring levels (_ring_levels) look at the azimuth
+    its corners span, which for a triangle passing close to the axis is much less: its pieces next
+    to the axis stay too wide, are culled, and the far side of the object shows through the gaps.
+    A uniform split at ``need`` would cost need^2 pieces; instead, triangles with need > PRESPLIT_MIN
+    are first split at sqrt(need), so that the ring levels of the smaller triangles, computed
+    again, refine mostly those next to the axis. Only meshes the axis does not cross (axis patches
+    handle the crossings)."""
+    x, y, _ = culling._axis_coordinates(src.positions, scene.camera, scene.hole)
+    need = np.ones(len(src.tris))
+    for order, img_v in images_v.items():
+        img_circ = _circumference_from_edges(_chord_lengths(img_v.direction, edges.verts), edges.of_tri)
+        cand = _ring_candidates(src_circ, img_circ)
+        if cand.size == 0:
+            continue
+        t = src.tris[cand]
+        px, py = x[t], y[t]
+        h = np.hypot(px - np.roll(px, -1, axis=1), py - np.roll(py, -1, axis=1)).max(axis=1)
+        dmin = axis_patch._triangle_distance(x, y, t)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            radius = culling.hole_angle(img_v.direction, scene.camera, scene.hole) / settings.pixel_angle
+            d_max = culling.max_ring_span(radius[t].max(axis=1), settings.max_error_px)
+            n = np.where(dmin > 0, h / (RING_LEVEL_MARGIN * d_max * dmin), 1.0)
+        need[cand] = np.maximum(need[cand], np.nan_to_num(n, nan=1.0, posinf=1.0))
+    split = need > PRESPLIT_MIN
+    if not split.any():
+        return None
+    k = np.clip(np.ceil(np.sqrt(need)), 1, subdivision.GRID).astype(np.int64)
+    k[~split] = 1
+    levels = np.ones(len(edges.verts), np.int64)
+    np.maximum.at(levels, edges.of_tri.ravel(), np.repeat(k, 3))
+    return levels
 
 
 def _patch_parts(patches, order, planes, offset):
