@@ -171,10 +171,9 @@ def other_surface_notes(angles, results):
         return []
     return [f"Pixels showing the sphere in the right order but another part of it (seen points more than "
             f"{OTHER_SURFACE:g} r_s apart; the coverage mismatch cannot see these, the UV error does): "
-            + "; ".join(parts) + ". Next to the ring (170 deg: the sphere passes beside the axis, so there is no axis patch) "
-            "the near side's image has gaps where the ring culling drops pieces of the triangles next to "
-            "the axis that are still too wide for the ring at max_tess_level, and the far side shows "
-            "through them.", ""]
+            + "; ".join(parts) + ". Such pixels show the far side through a gap in the near side's image (where the ring "
+            "culling drops pieces next to the axis), or lie on the edge of a second-order ring less than "
+            "a pixel wide, where the two images cross over between the near and the far side.", ""]
 
 
 def ring_notes(angles, results):
