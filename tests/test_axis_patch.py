@@ -115,7 +115,7 @@ def test_patch_on_a_tilted_plane(lut):
     (p,) = _patches(pts, tris, lut)
     n = p.n_azimuths
     grid = p.source_position[n:]
-    x, y, z = culling._axis_coordinates(grid, CAMERA, HOLE)
+    x, y, z = culling.axis_coordinates(grid, CAMERA, HOLE)
     # on the plane through (-4, 0, 0) with normal (cos 0.5, -sin 0.5, 0)
     np.testing.assert_allclose((grid - [-4.0, 0, 0]) @ [math.cos(0.5), -math.sin(0.5), 0.0], 0.0, atol=1e-12)
     delta = np.hypot(x, y).reshape(-1, n)
@@ -132,7 +132,7 @@ def test_patch_on_a_tilted_plane(lut):
     rebuilt = np.einsum("fck,fkx->fcx", p.bary, pts[tris[p.face_src]])
     np.testing.assert_allclose(rebuilt, f, atol=1e-12)
     # replaced: all corners inside the outer circle
-    cd = np.hypot(*culling._axis_coordinates(pts, CAMERA, HOLE)[:2])
+    cd = np.hypot(*culling.axis_coordinates(pts, CAMERA, HOLE)[:2])
     assert len(p.replaced) > 0 and np.all(cd[tris[p.replaced]].max(axis=1) <= p.radius)
     rest = np.setdiff1d(np.arange(len(tris)), p.replaced)
     assert np.all(cd[tris[rest]].max(axis=1) > p.radius)

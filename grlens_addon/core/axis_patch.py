@@ -32,7 +32,7 @@ stops at the last complete circle inside it; with none, there is no patch.
 
 Units: positions in Blender units (BU); delta in BU; angles in radians; pixel quantities in pixels
 of ``pixel_angle`` radians. Axis coordinates: (x, y, z) relative to the hole, z along the axis
-towards the camera (culling._axis_coordinates).
+towards the camera (culling.axis_coordinates).
 """
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import illumination, mapping
-from .culling import _axis_coordinates, max_ring_span
+from .culling import axis_coordinates, axis_crossing, axis_distance, hole_angle, max_ring_span
 
 EDGE_FACTOR = 1.0 / 16.0
 """The ring's edge is drawn with chords that sag by at most this times ``max_error_px``: a second-order
@@ -113,20 +113,16 @@ def find_crossings(points, tris, camera, hole, candidates=None) -> list[Crossing
     idx = np.arange(len(tris)) if candidates is None else np.arange(len(tris))[candidates]
     if idx.size == 0:
         return []
-    x, y, z = _axis_coordinates(points, camera, hole)
+    x, y, z = axis_coordinates(points, camera, hole)
     t = tris[idx]
-    xa, xb, xc = x[t[:, 0]], x[t[:, 1]], x[t[:, 2]]
-    ya, yb, yc = y[t[:, 0]], y[t[:, 1]], y[t[:, 2]]
-    la, lb, lc = xb * yc - xc * yb, xc * ya - xa * yc, xa * yb - xb * ya
-    total = la + lb + lc
-    with np.errstate(invalid="ignore", divide="ignore"):
-        inside = (((la >= 0) & (lb >= 0) & (lc >= 0)) | ((la <= 0) & (lb <= 0) & (lc <= 0))) & (total != 0)
-        along = (la * z[t[:, 0]] + lb * z[t[:, 1]] + lc * z[t[:, 2]]) / np.where(total != 0, total, np.nan)
-    sel = np.flatnonzero(inside & np.isfinite(along))
+    _, crossed, along = axis_crossing(x, y, z, t)
+    sel = np.flatnonzero(crossed & np.isfinite(along))
     if sel.size == 0:
         return []
     # one crossing per point: crossings closer along the axis than a millionth of their triangle's size
     # are the same point seen from the triangles around a shared edge or vertex
+    xa, xb, xc = x[t[:, 0]], x[t[:, 1]], x[t[:, 2]]
+    ya, yb, yc = y[t[:, 0]], y[t[:, 1]], y[t[:, 2]]
     size = np.maximum(np.maximum(np.hypot(xa - xb, ya - yb), np.hypot(xb - xc, yb - yc)), np.hypot(xc - xa, yc - ya))
     sel = sel[np.argsort(along[sel], kind="stable")]
     e1 = np.asarray(camera, np.float64) - hole
@@ -147,7 +143,7 @@ def ring_orders(crossing: Crossing, orders) -> tuple:
 
 def limit_images(crossing: Crossing, psi, scene: mapping.Scene, lut, order) -> mapping.Images:
     """Images of order ``order`` of the crossing point approached from azimuth ``psi`` (K,) radians
-    about the axis (measured in the frame of culling._axis_coordinates): the points of its Einstein
+    about the axis (measured in the frame of culling.axis_coordinates): the points of its Einstein
     ring, at the LUT's angle xi for phi = pi (behind the hole) or 0 (in front), at position angle psi
     (order 1) or psi + pi (order 2)."""
     psi = np.asarray(psi, np.float64)
@@ -168,25 +164,6 @@ def limit_images(crossing: Crossing, psi, scene: mapping.Scene, lut, order) -> m
     plane = mapping.PlaneCoordinates(r=r, phi=phi, e2=e2, on_axis=np.ones(psi.shape, bool))
     return mapping.Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
                           xi=look.xi, dt=look.dt, ux=None, uy=None)
-
-
-def _angle_from_hole(direction, scene) -> np.ndarray:
-    """Angle (radians) between apparent directions (N, 3) and the hole's direction from the camera."""
-    return np.arccos(np.clip(-(direction @ scene.e1), -1.0, 1.0))
-
-
-def _triangle_distance(x, y, tris) -> np.ndarray:
-    """Distance (BU) from the axis to each triangle projected along it (0 when the axis crosses it)."""
-    px, py = x[tris], y[tris]  # (T, 3)
-    qx, qy = np.roll(px, -1, axis=1), np.roll(py, -1, axis=1)
-    cross = px * qy - py * qx  # twice the signed areas of (origin, corner k, corner k+1)
-    inside = (cross >= 0).all(axis=1) | (cross <= 0).all(axis=1)
-    dx, dy = qx - px, qy - py
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.clip(-(px * dx + py * dy) / (dx * dx + dy * dy), 0.0, 1.0)
-    t = np.nan_to_num(t)
-    d = np.hypot(px + t * dx, py + t * dy).min(axis=1)
-    return np.where(inside, 0.0, d)
 
 
 def _connected(seed, cand, of_tri, n_edges) -> np.ndarray:
@@ -216,7 +193,7 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     if len(cand_tris) == 0 or m == 0:
         return best, bary
     px, py = x[cand_tris], y[cand_tris]  # (C, 3)
-    d_lo = _triangle_distance(x, y, cand_tris)
+    d_lo = axis_distance(x, y, cand_tris)
     d_hi = np.hypot(px, py).max(axis=1)
     step = 2.0 * np.pi / n_az
     ang = np.arctan2(py, px)
@@ -309,7 +286,7 @@ def build_patches(src_positions, src_tris, edges_of_tri, n_edges, scene: mapping
         return []
     if callable(closed):
         closed = bool(closed())
-    x, y, z = _axis_coordinates(points, scene.camera, scene.hole)
+    x, y, z = axis_coordinates(points, scene.camera, scene.hole)
     if len(crossings) > MAX_PATCHES:
         size = [np.ptp(x[tris[c.tri]]) + np.ptp(y[tris[c.tri]]) for c in crossings]
         keep = np.sort(np.argsort(size, kind="stable")[::-1][:MAX_PATCHES])
@@ -335,7 +312,7 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     ring = {o: limit_images(cr, np.zeros(1), scene, lut, o) for o in orders}
     if not all(bool(im.valid[0]) for im in ring.values()):
         return None
-    theta_e = {o: float(_angle_from_hole(im.direction, scene)[0]) for o, im in ring.items()}
+    theta_e = {o: float(hole_angle(im.direction, scene.camera, scene.hole)[0]) for o, im in ring.items()}
     n_az, q = grid_shape(max(theta_e.values()) / pixel_angle, max_error_px)
     # the innermost circle: probe the image along one azimuth in the crossed triangle's plane
     k = np.arange(MAX_CIRCLES + 1)
@@ -345,7 +322,7 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     band = BAND_FACTOR * max_error_px * pixel_angle
     close = np.ones(len(k), bool)
     for o, img in mapping.map_vertices_orders(probe, scene, lut, orders).items():
-        gap = np.abs(_angle_from_hole(img.direction, scene) - theta_e[o])
+        gap = np.abs(hole_angle(img.direction, scene.camera, scene.hole) - theta_e[o])
         if not np.isfinite(gap).all():  # part of the disc has no image (outside the LUT, horizon)
             return None
         close &= gap <= band
@@ -354,7 +331,7 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     n_circles = max(1, min(n_circles, MAX_GRID // n_az))
     radii = radius * q ** (-np.arange(n_circles - 1, -1, -1, dtype=np.float64))
     # the surface under the grid: triangles connected to the crossed one whose projection meets the disc
-    near = np.flatnonzero(_triangle_distance(x, y, tris) <= radius)
+    near = np.flatnonzero(axis_distance(x, y, tris) <= radius)
     cand = near[_connected(cr.tri, near, of_tri, n_edges)]
     psi = 2.0 * np.pi * np.arange(n_az) / n_az
     qx = (radii[:, None] * np.cos(psi)[None, :]).ravel()

@@ -95,7 +95,7 @@ def max_ring_span(radius, sagitta):
     return 2.0 * np.arccos(np.clip(1.0 - sagitta / radius, -1.0, 1.0))
 
 
-def _axis_coordinates(source_points, camera, hole):
+def axis_coordinates(source_points, camera, hole):
     """Coordinates (x, y, z) of ``source_points`` (N, 3; BU) relative to the hole: z along the axis
     towards the camera, x and y across it (a fixed perpendicular pair)."""
     e1 = np.asarray(camera, np.float64) - hole
@@ -104,6 +104,38 @@ def _axis_coordinates(source_points, camera, hole):
     v = np.cross(e1, u)
     p = np.asarray(source_points, dtype=np.float64) - hole
     return p @ u, p @ v, p @ e1
+
+
+def axis_crossing(x, y, z, tris):
+    """Where the observer-hole axis meets the triangles ``tris`` (T, 3) of points with
+    :func:`axis_coordinates` (x, y, z): (inside, crossed, along), each (T,). ``inside``: the origin lies
+    in the triangle's projection onto the plane perpendicular to the axis (same sign of the three edge
+    functions; touching counts); ``crossed``: inside and not edge-on, so there is a crossing point;
+    ``along`` (BU): its coordinate along the axis (NaN where edge-on)."""
+    xa, xb, xc = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
+    ya, yb, yc = y[tris[:, 0]], y[tris[:, 1]], y[tris[:, 2]]
+    # twice the signed areas of (origin, b, c), (origin, c, a), (origin, a, b): barycentrics of the axis
+    la, lb, lc = xb * yc - xc * yb, xc * ya - xa * yc, xa * yb - xb * ya
+    with np.errstate(invalid="ignore", divide="ignore"):
+        inside = ((la >= 0) & (lb >= 0) & (lc >= 0)) | ((la <= 0) & (lb <= 0) & (lc <= 0))
+        total = la + lb + lc
+        along = (la * z[tris[:, 0]] + lb * z[tris[:, 1]] + lc * z[tris[:, 2]]) / np.where(total != 0, total, np.nan)
+    return inside, inside & (total != 0), along
+
+
+def axis_distance(x, y, tris) -> np.ndarray:
+    """(T,) distance (BU) from the observer-hole axis to the triangles ``tris`` (T, 3) projected along
+    it (0 when the axis passes through the projection); x, y from :func:`axis_coordinates`."""
+    px, py = x[tris], y[tris]  # (T, 3)
+    qx, qy = np.roll(px, -1, axis=1), np.roll(py, -1, axis=1)
+    cross = px * qy - py * qx  # twice the signed areas of (origin, corner k, corner k+1)
+    inside = (cross >= 0).all(axis=1) | (cross <= 0).all(axis=1)
+    dx, dy = qx - px, qy - py
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.clip(-(px * dx + py * dy) / (dx * dx + dy * dy), 0.0, 1.0)
+    t = np.nan_to_num(t)
+    d = np.hypot(px + t * dx, py + t * dy).min(axis=1)
+    return np.where(inside, 0.0, d)
 
 
 def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
@@ -122,15 +154,11 @@ def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     triangles, the others get NaN.
     """
     tris = np.asarray(tris, dtype=np.int64)
-    x, y, z = _axis_coordinates(source_points, camera, hole)
+    x, y, z = axis_coordinates(source_points, camera, hole)
+    inside, crossed, along = axis_crossing(x, y, z, tris)
     xa, xb, xc = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
     ya, yb, yc = y[tris[:, 0]], y[tris[:, 1]], y[tris[:, 2]]
-    # twice the signed areas of (origin, b, c), (origin, c, a), (origin, a, b): barycentrics of the axis
-    la, lb, lc = xb * yc - xc * yb, xc * ya - xa * yc, xa * yb - xb * ya
     with np.errstate(invalid="ignore", divide="ignore"):
-        inside = ((la >= 0) & (lb >= 0) & (lc >= 0)) | ((la <= 0) & (lb <= 0) & (lc <= 0))
-        total = la + lb + lc
-        along = (la * z[tris[:, 0]] + lb * z[tris[:, 1]] + lc * z[tris[:, 2]]) / np.where(total != 0, total, np.nan)
 
         def angle(x1, y1, x2, y2):  # angle between the projected corners, seen from the axis
             return np.abs(np.arctan2(x1 * y2 - y1 * x2, x1 * x2 + y1 * y2))
@@ -140,7 +168,6 @@ def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
         xa_, xb_, xc_, ya_, yb_, yc_ = (c[sel] for c in (xa, xb, xc, ya, yb, yc))
         span[sel] = np.maximum(np.maximum(angle(xa_, ya_, xb_, yb_), angle(xb_, yb_, xc_, yc_)),
                                angle(xc_, yc_, xa_, ya_))
-    crossed = inside & (total != 0)  # edge-on projections have no crossing point
     span = np.where(inside, np.pi, span)
     straddles = crossed & (along < 0) if order == 1 else crossed
     return straddles, span
@@ -153,7 +180,7 @@ def near_axis(source_points, tris, camera, hole, margin=1e-9) -> np.ndarray:
     finds crossed, and of every sub-triangle of theirs (sub-triangles lie inside their source
     triangle), for ``cull(..., axis_candidates=...)``. Non-finite corners make a candidate."""
     tris = np.asarray(tris, dtype=np.int64)
-    x, y, z = _axis_coordinates(source_points, camera, hole)
+    x, y, z = axis_coordinates(source_points, camera, hole)
     tol = margin * np.sqrt(x * x + y * y + z * z)  # margin times the distance from the hole (orthonormal axes)
     with np.errstate(invalid="ignore"):  # NaN compares False: no side, so never excluded
         side = ((x > tol).astype(np.uint8) | ((x < -tol).astype(np.uint8) << 1)

@@ -509,7 +509,7 @@ def _presplit_levels(src, edges, src_circ, images_v, scene, settings):
     are first split at sqrt(need), so that the ring levels of the smaller triangles, computed
     again, refine mostly those next to the axis. Only meshes the axis does not cross (axis patches
     handle the crossings)."""
-    x, y, _ = culling._axis_coordinates(src.positions, scene.camera, scene.hole)
+    x, y, _ = culling.axis_coordinates(src.positions, scene.camera, scene.hole)
     need = np.ones(len(src.tris))
     for order, img_v in images_v.items():
         img_circ = _circumference_from_edges(_chord_lengths(img_v.direction, edges.verts), edges.of_tri)
@@ -519,7 +519,7 @@ def _presplit_levels(src, edges, src_circ, images_v, scene, settings):
         t = src.tris[cand]
         px, py = x[t], y[t]
         h = np.hypot(px - np.roll(px, -1, axis=1), py - np.roll(py, -1, axis=1)).max(axis=1)
-        dmin = axis_patch._triangle_distance(x, y, t)
+        dmin = culling.axis_distance(x, y, t)
         with np.errstate(invalid="ignore", divide="ignore"):
             radius = culling.hole_angle(img_v.direction, scene.camera, scene.hole) / settings.pixel_angle
             d_max = culling.max_ring_span(radius[t].max(axis=1), settings.max_error_px)
