@@ -218,26 +218,21 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     qx = radii[pc] * np.cos(pj * step)
     qy = radii[pc] * np.sin(pj * step)
     tr = cand_tris[pt]
-    ax, bx, cx = x[tr[:, 0]], x[tr[:, 1]], x[tr[:, 2]]
-    ay, by, cy = y[tr[:, 0]], y[tr[:, 1]], y[tr[:, 2]]
-    det = (bx - ax) * (cy - ay) - (cx - ax) * (by - ay)
     with np.errstate(invalid="ignore", divide="ignore"):
-        l1 = ((qx - ax) * (cy - ay) - (cx - ax) * (qy - ay)) / det
-        l2 = ((bx - ax) * (qy - ay) - (qx - ax) * (by - ay)) / det
-    l0 = 1.0 - l1 - l2
-    eps = 1e-12
-    inside = (det != 0) & (l0 >= -eps) & (l1 >= -eps) & (l2 >= -eps)
+        lam = _projected_bary(qx, qy, tr, x, y)  # not finite for edge-on projections
+    inside = np.isfinite(lam).all(axis=1) & (lam >= -1e-12).all(axis=1)
     if not inside.any():
         return best, bary
     sel = np.flatnonzero(inside)
     point = pc[sel] * n_az + pj[sel]
-    gap = np.abs(l0[sel] * z[tr[sel, 0]] + l1[sel] * z[tr[sel, 1]] + l2[sel] * z[tr[sel, 2]] - z_target)
+    ls, zs = lam[sel], z[tr[sel]]
+    gap = np.abs(ls[:, 0] * zs[:, 0] + ls[:, 1] * zs[:, 1] + ls[:, 2] * zs[:, 2] - z_target)
     order = np.lexsort((gap, point))
     first = order[np.r_[True, point[order][1:] != point[order][:-1]]]
     pts = point[first]
     k = sel[first]
     best[pts] = pt[k]
-    bary[pts] = np.column_stack([l0[k], l1[k], l2[k]])
+    bary[pts] = lam[k]
     return best, bary
 
 
