@@ -260,10 +260,11 @@ def grid_shape(ring_radius_px, max_error_px) -> tuple[int, float]:
 
 
 def build_patches(src_positions, src_tris, edges_of_tri, n_edges, scene: mapping.Scene, lut, orders,
-                  pixel_angle, max_error_px, candidates=None, closed=False) -> list[Patch]:
+                  pixel_angle, max_error_px, candidates=None, closed=False, crossings=None) -> list[Patch]:
     """The patches of a source mesh (positions (N, 3) BU, triangles (T, 3), ``edges_of_tri`` (T, 3) edge
     indices of subdivision.Edges) for the image ``orders``, with their images. ``candidates``: the
-    triangles the axis may cross (culling.near_axis). See the module docstring.
+    triangles the axis may cross (culling.near_axis); ``crossings``: :func:`find_crossings`' result, when
+    the caller has it already (then ``candidates`` is not used). See the module docstring.
 
     ``closed`` (bool, or a function giving it, called only when the axis crosses the mesh): the mesh
     is a closed surface with outward winding (pipeline.is_closed_outward) seen from outside, so
@@ -276,7 +277,8 @@ def build_patches(src_positions, src_tris, edges_of_tri, n_edges, scene: mapping
         return []
     points = np.asarray(src_positions, np.float64)
     tris = np.asarray(src_tris, np.int64)
-    crossings = find_crossings(points, tris, scene.camera, scene.hole, candidates)
+    if crossings is None:
+        crossings = find_crossings(points, tris, scene.camera, scene.hole, candidates)
     if not crossings:
         return []
     if callable(closed):

@@ -176,15 +176,24 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
     src_circ = _circumference_from_edges(
         _chord_lengths(culling.unit_directions(src.positions, scene.camera), edges.verts), edges.of_tri)
     src_near_axis = culling.near_axis(src.positions, src.tris, scene.camera, scene.hole)
-    if (_presplit and ring_levels and settings.max_tess_level > 1
-            and not axis_patch.find_crossings(src.positions, src.tris, scene.camera, scene.hole, src_near_axis)):
-        pre = _presplit_levels(src, edges, src_circ, images_v, scene, settings)
+    # per order: the image circumferences of the source triangles
+    img_chord_lens = {o: _chord_lengths(images_v[o].direction, edges.verts) for o in settings.orders}
+    img_circs = {o: _circumference_from_edges(img_chord_lens[o], edges.of_tri) for o in settings.orders}
+    patching = ring_levels and settings.max_tess_level > 1
+    crossings = axis_patch.find_crossings(src.positions, src.tris, scene.camera, scene.hole,
+                                          src_near_axis) if patching else []
+    if _presplit and patching and not crossings:
+        pre = _presplit_levels(src, edges, src_circ, img_circs, images_v, scene, settings)
         if pre is not None:
             sub = subdivision.subdivide(src.positions, src.tris, edges, pre)
-            fine = SourceMesh(sub.positions, sub.tris,
-                              None if src.corner_uv is None else np.matmul(sub.bary, src.corner_uv[sub.source_tri]),
-                              src.material[sub.source_tri],
-                              None if src.corner_normals is None else np.matmul(sub.bary, src.corner_normals[sub.source_tri]))
+
+            def carried(corner_values):
+                if corner_values is None:
+                    return None
+                return _interpolate(sub.bary, corner_values.take(sub.source_tri, axis=0), sub.identity)
+
+            fine = SourceMesh(sub.positions, sub.tris, carried(src.corner_uv), src.material[sub.source_tri],
+                              carried(src.corner_normals))
             out = build_images(fine, scene, lut, settings, light, frustum_planes, disc, _presplit=False)
             for img in out.values():
                 img.source_tri = kept_source[sub.source_tri[img.source_tri]]
@@ -193,10 +202,10 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             return out
     patches = axis_patch.build_patches(src.positions, src.tris, edges.of_tri, len(edges.verts), scene, lut,
                                        settings.orders, settings.pixel_angle, settings.max_error_px,
-                                       candidates=src_near_axis,
+                                       crossings=crossings,
                                        closed=lambda: (is_closed_outward(src.positions, src.tris, edges) and
                                                        winding_number(src.positions, src.tris, scene.camera) < 0.5),
-                                       ) if ring_levels and settings.max_tess_level > 1 else []
+                                       ) if crossings else []
     for order in settings.orders:
         order_patches = [p for p in patches if order in p.orders]
         replaced = None
@@ -205,9 +214,8 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             for p in order_patches:
                 replaced[p.replaced] = True
         img_v = images_v[order]
-        img_chord_len = _chord_lengths(img_v.direction, edges.verts)
-        img_circ = _circumference_from_edges(img_chord_len, edges.of_tri)
-        chord = subdivision.angle_of_chord(img_chord_len)
+        img_circ = img_circs[order]
+        chord = subdivision.angle_of_chord(img_chord_lens[order])
         # edge midpoints are mapped only where a level above 1 is possible: an edge whose image spans
         # at most one pixel keeps level 1 whatever its curvature (see subdivision.edge_levels)
         probe = np.flatnonzero(~(chord <= settings.pixel_angle)) if settings.pixel_angle else np.arange(len(ev0))
@@ -496,7 +504,7 @@ PRESPLIT_MIN = 12
 first (see :func:`_presplit_levels`)."""
 
 
-def _presplit_levels(src, edges, src_circ, images_v, scene, settings):
+def _presplit_levels(src, edges, src_circ, img_circs, images_v, scene, settings):
     """Per-edge levels of a first, coarse split of the source mesh, or None when none is needed.
 
     A strongly magnified triangle (RING_MAGNIFICATION) of projected size h whose closest point lies at
@@ -508,14 +516,15 @@ def _presplit_levels(src, edges, src_circ, images_v, scene, settings):
     A uniform split at ``need`` would cost need^2 pieces; instead, triangles with need > PRESPLIT_MIN
     are first split at sqrt(need), so that the ring levels of the smaller triangles, computed
     again, refine mostly those next to the axis. Only meshes the axis does not cross (axis patches
-    handle the crossings)."""
-    x, y, _ = culling.axis_coordinates(src.positions, scene.camera, scene.hole)
+    handle the crossings). ``img_circs``: {order: image circumferences of the source triangles}."""
     need = np.ones(len(src.tris))
+    x = y = None
     for order, img_v in images_v.items():
-        img_circ = _circumference_from_edges(_chord_lengths(img_v.direction, edges.verts), edges.of_tri)
-        cand = _ring_candidates(src_circ, img_circ)
+        cand = _ring_candidates(src_circ, img_circs[order])
         if cand.size == 0:
             continue
+        if x is None:
+            x, y, _ = culling.axis_coordinates(src.positions, scene.camera, scene.hole)
         t = src.tris[cand]
         px, py = x[t], y[t]
         h = np.hypot(px - np.roll(px, -1, axis=1), py - np.roll(py, -1, axis=1)).max(axis=1)
