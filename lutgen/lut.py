@@ -29,6 +29,8 @@ from .solver import check_observer_radius, connect_grid
 
 QUANTITIES = ("xi", "dt", "ux", "uy")
 FORMAT_VERSION = 1
+LOOKUP_BLOCK = 4096
+"""Points interpolated together by :meth:`LUT.lookup_orders` (a block's stencils fit the CPU's cache)."""
 SAMPLING = "rows uniform in x = r_s/r from 1/r_max to 1/r_min; columns uniform in phi from 0 to pi; endpoints included"
 
 
@@ -141,9 +143,21 @@ class LUT:
         qi = [QUANTITIES.index(q) for q in quantities]
         r, phi = np.broadcast_arrays(np.asarray(r, dtype=np.float64), np.asarray(phi, dtype=np.float64))
         shape = r.shape
+        r, p = r.ravel(), phi.ravel()
+        out = {order: {q: np.empty(r.size) for q in quantities} for order in ks}
+        # in blocks: the (n, 4, 4) stencils of a block stay in the CPU's cache (several times faster
+        # than one pass over 10^4-10^5 points); every point's value is computed the same way
+        for a in range(0, r.size, LOOKUP_BLOCK):
+            b = min(a + LOOKUP_BLOCK, r.size)
+            self._lookup_block(r[a:b], p[a:b], ks, quantities, qi, {o: {q: v[a:b] for q, v in got.items()}
+                                                                  for o, got in out.items()})
+        return {order: Lookup(*(got[q].reshape(shape) if q in got else None for q in QUANTITIES))
+                for order, got in out.items()}
+
+    def _lookup_block(self, r, p, ks, quantities, qi, dest):
+        """lookup_orders for 1-d ``r``, ``p`` (one block), written into ``dest`` {order: {quantity: (n,)}}."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            x = 1.0 / r.ravel()
-        p = phi.ravel()
+            x = 1.0 / r
         gx = (x - self.x_min) / (self.x_max - self.x_min) * (self.n_r - 1)
         gp = p / np.pi * (self.n_phi - 1)
         tol = 1e-9
@@ -155,15 +169,11 @@ class LUT:
         idx = ix[:, :, None] * self.n_phi + ip[:, None, :]  # (N, 4, 4) flat indices into a channel
         w = wx[:, :, None] * wp[:, None, :]
         outside = ~inside
-        result = {}
         for order, k in ks.items():
-            got = {}
             for q, i in zip(quantities, qi):
-                v = np.einsum("nij,nij->n", self.data[k, i].reshape(-1).take(idx), w)  # a view, no copy
+                v = dest[order][q]
+                np.einsum("nij,nij->n", self.data[k, i].reshape(-1).take(idx), w, out=v)  # data: a view
                 v[outside] = np.nan
-                got[q] = v.reshape(shape)
-            result[order] = Lookup(*(got.get(q) for q in QUANTITIES))
-        return result
 
     def save(self, path) -> None:
         """Write the table to an OpenEXR file (see :mod:`lutgen.lutfile`)."""

@@ -110,6 +110,28 @@ def test_lookup_of_some_quantities(lut):
         lut.lookup(2.0, 0.3, 1, quantities=("zeta",))
 
 
+def test_lookup_in_blocks_is_pointwise(lut):
+    """lookup_orders works through its points in blocks (LOOKUP_BLOCK): every point's value is the
+    one it gets alone, for any input shape (here 2-D, spanning three blocks, with points outside)."""
+    from lutgen import lut as lut_module
+
+    rng = np.random.default_rng(5)
+    n = 2 * lut_module.LOOKUP_BLOCK + 17
+    r = rng.uniform(1.0, 16.0, n).reshape(-1, 1) * np.ones((1, 1))
+    phi = rng.uniform(-0.1, np.pi + 0.1, n).reshape(-1, 1)
+    many = lut.lookup_orders(r, phi, (1, 2))
+    pick = rng.integers(0, n, 40)
+    for k in pick:
+        one = lut.lookup_orders(r[k, 0], phi[k, 0], (1, 2))
+        for o in (1, 2):
+            assert many[o].xi.shape == (n, 1) and np.shape(one[o].xi) == ()
+            for q in ("xi", "dt", "ux", "uy"):
+                np.testing.assert_array_equal(getattr(many[o], q)[k, 0], getattr(one[o], q))
+    assert np.isnan(many[1].xi).any() and np.isfinite(many[1].xi).any()
+    empty = lut.lookup(np.zeros(0), np.zeros(0), 1)
+    assert empty.xi.shape == (0,) and empty.dt.shape == (0,)
+
+
 def test_build_is_bit_identical_for_any_number_of_threads():
     """Render-farm nodes differ in CPU count: the table must not depend on it."""
     a = build_lut(20.0, 1.05, 40.0, 64, 96, workers=1).data

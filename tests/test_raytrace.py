@@ -256,7 +256,8 @@ def test_rasterizer_matches_reference_in_flat_space():
 
 def _synthetic(shift=0):
     """A 40x60 buffer with a rectangle (rows 10..19, columns 10..29, shifted right by ``shift``),
-    uv = pixel centre / size, light time 10 + column of the unshifted content."""
+    uv = pixel centre / size, light time 10 + column of the unshifted content, point = (column + 0.5,
+    row + 0.5, 0) of the unshifted content (its true pixel position under _identity_pixels)."""
     H, W = 40, 60
     b = raytrace.PixelBuffers.empty((H, W))
     rows, cols = np.mgrid[0:H, 0:W]
@@ -267,7 +268,54 @@ def _synthetic(shift=0):
     b.order[inside] = 1
     b.uv[inside] = np.stack([(src_col + 0.5) / W, (rows + 0.5) / H], -1)[inside]
     b.light_time[inside] = (10.0 + src_col)[inside]
+    b.point[inside] = np.stack([src_col + 0.5, rows + 0.5, np.zeros((H, W))], -1)[inside]
     return b
+
+
+def _identity_pixels(points, order):
+    """image_pixels for _synthetic: a point (x, y, z) appears at column x, row y."""
+    return points[:, 0], points[:, 1]
+
+
+def test_metrics_screen_error():
+    """screen_px: the distance from each matched pixel's centre to where the point the test pixel shows
+    truly appears: 0 for the reference itself, exactly the shift for shifted content."""
+    ref = _synthetic()
+    m = image_metrics.compare(ref, _synthetic(), image_pixels=_identity_pixels)["orders"]
+    assert m[1]["screen_px"]["max"] == 0 and m[1]["screen_px_n"] == 200 and m["all"]["screen_px_n"] == 200
+    assert np.isnan(m[2]["screen_px"]["p50"]) and m[2]["screen_px_n"] == 0
+    m = image_metrics.compare(ref, _synthetic(shift=2), image_pixels=_identity_pixels)["orders"]["all"]
+    assert m["screen_px_n"] == m["matched"] == 180
+    for k in ("p50", "p99", "max"):
+        assert m["screen_px"][k] == pytest.approx(2.0, rel=1e-12)
+    assert "screen_px" not in image_metrics.compare(ref, ref)["orders"][1]
+    rows = image_metrics.markdown_rows(image_metrics.compare(ref, _synthetic(shift=2), image_pixels=_identity_pixels))
+    assert len(rows) == 3 and rows[0].count("|") == image_metrics.MARKDOWN_HEADER[0].count("|")
+    assert "| 2.000 | 2.000 | 2.00 |" in rows[0]
+
+
+@pytest.mark.parametrize("angle", [135, 170])
+def test_image_pixels_consistent_with_trace(angle):
+    """raytrace.image_pixels (lutgen.connect) puts the world point that the ray tracer finds at each
+    pixel back on that pixel's centre, to 1e-6 px, for both orders: the closed-form orbits of the
+    tracer and the emitter-observer solver agree, also beside the Einstein ring (170 deg), where the
+    second-order image of the sphere is squeezed to a pixel across."""
+    bench = _bench_accuracy()
+    cam = bench.camera(96, 54)
+    _, scene = bench.sphere_scene(angle)
+    ref = raytrace.trace(scene, cam, HOLE, 1.0)
+    rows, cols = np.mgrid[0:54, 0:96]
+    for order in (1, 2):
+        m = ref.hit & (ref.order == order)
+        assert m.sum() >= (5 if order == 2 else 50)
+        col, row = raytrace.image_pixels(ref.point[m], cam, HOLE, 1.0, order)
+        np.testing.assert_allclose(col, cols[m] + 0.5, atol=1e-6)
+        np.testing.assert_allclose(row, rows[m] + 0.5, atol=1e-6)
+    # no image on the axis, none behind the camera
+    col, row = raytrace.image_pixels(np.array([[-5.0, 0, 0], [40.0, 0, 1.0], [0, 0, 0.5], [0, 0, 2.0]]),
+                                     cam, HOLE, 1.0, 1)
+    assert np.isnan(col[:3]).all() and np.isnan(row[:3]).all()  # axis, behind the camera, horizon
+    assert np.isfinite(col[3]) and np.isfinite(row[3])
 
 
 def test_metrics_identical_and_shifted():
@@ -317,6 +365,10 @@ def test_debug_png(tmp_path):
 # --------------------------------------------------------------------------------------------------
 # The polygon method against the reference
 # --------------------------------------------------------------------------------------------------
+def _exact_pixels(cam):
+    return lambda points, order: raytrace.image_pixels(points, cam, HOLE, 1.0, order)
+
+
 @pytest.fixture(scope="module")
 def lut():
     return build_lut(20.0, 1.05, 40.0, 256, 512)
@@ -334,7 +386,7 @@ def test_sphere_polygon_method_vs_reference(lut, angle):
     images = pipeline.build_images(src, mapping.Scene(cam.position, HOLE, 1.0), lut, settings,
                                    frustum_planes=cam.frustum_planes())
     poly = rasterize.rasterize(rasterize.from_images(images), cam)
-    m = image_metrics.compare(ref, poly, wrap_uv=(True, False))
+    m = image_metrics.compare(ref, poly, wrap_uv=(True, False), image_pixels=_exact_pixels(cam))
     a = m["orders"]["all"]
     print(f"\nsphere {angle} deg 96x54: covered {a['covered_ref']} / {a['covered_test']}, mismatch "
           f"{a['mismatch']} ({100 * a['mismatch_frac']:.2f}%), UV p99 {a['uv_px']['p99']:.3f} px, "
@@ -342,7 +394,7 @@ def test_sphere_polygon_method_vs_reference(lut, angle):
           f"{m['orders'][2]['covered_ref']} px, mismatch {m['orders'][2]['mismatch']}")
     assert a["covered_ref"] > 50 and m["orders"][2]["covered_ref"] > 0
     assert a["mismatch_frac"] < 0.03
-    assert a["uv_px"]["p99"] < 0.5
+    assert a["uv_px"]["p99"] < 0.5 and a["screen_px"]["p99"] < 0.5
     assert a["lt_rel"]["p99"] < 2e-3
 
 
@@ -361,11 +413,14 @@ def test_sphere_ring_views_vs_reference(lut, angle, bound):
     images = pipeline.build_images(src, mapping.Scene(cam.position, HOLE, 1.0), lut, bench.make_settings(cam),
                                    frustum_planes=cam.frustum_planes())
     poly = rasterize.rasterize(rasterize.from_images(images), cam)
-    a = image_metrics.compare(ref, poly, wrap_uv=(True, False), other_surface=0.125)["orders"]["all"]
+    a = image_metrics.compare(ref, poly, wrap_uv=(True, False), other_surface=0.125,
+                              image_pixels=_exact_pixels(cam))["orders"]["all"]
     print(f"\nsphere {angle} deg 320x180: mismatch {a['mismatch']} of {a['covered_ref']} "
-          f"({100 * a['mismatch_frac']:.2f}%), other surface {a['other_surface']} of {a['matched']}")
+          f"({100 * a['mismatch_frac']:.2f}%), other surface {a['other_surface']} of {a['matched']}, "
+          f"screen error p99 {a['screen_px']['p99']:.3f} px (via J {a['uv_px']['p99']:.3f})")
     assert a["covered_ref"] > 500
     assert a["mismatch_frac"] < bound
+    assert a["screen_px"]["p99"] < 0.5
     if angle == 170:
         assert a["other_surface"] < 0.01 * a["matched"]
 

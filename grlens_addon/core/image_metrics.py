@@ -19,6 +19,14 @@ Per image order o (1, 2, and "all" = orders 1 and 2 together) the comparison rep
     with neither neighbour in a direction are left out, see ``uv_px_n``). It is how far one would
     have to move on the reference image to see the texture point the test pixel shows: a texture
     lands that many pixels off;
+  - ``screen_px`` (with ``image_pixels``): the distance in pixels from the pixel's centre to where
+    the surface point the test pixel shows (``test.point``), and with it the texture point drawn
+    there, truly appears: its image of that order through the exact connecting geodesic. This is
+    what ``uv_px`` estimates, without the linearisation: J from finite differences is wrong where
+    the image is squeezed to a pixel or less across (beside the Einstein ring the UV changes
+    non-linearly within one pixel, J is nearly singular and ``uv_px`` reads hundreds of pixels where
+    the point is drawn a fraction of a pixel off), and ``uv_px`` has no value at all on rings one
+    pixel wide. Where the image is not squeezed the two agree (benchmarks/bench_accuracy.py);
   - ``lt_rel``: |lt_test - lt_ref| / lt_ref, the relative light-travel-time error;
 
   each as p50 / p99 / max (NaN if there is nothing to measure).
@@ -86,7 +94,7 @@ def uv_gradient(buf, wrap_uv=(False, False), seam: float = 0.25) -> np.ndarray:
 
 
 def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(False, False),
-            other_surface: float | None = None) -> dict:
+            other_surface: float | None = None, image_pixels=None) -> dict:
     """Metrics between the reference buffers ``ref`` and ``test`` (see the module docstring).
 
     Returns {"orders": {1: {...}, 2: {...}, "all": {...}}, "higher_ref": int, "higher_test": int,
@@ -95,6 +103,9 @@ def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(Fals
     distance in BU) also other_surface: the matched pixels (same object, same order) whose world
     points (``point`` buffers) are farther apart than that, i.e. that show another part of the object
     (such as its far side through a gap in the near side), which the coverage mismatch cannot see.
+    With ``image_pixels``, a function (points (M, 3) BU, order) -> (column, row) giving where the
+    image of that order of each point truly appears (e.g. raytrace.image_pixels for the buffers'
+    camera), also screen_px (p50, p99, max) and screen_px_n: see the module docstring.
     """
     if ref.shape != test.shape:
         raise ValueError(f"buffers of different shapes: {ref.shape} vs {test.shape}")
@@ -102,6 +113,13 @@ def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(Fals
     out = {"orders": {}, "pixels": int(np.prod(ref.shape)),
            "higher_ref": int((ref.hit & (ref.order >= 3)).sum()),
            "higher_test": int((test.hit & (test.order >= 3)).sum())}
+    screen = {}
+    if image_pixels is not None:
+        rows, cols = np.mgrid[0:ref.shape[0], 0:ref.shape[1]]
+        for o in orders:
+            m = ref.hit & test.hit & (ref.order == o) & (test.order == o) & (ref.object_id == test.object_id)
+            col, row = image_pixels(test.point[m], o)
+            screen[o] = np.hypot(np.asarray(col) - (cols[m] + 0.5), np.asarray(row) - (rows[m] + 0.5))
     for o in list(orders) + ["all"]:
         sel = list(orders) if o == "all" else [o]
         kr, kt = _key(ref, sel), _key(test, sel)
@@ -127,6 +145,10 @@ def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(Fals
         with np.errstate(invalid="ignore", divide="ignore"):
             lt = np.abs(test.light_time[matched] - ref.light_time[matched]) / ref.light_time[matched]
         res["lt_rel"] = _stats(lt)
+        if image_pixels is not None:
+            err = np.concatenate([screen[k] for k in sel])
+            res["screen_px"] = _stats(err)
+            res["screen_px_n"] = int(np.isfinite(err).sum())
         if other_surface is not None:
             far = np.linalg.norm(test.point[matched] - ref.point[matched], axis=-1) > other_surface
             res["other_surface"] = int(np.count_nonzero(far))
@@ -139,19 +161,23 @@ def markdown_rows(metrics: dict, label: str = "") -> list[str]:
     :data:`MARKDOWN_HEADER`."""
     rows = []
     for o, m in metrics["orders"].items():
+        sc = m.get("screen_px", _stats([]))
         rows.append(
             f"| {label} | {o} | {m['covered_ref']} | {m['covered_test']} | {m['mismatch']} | "
-            f"{100 * m['mismatch_frac']:.2f}% | {m['uv_px']['p50']:.3f} | {m['uv_px']['p99']:.3f} | "
+            f"{100 * m['mismatch_frac']:.2f}% | {sc['p50']:.3f} | {sc['p99']:.3f} | {sc['max']:.2f} | "
+            f"{m['uv_px']['p50']:.3f} | {m['uv_px']['p99']:.3f} | "
             f"{m['uv_px']['max']:.2f} | {m['uv_texel']['p99']:.2f} | {m['lt_rel']['p50']:.1e} | "
             f"{m['lt_rel']['p99']:.1e} | {m['lt_rel']['max']:.1e} |")
     return rows
 
 
 MARKDOWN_HEADER = [
-    "| case | order | covered (ref) | covered (test) | mismatch | mismatch / covered | UV err p50 [px] | "
-    "UV err p99 [px] | UV err max [px] | UV err p99 [texel] | c*dt rel. err p50 | p99 | max |",
-    "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    "| case | order | covered (ref) | covered (test) | mismatch | mismatch / covered | screen err p50 [px] | "
+    "p99 | max | UV err via J p50 [px] | p99 | max | UV err p99 [texel] | c*dt rel. err p50 | p99 | max |",
+    "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
 ]
+"""Columns of :func:`markdown_rows`: screen err is ``screen_px`` (nan without ``image_pixels``), UV err
+via J is ``uv_px``."""
 
 
 # --------------------------------------------------------------------------------------------------

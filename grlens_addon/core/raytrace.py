@@ -72,9 +72,9 @@ import numpy as np
 from scipy.special import ellipj
 
 from lutgen import orbit as _orb
-from lutgen.solver import check_observer_radius
+from lutgen.solver import check_observer_radius, connect
 from .culling import side_planes
-from .mapping import any_perpendicular
+from .mapping import Scene, any_perpendicular, plane_coordinates
 
 TWO_PI = 2.0 * np.pi
 _B_MIN = 1e-12  # impact parameters (r_s) below this are clamped (the ray is radial to rounding)
@@ -434,6 +434,26 @@ def trace(scene: TriangleScene, camera: Camera, hole, r_s, *, pair_chunk: int = 
     dirs = camera.pixel_directions().reshape(-1, 3)
     out = trace_rays(scene, camera.position, dirs, hole, r_s, pair_chunk=pair_chunk)
     return out.reshape((camera.height, camera.width))
+
+
+def image_pixels(points, camera: Camera, hole, r_s, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Where the image of ``order`` (1 or 2) of each world point (N, 3; BU) appears: continuous pixel
+    coordinates (column, row) of ``camera`` (pixel centres at integer + 0.5, as :meth:`Camera.project`).
+
+    The direction comes from the exact connecting geodesic (lutgen.connect, the closed-form
+    emitter-observer solver), not from a LUT and not from this module's ray tracing, so it is an
+    independent check of both. NaN where the point has no image of that order (inside the horizon,
+    on the camera-hole axis, non-finite) or the image lies behind the camera. hole: (3,) BU; r_s: BU.
+    """
+    scene = Scene(camera.position, hole, r_s)
+    plane = plane_coordinates(np.asarray(points, dtype=np.float64).reshape(-1, 3), scene)
+    conn = connect(scene.r_obs, plane.r, plane.phi, order)
+    sign = 1.0 if order == 1 else -1.0
+    direction = np.cos(conn.xi)[:, None] * scene.e1 + (sign * np.sin(conn.xi))[:, None] * plane.e2
+    col, row, depth = camera.project(camera.position + direction)
+    with np.errstate(invalid="ignore"):
+        bad = plane.on_axis | ~(depth > 0)
+    return np.where(bad, np.nan, col), np.where(bad, np.nan, row)
 
 
 def _object_shells(V, tri_obj, n_obj):
