@@ -30,11 +30,12 @@ class CullReport:
     patch_replaced: int = 0  # source triangles drawn by an Einstein-ring patch instead (not culled)
     patch_faces: int = 0  # of the kept faces, those of Einstein-ring patches (axis_patch.py)
     presplit: int = 0  # source triangles added by the pipeline's first split next to the axis (counted above)
+    back_face: int = 0  # source triangles hidden behind the front of a closed surface (pipeline.BACK_FACE_MARGIN)
     extra: dict = field(default_factory=dict)
 
     def total_culled(self) -> int:
         return (self.invalid_vertex + self.degenerate_source + self.einstein_ring + self.outside_frustum
-                + self.below_pixel)
+                + self.below_pixel + self.back_face)
 
 
 def chord_length(u, v):

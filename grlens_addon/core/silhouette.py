@@ -29,6 +29,20 @@ def facing_signs(points, tris, directions) -> np.ndarray:
     return np.sign(np.nan_to_num(dots, nan=0.0))
 
 
+def turned_away(points, tris, directions, margin: float) -> np.ndarray:
+    """(T,) bool: triangles ``tris`` of ``points`` (BU) turned away from the camera along the rays by
+    more than ``margin``: n . d < -margin at all three corners, with n the unit geometric normal and
+    ``directions`` (N, 3) the vertices' unit leaving directions d (so n . d is the cosine of the angle
+    between them). A corner without a ray (NaN) is not turned away."""
+    tris = np.asarray(tris, dtype=np.int64)
+    p0, p1, p2 = (points.take(tris[:, k], axis=0) for k in range(3))
+    n = np.cross(p1 - p0, p2 - p0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n /= np.linalg.norm(n, axis=1)[:, None]
+        dots = np.einsum("fx,fcx->fc", n, directions.take(tris, axis=0))
+        return (dots < -margin).all(axis=1)
+
+
 def silhouette(points, tris, of_tri, n_edges, directions) -> tuple[np.ndarray, np.ndarray]:
     """(edge mask (E,), triangle mask (T,)) of the silhouette.
 
