@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from grlens_addon.core import axis_patch, culling, illumination, mapping, pipeline, silhouette, subdivision
+from grlens_addon.core import (axis_patch, culling, illumination, mapping, pipeline, rasterize, raytrace,
+                               silhouette, subdivision)
 from lutgen import build_lut, connect
 from meshes import uv_sphere
 
@@ -234,6 +235,75 @@ def test_silhouette_of_a_sphere_is_its_limb(lut):
     assert 0.5 * e_flat.sum() < e_lens.sum() < 2 * e_flat.sum()
     sign = silhouette.facing_signs(pts, tris, d)
     assert np.all(t_lens[(sign != sign[:, :1]).any(axis=1)])  # split triangles are on it
+
+
+def test_turned_away_needs_all_corners_beyond_the_margin():
+    """silhouette.turned_away: n . d < -margin at all three corners (n the unit normal from the winding);
+    a corner without a ray (NaN) or a degenerate triangle is never turned away."""
+    pts = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 2, 0], [3, 3, 0]])  # normal +z
+    tris = np.array([[0, 1, 2], [0, 1, 2], [0, 1, 2], [0, 3, 4]])
+    down = np.array([0.0, 0.6, -0.8])  # n . d = -0.8
+    d = np.tile(down, (5, 1))
+    np.testing.assert_array_equal(silhouette.turned_away(pts, tris[:1], d, 0.5), [True])
+    np.testing.assert_array_equal(silhouette.turned_away(pts, tris[:1], d, 0.85), [False])
+    np.testing.assert_array_equal(silhouette.turned_away(pts, tris[:1, ::-1], d, 0.5), [False])  # normal -z
+    d[2] = [0.0, 0.0, 1.0]
+    assert not silhouette.turned_away(pts, tris[:1], d, 0.0).any()
+    d[2] = np.nan
+    assert not silhouette.turned_away(pts, tris[:1], d, 0.0).any()
+    assert not silhouette.turned_away(pts, tris[3:], np.tile(down, (5, 1)), 0.0).any()  # collinear
+
+
+def _ring_view(lut, pts, tris, **settings):
+    cam = raytrace_camera(320, 180)
+    src = pipeline.SourceMesh(pts, tris, corner_uv=np.zeros((len(tris), 3, 2)))
+    out = pipeline.build_images(src, SCENE, lut, pipeline.Settings(pixel_angle=cam.pixel_angle, **settings),
+                                frustum_planes=cam.frustum_planes())
+    return out, rasterize.rasterize(rasterize.from_images(out), cam)
+
+
+def raytrace_camera(width, height):
+    return raytrace.Camera.look_at(CAMERA, HOLE, math.radians(19.0), width, height)
+
+
+@pytest.mark.parametrize("angle", [170.0, 180.0])
+def test_back_faces_are_skipped_without_changing_the_image(lut, monkeypatch, angle):
+    """A closed sphere next to the axis behind the hole, seen along lensed rays: its triangles turned
+    away from the camera (by more than BACK_FACE_MARGIN) are not subdivided. That removes a large
+    share of the pieces, and the rasterized image shows the same (order, point) at all but a few
+    edge pixels as with every triangle kept."""
+    a = math.radians(angle)
+    pts, tris = _sphere([3 * math.cos(a), 3 * math.sin(a), 0.01])
+    out, img = _ring_view(lut, pts, tris)
+    monkeypatch.setattr(pipeline, "BACK_FACE_MIN_PIECES", 10**12)
+    full, img_full = _ring_view(lut, pts, tris)
+    skipped = {o: out[o].report.back_face for o in out}
+    assert all(full[o].report.back_face == 0 for o in full)
+    busiest = max(out, key=lambda o: skipped[o])
+    assert skipped[busiest] > 200
+    assert len(out[busiest].tris) < 0.8 * len(full[busiest].tris)
+    covered = img_full.hit.sum()
+    assert covered > 1000
+    differ = (img.hit != img_full.hit) | (img.hit & img_full.hit & (img.order != img_full.order))
+    assert differ.sum() <= 0.002 * covered
+    both = img.hit & img_full.hit & (img.order == img_full.order)
+    far = np.linalg.norm(img.point[both] - img_full.point[both], axis=1) > 0.05
+    assert far.sum() <= 0.002 * covered
+
+
+def test_back_faces_are_kept_on_open_meshes_and_from_inside(lut):
+    """Without a closed, outward-wound surface seen from outside there is no hidden side: a sphere with
+    one triangle missing, and a sphere around the camera, keep every triangle."""
+    a = math.radians(170.0)
+    pts, tris = _sphere([3 * math.cos(a), 3 * math.sin(a), 0.01])
+    open_out, _ = _ring_view(lut, pts, tris[1:])
+    assert all(img.report.back_face == 0 for img in open_out.values())
+    assert max(len(img.tris) for img in open_out.values()) > pipeline.BACK_FACE_MIN_PIECES
+    inside_pts, inside_tris = _sphere([0.0, 0.0, 0.0], radius=30.0, segments=48, rings=24)
+    lut40 = build_lut(20.0, 1.05, 40.0, 128, 256)
+    out = pipeline.build_images(pipeline.SourceMesh(inside_pts, inside_tris), SCENE, lut40,
+                                pipeline.Settings(pixel_angle=PIXEL))
+    assert all(img.report.back_face == 0 for img in out.values())
 
 
 def test_silhouette_of_an_open_disc_is_its_boundary(lut):

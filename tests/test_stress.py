@@ -26,7 +26,9 @@ i.e. ``>= T``, with equality exactly when nothing is split (max_tess_level = 1, 
 Einstein-ring patches: ``patch_replaced`` source triangles are drawn by ``patch_faces`` faces of
 axis_patch.py instead of being subdivided). ``presplit``: triangles that a first split next to the
 axis added (pipeline._presplit_levels); the counts are then of the split mesh, whose S and F are
-those of the second subdivide call. The report alone
+those of the second subdivide call. ``back_face`` (part of total_culled()) counts source triangles
+of a closed surface that are hidden behind its front and not subdivided (pipeline.BACK_FACE_MARGIN).
+The report alone
 does not give F - S (nor how many of outside_frustum are source triangles); the tests get it by
 wrapping subdivision.subdivide.
 
@@ -322,7 +324,8 @@ def check_images(out, src, scene, settings, spy_calls=None, light=None, disc=Non
         if light is not None and src.corner_normals is not None:
             assert img.irradiance.shape == (F, 3) and np.all(img.irradiance >= 0)
         # accounting
-        for k in ("invalid_vertex", "degenerate_source", "einstein_ring", "outside_frustum", "below_pixel", "kept"):
+        for k in ("invalid_vertex", "degenerate_source", "einstein_ring", "outside_frustum", "below_pixel", "kept",
+                  "back_face"):
             assert isinstance(getattr(rep, k), int) and getattr(rep, k) >= 0, k
         assert rep.kept == F
         assert rep.extra["bad_source_triangles"] == n_bad
@@ -341,7 +344,7 @@ def check_images(out, src, scene, settings, spy_calls=None, light=None, disc=Non
             extra = f - s
             assert total == n_src + extra, (total, n_src, extra, rep)
             # the pre-subdivision cull is part of it; triangles replaced by a patch are not subdivided
-            assert rep.outside_frustum + rep.patch_replaced >= n_clean + rep.presplit - s
+            assert rep.outside_frustum + rep.patch_replaced + rep.back_face >= n_clean + rep.presplit - s
         else:
             extra = None
         if settings.max_tess_level == 1:
@@ -679,6 +682,7 @@ def test_accounting_with_the_first_split_next_to_the_axis(monkeypatch):
     spy = SubdivideSpy(monkeypatch)
     out = pipeline.build_images(src, scene, lut, settings)
     assert all(img.report.presplit > 0 for img in out.values())
+    assert out[1].report.back_face > 0  # the far side, seen along the first-order rays
     check_images(out, src, scene, settings, spy.calls)
 
 
