@@ -123,6 +123,9 @@ def test_subdivision_is_watertight_for_any_levels(seed):
     src = P[T[S.source_tri]]
     corners = np.einsum("fck,fkx->fcx", S.bary, src)
     np.testing.assert_allclose(corners, S.positions[S.tris], atol=1e-12)
+    # corner values (UVs, normals) carried through the shared rows: the positions again, as values
+    np.testing.assert_allclose(S.corner_values(P[T]), S.positions[S.tris], atol=1e-12)
+    assert len(S.row_bary) < 0.75 * 3 * len(S.tris)  # corners are shared: fewer rows than face corners
 
 
 def test_subdivision_levels_and_rho():

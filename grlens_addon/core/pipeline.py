@@ -200,7 +200,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             def carried(corner_values):
                 if corner_values is None:
                     return None
-                return _interpolate(sub.bary, corner_values.take(sub.source_tri, axis=0), sub.identity)
+                return sub.corner_values(corner_values)
 
             fine = SourceMesh(sub.positions, sub.tris, carried(src.corner_uv), src.material[sub.source_tri],
                               carried(src.corner_normals))
@@ -304,31 +304,37 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             remap[used] = np.arange(used.size)
             image_tris = remap.take(tris)
         src_tri = face_src if everything else face_src.take(kept)
-        bary = None if sub.identity else (sub.bary if everything else sub.bary.take(kept, axis=0))
+        # the faces' corners in their source triangles: None (whole source triangles src_tri) or rows
+        # (row barycentrics, row source triangle, face corner rows; see subdivision.Subdivided)
+        rows = None
+        if not sub.identity:
+            rows = (sub.row_bary, tri_sel.take(sub.row_src),
+                    sub.corner_row if everything else sub.corner_row.take(kept, axis=0))
         v_pos, v_dir = img.position.take(used, axis=0), img.direction.take(used, axis=0)
         v_dist, v_src = img.distance[used], sub.positions.take(used, axis=0)
-        identity = sub.identity
         if order_patches:
             report.patch_replaced = n_replaced
             parts = _patch_parts(order_patches, order, planes, len(used))
             if parts is not None:
                 p_tris, p_src, p_bary, p_pos, p_dir, p_dist, p_spos = parts
-                if bary is None:
-                    bary = np.broadcast_to(np.eye(3), (len(src_tri), 3, 3))
+                if rows is None:
+                    rows = (np.tile(np.eye(3), (len(src_tri), 1)), np.repeat(src_tri, 3),
+                            np.arange(3 * len(src_tri)).reshape(-1, 3))
+                n_rows = len(rows[0])
+                rows = (np.concatenate([rows[0], p_bary.reshape(-1, 3)]), np.concatenate([rows[1], np.repeat(p_src, 3)]),
+                        np.concatenate([rows[2], n_rows + np.arange(3 * len(p_tris)).reshape(-1, 3)]))
                 image_tris = np.concatenate([image_tris, p_tris])
                 src_tri = np.concatenate([src_tri, p_src])
-                bary = np.concatenate([bary, p_bary])
                 v_pos, v_dir = np.concatenate([v_pos, p_pos]), np.concatenate([v_dir, p_dir])
                 v_dist, v_src = np.concatenate([v_dist, p_dist]), np.concatenate([v_src, p_spos])
-                identity = False
                 report.kept += len(p_tris)
                 report.patch_faces = len(p_tris)
         corner_uv = None
         if src.corner_uv is not None:
-            corner_uv = _interpolate(bary, src.corner_uv.take(src_tri, axis=0), identity)
+            corner_uv = _carry(src.corner_uv, src_tri, rows)
         irr = None
         if light is not None and src.corner_normals is not None:
-            n = _interpolate(bary, src.corner_normals.take(src_tri, axis=0), identity)
+            n = _carry(src.corner_normals, src_tri, rows)
             n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-300)
             pts = v_src.take(image_tris.ravel(), axis=0)
             e, _ = illumination.irradiance(pts, n.reshape(-1, 3), light.position, scene.hole, scene.r_s,
@@ -432,12 +438,14 @@ def _used_vertices(tris, n_vertices) -> np.ndarray:
     return np.flatnonzero(mask)
 
 
-def _interpolate(bary, corner_values, identity: bool):
-    """Corner values (F, 3, K) of the faces from their source triangles' corner values (F, 3, K) and
-    the faces' barycentric coordinates (F, 3, 3); unchanged when the subdivision was the identity."""
-    if identity:
-        return np.asarray(corner_values, dtype=np.float64)  # already a copy (gathered by the caller)
-    return np.matmul(bary, corner_values)
+def _carry(corner_values, src_tri, rows):
+    """Corner values (F, 3, K) of the image faces from the source triangles' corner values (T, 3, K):
+    the faces' own source triangles' (``src_tri``) when ``rows`` is None, else interpolated at the
+    rows (row_bary, row_src, corner_row) of subdivision.carry_rows."""
+    corner_values = np.asarray(corner_values, dtype=np.float64)
+    if rows is None:
+        return corner_values.take(src_tri, axis=0)
+    return subdivision.carry_rows(*rows, corner_values)
 
 
 RING_MAGNIFICATION = 2.0

@@ -142,10 +142,12 @@ class Subdivided:
     positions: (V, 3) world positions (BU) of the welded vertices;
     tris: (F, 3) vertex indices, same winding as the source;
     source_tri: (F,) index of the source triangle each face comes from;
-    bary: (F, 3, 3) barycentric coordinates of each face corner in its source triangle (for UVs,
-    normals and other corner attributes);
+    row_bary (R, 3), row_src (R,), corner_row (F, 3): the barycentric coordinates of each face corner in
+    its source triangle, stored once per (source triangle, template vertex) "row" (row_src: the
+    row's source triangle) and indexed by corner_row, because the faces of a split triangle share
+    their corners (R is about F / 2; see :attr:`bary` and :meth:`corner_values`); None when identity;
     vertex_key: (V,) the welding keys (stable for unchanged topology and levels);
-    identity: True when nothing was split (all levels 1): positions, tris and bary are the source's;
+    identity: True when nothing was split (all levels 1): positions and tris are the source's;
     n_pass: the first n_pass faces are source triangles passed through unsplit (level 1 on all edges),
     so their corners are source vertices and per-triangle values of the source apply to them.
     """
@@ -153,10 +155,35 @@ class Subdivided:
     positions: np.ndarray
     tris: np.ndarray
     source_tri: np.ndarray
-    bary: np.ndarray
+    row_bary: np.ndarray | None
+    row_src: np.ndarray | None
+    corner_row: np.ndarray | None
     vertex_key: np.ndarray
     identity: bool = False
     n_pass: int = 0
+
+    @property
+    def bary(self) -> np.ndarray:
+        """(F, 3, 3) barycentric coordinates of each face corner in its source triangle."""
+        if self.identity:
+            return np.broadcast_to(np.eye(3), (len(self.tris), 3, 3))
+        return self.row_bary.take(self.corner_row, axis=0)
+
+    def corner_values(self, values) -> np.ndarray:
+        """Per face corner (F, 3, K) values interpolated from the source triangles' corner values
+        ``values`` (T, 3, K) (UVs, normals; T indexes the triangles that were subdivided)."""
+        values = np.asarray(values, dtype=np.float64)
+        if self.identity:
+            return values.take(self.source_tri, axis=0)
+        return carry_rows(self.row_bary, self.row_src, self.corner_row, values)
+
+
+def carry_rows(row_bary, row_src, corner_row, values) -> np.ndarray:
+    """(F, 3, K) corner values of faces whose corners are rows ``corner_row`` (F, 3) of barycentric
+    coordinates ``row_bary`` (R, 3) in the source triangles ``row_src`` (R,), from those triangles'
+    corner values ``values`` (T, 3, K) (see :class:`Subdivided`)."""
+    per_row = np.matmul(row_bary[:, None, :], values.take(row_src, axis=0))[:, 0, :]  # (R, K)
+    return per_row.take(corner_row, axis=0)
 
 
 def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.ndarray) -> Subdivided:
@@ -168,10 +195,11 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     lev = levels.take(edges.of_tri)
     tri_level = np.maximum(np.maximum(lev[:, 0], lev[:, 1]), lev[:, 2])
     if len(tris) and tri_level.max() == 1:  # nothing to split: the source itself
-        return Subdivided(positions=points, tris=tris.copy(), source_tri=np.arange(len(tris)),
-                          bary=np.broadcast_to(np.eye(3), (len(tris), 3, 3)), vertex_key=np.arange(n_pts),
-                          identity=True, n_pass=len(tris))
-    src_parts, bary_parts, other_key_parts, other_pos_parts, level_parts = [], [], [], [], []
+        return Subdivided(positions=points, tris=tris.copy(), source_tri=np.arange(len(tris)), row_bary=None,
+                          row_src=None, corner_row=None, vertex_key=np.arange(n_pts), identity=True, n_pass=len(tris))
+    src_parts, other_key_parts, other_pos_parts, level_parts = [], [], [], []
+    row_bary_parts, row_src_parts, corner_row_parts = [], [], []
+    n_rows = 0
     unsplit_faces = None
     interior_base = n_pts + n_edges * (GRID + 1)
     for L in np.unique(tri_level):
@@ -180,7 +208,10 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
         if L == 1:  # unsplit triangles: their corners are source vertices, keyed by their indices
             unsplit_faces = src
             src_parts.append(sel)
-            bary_parts.append(np.broadcast_to(np.eye(3), (sel.size, 3, 3)))
+            row_bary_parts.append(np.tile(np.eye(3), (sel.size, 1)))
+            row_src_parts.append(np.repeat(sel, 3))
+            corner_row_parts.append(n_rows + np.arange(3 * sel.size).reshape(-1, 3))
+            n_rows += 3 * sel.size
             continue
         ij, ttris, tedge, tt, tcorner = _template(int(L))
         nv = len(ij)
@@ -221,10 +252,13 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
         other_pos_parts.append((bary[other], src[rows]))
         level_parts.append((key, other, ttris))
         src_parts.append(np.repeat(sel, len(ttris)))
-        bary_parts.append(bary[:, ttris].reshape(-1, 3, 3))
+        row_bary_parts.append(bary.reshape(-1, 3))
+        row_src_parts.append(np.repeat(sel, nv))
+        corner_row_parts.append((n_rows + nv * np.arange(sel.size)[:, None, None] + ttris[None]).reshape(-1, 3))
+        n_rows += sel.size * nv
     if not level_parts:
         return Subdivided(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64),
-                          np.zeros((0, 3, 3)), np.zeros(0, np.int64))
+                          np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros((0, 3), np.int64), np.zeros(0, np.int64))
     # weld: corner keys (< n_pts) are source vertex indices (every corner of a source triangle is a
     # corner of one of its pieces); the others are merged by np.unique. Vertices come out sorted by
     # key (corners first), so equal inputs give equal meshes.
@@ -253,9 +287,11 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
     n_unsplit = int(np.count_nonzero(tri_level == 1))  # np.unique put level 1 first
     n_pass = n_unsplit if keep[:n_unsplit].all() else 0
-    source_tri, bary = np.concatenate(src_parts), np.concatenate(bary_parts)
+    source_tri, corner_row = np.concatenate(src_parts), np.concatenate(corner_row_parts)
     if not keep.all():
         k = np.flatnonzero(keep)  # (take is several times faster than boolean indexing)
-        faces, source_tri, bary = faces.take(k, axis=0), source_tri.take(k), bary.take(k, axis=0)
+        faces, source_tri, corner_row = faces.take(k, axis=0), source_tri.take(k), corner_row.take(k, axis=0)
     return Subdivided(positions=np.concatenate([points.take(corners, axis=0), other_pos]), tris=faces,
-                      source_tri=source_tri, bary=bary, vertex_key=np.concatenate([corners, uniq]), n_pass=n_pass)
+                      source_tri=source_tri, row_bary=np.concatenate(row_bary_parts),
+                      row_src=np.concatenate(row_src_parts), corner_row=corner_row,
+                      vertex_key=np.concatenate([corners, uniq]), n_pass=n_pass)
