@@ -51,9 +51,17 @@ BAND_FACTOR = 0.25
 """The innermost circle of a patch lies where the image is within this times ``max_error_px`` of the
 Einstein ring; the band inside it is drawn with pieces that span the whole distance to the ring."""
 
-RADIUS_FACTOR = 2.0
+RADIUS_FACTOR = 6.0
 """A patch reaches this many times the largest distance from the axis of the crossed triangle's
-corners, so it covers that triangle and most of its neighbours."""
+corners (or less: the last circle the surface covers all round, the last one with an image). The
+magnified region around a crossing is as wide as the surface's own triangles are far from the axis
+before they stop needing the ring levels of the pipeline, several triangles out: on the benchmark
+sphere behind the hole a patch of 6 reaches its limb and halves the pieces of the frame
+(benchmarks/bench_accuracy.py; 2 left most of the near side to the uniform subdivision)."""
+
+PROBE_AZIMUTHS = 8
+"""Azimuths at which the crossed triangle's plane is probed for the innermost circle (a tilted surface
+comes closer to the ring's image in some directions than in others)."""
 
 MAX_PATCHES = 8
 """At most this many patches per mesh (the crossings with the largest triangles): a closed surface
@@ -236,6 +244,14 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     return best, bary
 
 
+def _projected_area(x, y, tris) -> np.ndarray:
+    """(T,) twice the signed area of the triangles ``tris`` (T, 3) projected along the axis (BU^2;
+    positive: counter-clockwise seen from the camera's side)."""
+    ax, bx, cx = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
+    ay, by, cy = y[tris[:, 0]], y[tris[:, 1]], y[tris[:, 2]]
+    return (bx - ax) * (cy - ay) - (cx - ax) * (by - ay)
+
+
 def _projected_bary(qx, qy, tris, x, y) -> np.ndarray:
     """(M, 3) barycentrics of points (qx, qy) (M,) in the projections of triangles ``tris`` (M, 3)
     along the axis (extrapolated outside them)."""
@@ -311,24 +327,34 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
         return None
     theta_e = {o: float(hole_angle(im.direction, scene.camera, scene.hole)[0]) for o, im in ring.items()}
     n_az, q = grid_shape(max(theta_e.values()) / pixel_angle, max_error_px)
-    # the innermost circle: probe the image along one azimuth in the crossed triangle's plane
+    # the innermost circle: probe the image at PROBE_AZIMUTHS azimuths in the crossed triangle's plane
     k = np.arange(MAX_CIRCLES + 1)
     probe_delta = radius * q ** (-k.astype(np.float64))
-    lam = _projected_bary(probe_delta, np.zeros_like(probe_delta), np.repeat(t0[None], len(k), axis=0), x, y)
+    psi_p = 2.0 * np.pi * np.arange(PROBE_AZIMUTHS) / PROBE_AZIMUTHS
+    qx = (probe_delta[:, None] * np.cos(psi_p)[None, :]).ravel()
+    qy = (probe_delta[:, None] * np.sin(psi_p)[None, :]).ravel()
+    lam = _projected_bary(qx, qy, np.repeat(t0[None], len(qx), axis=0), x, y)
     probe = lam @ points[t0]
     band = BAND_FACTOR * max_error_px * pixel_angle
-    close = np.ones(len(k), bool)
+    gap = np.zeros(len(qx))
     for o, img in mapping.map_vertices_orders(probe, scene, lut, orders).items():
-        gap = np.abs(hole_angle(img.direction, scene.camera, scene.hole) - theta_e[o])
-        if not np.isfinite(gap).all():  # part of the disc has no image (outside the LUT, horizon)
-            return None
-        close &= gap <= band
-    first = np.flatnonzero(close)
-    n_circles = int(first[0]) + 1 if first.size else len(k)  # circles delta_p q^-k, k = first .. 0
+        gap = np.maximum(gap, np.abs(hole_angle(img.direction, scene.camera, scene.hole) - theta_e[o]))  # NaN stays
+    gap = gap.reshape(len(k), PROBE_AZIMUTHS).max(axis=1)
+    # no image (outside the LUT, horizon) next to the axis: no patch; farther out: a smaller patch
+    bad = np.flatnonzero(~np.isfinite(gap))
+    if bad.size and bad[-1] == len(k) - 1:
+        return None
+    start = int(bad[-1]) + 1 if bad.size else 0
+    radius = float(probe_delta[start])
+    first = np.flatnonzero(gap[start:] <= band)
+    n_circles = int(first[0]) + 1 if first.size else len(k) - start  # circles radius q^-k, k = first .. 0
     n_circles = max(1, min(n_circles, MAX_GRID // n_az))
     radii = radius * q ** (-np.arange(n_circles - 1, -1, -1, dtype=np.float64))
     # the surface under the grid: triangles connected to the crossed one whose projection meets the disc
+    # and is wound the same way (a closed surface folds over where it turns parallel to the axis: the
+    # sheet beyond the fold projects with the opposite winding and belongs to another crossing)
     near = np.flatnonzero(axis_distance(x, y, tris) <= radius)
+    near = near[_projected_area(x, y, tris[near]) * _projected_area(x, y, t0[None])[0] > 0]
     cand = near[_connected(cr.tri, near, of_tri, n_edges)]
     psi = 2.0 * np.pi * np.arange(n_az) / n_az
     qx = (radii[:, None] * np.cos(psi)[None, :]).ravel()
@@ -354,8 +380,7 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     d = i * n_az + (j + 1) % n_az
     faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
     # counter-clockwise seen from the camera's side of the axis; flip to the crossed triangle's winding
-    area = (x[t0[1]] - x[t0[0]]) * (y[t0[2]] - y[t0[0]]) - (x[t0[2]] - x[t0[0]]) * (y[t0[1]] - y[t0[0]])
-    if area < 0:
+    if _projected_area(x, y, t0[None])[0] < 0:
         faces = faces[:, ::-1]
     # each face's source triangle: the one under its corner of largest index (on its outer circle;
     # faces are small, so their centroid lies in that triangle or next to it)
