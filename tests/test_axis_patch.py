@@ -152,13 +152,20 @@ def test_patch_on_a_tilted_plane(lut):
 
 
 def test_patch_stops_at_the_mesh(lut):
-    """A small plane: the patch ends at the last circle the plane covers all round; a plane with a hole
-    around the axis (nothing crosses it) and a plane whose hole reaches the crossing's circles give
-    no patch."""
+    """A small plane: the patch's cells stay on the plane (full circles inside it, then the cells
+    whose four corners are on it, into its corners); it replaces only triangles inside drawn cells. A
+    plane with a hole around the axis (nothing crosses it) and a plane whose hole reaches the
+    crossing's circles give no patch."""
     pts, tris = _grid(-4.0, 0.06, 3)
     (p,) = _patches(pts, tris, lut)
-    assert p.radius <= 0.06 and p.radius > 0.06 / 1.5
-    assert len(p.replaced) > 0
+    assert 0.06 < p.radius <= 0.06 * math.sqrt(2)
+    _, y, z = p.source_position.T
+    assert np.abs(y).max() <= 0.06 + 1e-12 and np.abs(z).max() <= 0.06 + 1e-12
+    n = p.n_azimuths
+    delta = np.hypot(*culling.axis_coordinates(p.source_position[n:], CAMERA, HOLE)[:2])
+    assert np.unique(np.round(delta, 9)).size > 1 and len(p.source_position) < n * (1 + np.unique(np.round(delta, 9)).size)
+    cd = np.hypot(*culling.axis_coordinates(pts, CAMERA, HOLE)[:2])
+    assert 0 < len(p.replaced) < len(tris) and np.all(cd[tris[p.replaced]].max(axis=1) <= p.radius)
     assert _patches(*_grid(-4.0, 1.0, 10, hole_radius=0.15), lut) == []
     # crossed, but the triangles next to the crossed one are missing
     pts, tris = _grid(-4.0, 1.0, 10)

@@ -24,11 +24,15 @@ quads (two triangles each) between consecutive circles, so:
 * the innermost circle is where the image is within ``BAND_FACTOR * max_error_px`` pixels of theta_E,
   so the band between it and the limit vertices is thinner than that.
 
-The source triangles entirely inside the patch's outer circle (and connected to the crossing) are
-*replaced*: the pipeline does not subdivide them. Triangles that reach beyond it are kept as they
-are, so the patch overlaps them on the same surface (no cracks; the two draw the same points).
-Where the surface does not cover a whole circle (a mesh boundary or hole near the axis), the patch
-stops at the last complete circle inside it; with none, there is no patch.
+The source triangles entirely inside the patch's drawn cells (connected to the crossed one, and
+wound like it in projection, i.e. on the same sheet of the surface) are *replaced*: the pipeline does
+not subdivide them. Triangles that reach beyond are kept as they are, so the patch overlaps them on
+the same surface (no cracks; the two draw the same points).
+Where the surface does not cover a whole circle (a mesh boundary, a hole, or the fold where a closed
+surface turns parallel to the axis), the patch goes on with the cells (between two circles and two
+azimuths) whose four corners are on the surface, and replaces only the triangles that lie inside
+such cells; the innermost circle must be complete (the ring's edge needs every azimuth), else there
+is no patch.
 
 Units: positions in Blender units (BU); delta in BU; angles in radians; pixel quantities in pixels
 of ``pixel_angle`` radians. Axis coordinates: (x, y, z) relative to the hole, z along the axis
@@ -244,6 +248,34 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     return best, bary
 
 
+def _inside_cells(cell, ring_radii, cand_tris, x, y) -> np.ndarray:
+    """(C,) bool: the triangles ``cand_tris`` (C, 3) whose projection lies inside drawn cells only.
+    ``cell`` (R - 1, N): drawn cells between rings of radii ``ring_radii`` (R,) (BU, increasing, the
+    first 0) and azimuths 2 pi j / N. Tested on the triangle's box in distance from the axis and
+    azimuth (its corners' range; all azimuths when the axis passes through it), which contains it."""
+    n_rows, n_az = cell.shape
+    step = 2.0 * np.pi / n_az
+    d_lo = axis_distance(x, y, cand_tris)
+    d_hi = np.hypot(x[cand_tris], y[cand_tris]).max(axis=1)
+    ang = np.arctan2(y[cand_tris], x[cand_tris])
+    rel = np.angle(np.exp(1j * (ang - ang[:, :1])))  # corners' azimuths relative to corner 0, (-pi, pi]
+    a_lo = ang[:, 0] + rel.min(axis=1)
+    j0 = np.floor(a_lo / step).astype(np.int64)
+    j1 = np.ceil((ang[:, 0] + rel.max(axis=1)) / step).astype(np.int64)  # exclusive
+    count = np.where(d_lo == 0.0, n_az, np.minimum(j1 - j0, n_az))
+    j0 = np.where(d_lo == 0.0, 0, j0 % n_az)
+    r0 = np.clip(np.searchsorted(ring_radii, d_lo, side="right") - 1, 0, n_rows)
+    r1 = np.searchsorted(ring_radii, d_hi, side="left")  # exclusive row bound
+    inside = d_hi <= ring_radii[-1]
+    r1 = np.clip(r1, r0 + 1, n_rows)
+    # drawn cells in the box by a 2-D prefix sum (azimuths doubled for the wrap-around)
+    total = np.zeros((n_rows + 1, 2 * n_az + 1), np.int64)
+    total[1:, 1:] = np.cumsum(np.cumsum(np.concatenate([cell, cell], axis=1), axis=0), axis=1)
+    c1 = j0 + count
+    got = total[r1, c1] - total[r0, c1] - total[r1, j0] + total[r0, j0]
+    return inside & (got == (r1 - r0) * count)
+
+
 def _projected_area(x, y, tris) -> np.ndarray:
     """(T,) twice the signed area of the triangles ``tris`` (T, 3) projected along the axis (BU^2;
     positive: counter-clockwise seen from the camera's side)."""
@@ -360,36 +392,48 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     qx = (radii[:, None] * np.cos(psi)[None, :]).ravel()
     qy = (radii[:, None] * np.sin(psi)[None, :]).ravel()
     hit, lam = _locate(radii, n_az, tris[cand], x, y, z, cr.along)
-    complete = (hit.reshape(n_circles, n_az) >= 0).all(axis=1)
-    n_ok = n_circles if complete.all() else int(np.argmin(complete))
-    if n_ok == 0:
+    # vertex rings: 0 the limit vertices, r >= 1 circle r - 1; a cell (r, j) lies between rings r and
+    # r + 1 and azimuths j and j + 1, and is drawn when the surface is under its four corners
+    on = np.concatenate([np.ones((1, n_az), bool), (hit >= 0).reshape(n_circles, n_az)])
+    cell = on[:-1] & on[1:]
+    cell &= np.roll(cell, -1, axis=1)
+    if not cell[0].all():  # the innermost circle must go all round: the ring's edge needs every azimuth
         return None
-    radii = radii[:n_ok]
-    m = n_ok * n_az
+    rows = np.flatnonzero(cell.any(axis=1))
+    n_rings = int(rows[-1]) + 2  # rings in use
+    cell = cell[:n_rings - 1]
+    radii = radii[:n_rings - 1]
+    m = (n_rings - 1) * n_az
     hit, lam, qx, qy = hit[:m], lam[:m], qx[:m], qy[:m]
-    grid_pos = np.einsum("mk,mkx->mx", lam, points[tris[cand[hit]]])
-    src_pos = np.concatenate([np.repeat(cr.point[None], n_az, axis=0), grid_pos])
-    vx = np.concatenate([np.zeros(n_az), qx])
-    vy = np.concatenate([np.zeros(n_az), qy])
-    # quads between consecutive circles (circle 0: the limit vertices)
-    i = np.arange(n_ok)[:, None]
-    j = np.arange(n_az)[None, :]
-    a = i * n_az + j
-    b = (i + 1) * n_az + j
-    c = (i + 1) * n_az + (j + 1) % n_az
-    d = i * n_az + (j + 1) % n_az
-    faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
-    # counter-clockwise seen from the camera's side of the axis; flip to the crossed triangle's winding
+    # quads of the drawn cells (two faces each), counter-clockwise seen from the camera's side of the axis
+    r_i, j_i = np.nonzero(cell)
+    a = r_i * n_az + j_i
+    b = (r_i + 1) * n_az + j_i
+    c = (r_i + 1) * n_az + (j_i + 1) % n_az
+    d = r_i * n_az + (j_i + 1) % n_az
+    faces = np.concatenate([np.stack([a, b, c], -1), np.stack([a, c, d], -1)])
+    # flip to the crossed triangle's winding
     if _projected_area(x, y, t0[None])[0] < 0:
         faces = faces[:, ::-1]
+    # only the grid points of drawn cells are vertices (the limit vertices come first, all used)
+    used = np.zeros(n_rings * n_az, bool)
+    used[faces.ravel()] = True
+    used[:n_az] = True
+    remap = np.cumsum(used) - 1
+    faces = remap[faces]
+    grid = np.flatnonzero(used[n_az:])  # indices into hit / lam / qx / qy
+    hit, lam = hit[grid], lam[grid]
+    grid_pos = np.einsum("mk,mkx->mx", lam, points[tris[cand[hit]]])
+    src_pos = np.concatenate([np.repeat(cr.point[None], n_az, axis=0), grid_pos])
+    vx = np.concatenate([np.zeros(n_az), qx[grid]])
+    vy = np.concatenate([np.zeros(n_az), qy[grid]])
     # each face's source triangle: the one under its corner of largest index (on its outer circle;
     # faces are small, so their centroid lies in that triangle or next to it)
     where = hit[faces.max(axis=1) - n_az]
     face_src = cand[where]
     bary = _projected_bary(vx[faces].ravel(), vy[faces].ravel(), np.repeat(tris[face_src], 3, axis=0), x, y)
     outer = radii[-1]
-    corner_d = np.hypot(x[tris[cand]], y[tris[cand]]).max(axis=1)
-    replaced = cand[corner_d <= outer]
+    replaced = cand[_inside_cells(cell, np.concatenate([[0.0], radii]), tris[cand], x, y)]
     patch = Patch(crossing=cr, n_azimuths=n_az, source_position=src_pos, tris=faces.astype(np.int64),
                   face_src=face_src, bary=bary.reshape(-1, 3, 3), replaced=replaced, radius=float(outer),
                   orders=tuple(orders))
