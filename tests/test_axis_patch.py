@@ -175,6 +175,22 @@ def test_patch_stops_at_the_mesh(lut):
     assert _patches(pts, tris[keep], lut) == []
 
 
+def test_connected_stays_inside_the_candidates():
+    """axis_patch._connected: the triangles reachable from the seed through shared edges without
+    leaving the candidates; a seed that is not a candidate reaches nothing."""
+    pts, tris = _grid(-4.0, 1.0, 3)  # 6x6 quads, 72 triangles
+    edges = subdivision.mesh_edges(tris)
+    centre = pts[tris].mean(axis=1)
+    left, right = np.flatnonzero(centre[:, 1] < -0.2), np.flatnonzero(centre[:, 1] > 0.2)
+    cand = np.concatenate([left, right])  # two strips with a gap between them
+    got = axis_patch._connected(int(left[0]), cand, edges.of_tri, len(edges.verts))
+    np.testing.assert_array_equal(got, np.isin(cand, left))
+    every = axis_patch._connected(0, np.arange(len(tris)), edges.of_tri, len(edges.verts))
+    assert every.all()
+    middle = np.setdiff1d(np.arange(len(tris)), cand)[0]
+    assert not axis_patch._connected(int(middle), cand, edges.of_tri, len(edges.verts)).any()
+
+
 def test_patch_limits(lut, monkeypatch):
     """Many crossings (a stack of planes): at most MAX_PATCHES patches; a grid never exceeds
     MAX_GRID points."""

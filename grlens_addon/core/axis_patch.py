@@ -43,6 +43,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from . import illumination, mapping
 from .culling import axis_coordinates, axis_crossing, axis_distance, hole_angle, max_ring_span
@@ -181,15 +183,18 @@ def limit_images(crossing: Crossing, psi, scene: mapping.Scene, lut, order) -> m
 def _connected(seed, cand, of_tri, n_edges) -> np.ndarray:
     """Mask over ``cand`` (indices of triangles) of those connected to triangle ``seed`` through shared
     edges without leaving ``cand``."""
-    reached = cand == seed
-    cand_edges = of_tri[cand]
-    while True:
-        lit = np.zeros(n_edges, bool)
-        lit[cand_edges[reached].ravel()] = True
-        new = ~reached & lit[cand_edges].any(axis=1)
-        if not new.any():
-            return reached
-        reached |= new
+    cand = np.asarray(cand, np.int64)
+    if cand.size == 0:
+        return np.zeros(0, bool)
+    # a graph with a node per candidate and per edge, joined where the triangle has that edge
+    e = of_tri[cand].ravel()
+    t = np.repeat(np.arange(cand.size), 3)
+    graph = coo_matrix((np.ones(e.size, np.int8), (t, cand.size + e)), shape=(cand.size + n_edges,) * 2)
+    _, label = connected_components(graph, directed=False)
+    at = np.flatnonzero(cand == seed)
+    if at.size == 0:
+        return np.zeros(cand.size, bool)
+    return label[:cand.size] == label[at[0]]
 
 
 def _locate(radii, n_az, cand_tris, x, y, z, z_target):
@@ -388,13 +393,26 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     near = np.flatnonzero(axis_distance(x, y, tris) <= radius)
     near = near[_projected_area(x, y, tris[near]) * _projected_area(x, y, t0[None])[0] > 0]
     cand = near[_connected(cr.tri, near, of_tri, n_edges)]
+    return _grid_patch(radii, n_az, cand, _projected_area(x, y, t0[None])[0] < 0, points, tris, x, y, z,
+                       scene, lut, orders, closed, cr)
+
+
+def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orders, closed, crossing):
+    """The patch of ``crossing``: a ring of limit vertices at the crossing point, then the grid of
+    circles ``radii`` (BU, increasing) x ``n_az`` azimuths on the surface of the triangles ``cand``
+    (one sheet: wound alike in projection; hits nearest the crossing along the axis), with faces wound
+    counter-clockwise seen from the camera's side of the axis (clockwise with ``flip``). None when the
+    innermost circle is not complete."""
+    n_circles = len(radii)
+    n_lim = n_az  # the limit vertices
     psi = 2.0 * np.pi * np.arange(n_az) / n_az
     qx = (radii[:, None] * np.cos(psi)[None, :]).ravel()
     qy = (radii[:, None] * np.sin(psi)[None, :]).ravel()
-    hit, lam = _locate(radii, n_az, tris[cand], x, y, z, cr.along)
+    hit, lam = _locate(radii, n_az, tris[cand], x, y, z, crossing.along)
     # vertex rings: 0 the limit vertices, r >= 1 circle r - 1; a cell (r, j) lies between rings r and
     # r + 1 and azimuths j and j + 1, and is drawn when the surface is under its four corners
     on = np.concatenate([np.ones((1, n_az), bool), (hit >= 0).reshape(n_circles, n_az)])
+    ring_radii = np.concatenate([[0.0], radii])
     cell = on[:-1] & on[1:]
     cell &= np.roll(cell, -1, axis=1)
     if not cell[0].all():  # the innermost circle must go all round: the ring's edge needs every azimuth
@@ -402,8 +420,8 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     rows = np.flatnonzero(cell.any(axis=1))
     n_rings = int(rows[-1]) + 2  # rings in use
     cell = cell[:n_rings - 1]
-    radii = radii[:n_rings - 1]
-    m = (n_rings - 1) * n_az
+    ring_radii = ring_radii[:n_rings]
+    m = n_rings * n_az - n_lim  # grid points in use
     hit, lam, qx, qy = hit[:m], lam[:m], qx[:m], qy[:m]
     # quads of the drawn cells (two faces each), counter-clockwise seen from the camera's side of the axis
     r_i, j_i = np.nonzero(cell)
@@ -412,45 +430,42 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     c = (r_i + 1) * n_az + (j_i + 1) % n_az
     d = r_i * n_az + (j_i + 1) % n_az
     faces = np.concatenate([np.stack([a, b, c], -1), np.stack([a, c, d], -1)])
-    # flip to the crossed triangle's winding
-    if _projected_area(x, y, t0[None])[0] < 0:
+    if flip:  # to the source's winding
         faces = faces[:, ::-1]
-    # only the grid points of drawn cells are vertices (the limit vertices come first, all used)
+    # only the grid points of drawn cells are vertices (limit vertices first, all used)
     used = np.zeros(n_rings * n_az, bool)
     used[faces.ravel()] = True
-    used[:n_az] = True
-    remap = np.cumsum(used) - 1
-    faces = remap[faces]
-    grid = np.flatnonzero(used[n_az:])  # indices into hit / lam / qx / qy
+    used[:n_lim] = True
+    faces = (np.cumsum(used) - 1)[faces]
+    grid = np.flatnonzero(used[n_lim:])  # indices into hit / lam / qx / qy
     hit, lam = hit[grid], lam[grid]
     grid_pos = np.einsum("mk,mkx->mx", lam, points[tris[cand[hit]]])
-    src_pos = np.concatenate([np.repeat(cr.point[None], n_az, axis=0), grid_pos])
+    src_pos = np.concatenate([np.repeat(crossing.point[None], n_az, axis=0), grid_pos])
     vx = np.concatenate([np.zeros(n_az), qx[grid]])
     vy = np.concatenate([np.zeros(n_az), qy[grid]])
     # each face's source triangle: the one under its corner of largest index (on its outer circle;
     # faces are small, so their centroid lies in that triangle or next to it)
-    where = hit[faces.max(axis=1) - n_az]
+    where = hit[faces.max(axis=1) - n_lim]
     face_src = cand[where]
     bary = _projected_bary(vx[faces].ravel(), vy[faces].ravel(), np.repeat(tris[face_src], 3, axis=0), x, y)
-    outer = radii[-1]
-    replaced = cand[_inside_cells(cell, np.concatenate([[0.0], radii]), tris[cand], x, y)]
-    patch = Patch(crossing=cr, n_azimuths=n_az, source_position=src_pos, tris=faces.astype(np.int64),
-                  face_src=face_src, bary=bary.reshape(-1, 3, 3), replaced=replaced, radius=float(outer),
+    replaced = cand[_inside_cells(cell, ring_radii, tris[cand], x, y)]
+    patch = Patch(crossing=crossing, n_azimuths=n_az, source_position=src_pos, tris=faces.astype(np.int64),
+                  face_src=face_src, bary=bary.reshape(-1, 3, 3), replaced=replaced, radius=float(ring_radii[-1]),
                   orders=tuple(orders))
     if closed:
         p0, p1, p2 = (points[tris[face_src, k]] for k in range(3))
         normal = np.cross(p1 - p0, p2 - p0)  # (F, 3) geometric normals of the faces' source triangles
-        grid_corner = faces >= n_az  # limit vertices have no direction of their own
-        for o, (d, _) in illumination.towards_observer(grid_pos, scene, lut, orders).items():
+        grid_corner = faces >= n_lim  # limit vertices have no direction of their own
+        for o, (dd, _) in illumination.towards_observer(grid_pos, scene, lut, orders).items():
             with np.errstate(invalid="ignore"):
-                dots = np.einsum("fx,fcx->fc", normal, d[np.maximum(faces - n_az, 0)])
+                dots = np.einsum("fx,fcx->fc", normal, dd[np.maximum(faces - n_lim, 0)])
             away = np.where(grid_corner, dots < 0, True)  # NaN (no ray) counts as facing
             patch.facing[o] = ~away.all(axis=1)
     shown = tuple(o for o in orders if o not in patch.facing or patch.facing[o].any())
     for o in orders:
         patch.facing.setdefault(o, np.ones(len(faces), bool))
     for o, reg in (mapping.map_vertices_orders(grid_pos, scene, lut, shown).items() if shown else ()):
-        lim = limit_images(cr, psi, scene, lut, o)
+        lim = limit_images(crossing, psi, scene, lut, o)
         patch.images[o] = mapping.Images(
             position=np.concatenate([lim.position, reg.position]),
             direction=np.concatenate([lim.direction, reg.direction]),
