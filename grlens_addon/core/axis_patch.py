@@ -57,13 +57,13 @@ BAND_FACTOR = 0.25
 """The innermost circle of a patch lies where the image is within this times ``max_error_px`` of the
 Einstein ring; the band inside it is drawn with pieces that span the whole distance to the ring."""
 
-RADIUS_FACTOR = 6.0
+RADIUS_FACTOR = 2.0
 """A patch reaches this many times the largest distance from the axis of the crossed triangle's
-corners (or less: the last circle the surface covers all round, the last one with an image). The
-magnified region around a crossing is as wide as the surface's own triangles are far from the axis
-before they stop needing the ring levels of the pipeline, several triangles out: on the benchmark
-sphere behind the hole a patch of 6 reaches its limb and halves the pieces of the frame
-(benchmarks/bench_accuracy.py; 2 left most of the near side to the uniform subdivision)."""
+corners (or less: the last circle with an image). Larger patches would replace more of the
+magnified triangles around the crossing (6: half the pieces of the benchmark sphere's frame behind
+the hole), but a patch face spans several source triangles there and its corner values (UVs,
+normals) are interpolated linearly across them: the texture lands up to 2 px off at 6, 0.2 px at 2
+(benchmarks/bench_accuracy.py, screen error)."""
 
 PROBE_AZIMUTHS = 8
 """Azimuths at which the crossed triangle's plane is probed for the innermost circle (a tilted surface
@@ -99,7 +99,9 @@ class Patch:
     limit vertices, all at the crossing point); tris (F, 3), wound like the crossed source triangle;
     face_src (F,) the source triangle of each face (the one under its outer corner); bary (F, 3, 3) the
     barycentric coordinates of each face corner in that triangle (projected along the axis;
-    extrapolated for corners in a neighbouring triangle); replaced: source triangles the patch stands
+    extrapolated for corners in a neighbouring triangle); vertex_tri (V,) and vertex_bary (V, 3): the
+    source triangle each vertex lies on and its barycentric coordinates there (the crossed triangle
+    for the limit vertices); replaced: source triangles the patch stands
     in for; radius (BU): its outer circle's distance from the axis; orders: the image orders whose
     Einstein ring it is; images: {order: mapping.Images} of its vertices; facing: {order: (F,) bool}
     the faces to draw (all, unless back faces of a closed surface are left out, see
@@ -115,6 +117,8 @@ class Patch:
     replaced: np.ndarray
     radius: float
     orders: tuple
+    vertex_tri: np.ndarray = field(default=None, repr=False)
+    vertex_bary: np.ndarray = field(default=None, repr=False)
     images: dict = field(default_factory=dict, repr=False)
     facing: dict = field(default_factory=dict, repr=False)
 
@@ -449,9 +453,12 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
     face_src = cand[where]
     bary = _projected_bary(vx[faces].ravel(), vy[faces].ravel(), np.repeat(tris[face_src], 3, axis=0), x, y)
     replaced = cand[_inside_cells(cell, ring_radii, tris[cand], x, y)]
+    lim_bary = _projected_bary(np.zeros(1), np.zeros(1), tris[crossing.tri][None], x, y)
     patch = Patch(crossing=crossing, n_azimuths=n_az, source_position=src_pos, tris=faces.astype(np.int64),
                   face_src=face_src, bary=bary.reshape(-1, 3, 3), replaced=replaced, radius=float(ring_radii[-1]),
-                  orders=tuple(orders))
+                  orders=tuple(orders),
+                  vertex_tri=np.concatenate([np.full(n_az, crossing.tri), cand[hit]]).astype(np.int64),
+                  vertex_bary=np.concatenate([np.repeat(lim_bary, n_az, axis=0), lam]))
     if closed:
         p0, p1, p2 = (points[tris[face_src, k]] for k in range(3))
         normal = np.cross(p1 - p0, p2 - p0)  # (F, 3) geometric normals of the faces' source triangles

@@ -312,34 +312,37 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                     sub.corner_row if everything else sub.corner_row.take(kept, axis=0))
         v_pos, v_dir = img.position.take(used, axis=0), img.direction.take(used, axis=0)
         v_dist, v_src = img.distance[used], sub.positions.take(used, axis=0)
+        patch_corners = None
         if order_patches:
             report.patch_replaced = n_replaced
             parts = _patch_parts(order_patches, order, planes, len(used))
             if parts is not None:
-                p_tris, p_src, p_bary, p_pos, p_dir, p_dist, p_spos = parts
-                if rows is None:
-                    rows = (np.tile(np.eye(3), (len(src_tri), 1)), np.repeat(src_tri, 3),
-                            np.arange(3 * len(src_tri)).reshape(-1, 3))
-                n_rows = len(rows[0])
-                rows = (np.concatenate([rows[0], p_bary.reshape(-1, 3)]), np.concatenate([rows[1], np.repeat(p_src, 3)]),
-                        np.concatenate([rows[2], n_rows + np.arange(3 * len(p_tris)).reshape(-1, 3)]))
+                p_tris, p_src, patch_corners, p_pos, p_dir, p_dist, p_spos = parts
                 image_tris = np.concatenate([image_tris, p_tris])
-                src_tri = np.concatenate([src_tri, p_src])
                 v_pos, v_dir = np.concatenate([v_pos, p_pos]), np.concatenate([v_dir, p_dir])
                 v_dist, v_src = np.concatenate([v_dist, p_dist]), np.concatenate([v_src, p_spos])
                 report.kept += len(p_tris)
                 report.patch_faces = len(p_tris)
+
+        def corner_values(values):  # (F, 3, K) per face corner, subdivided faces then patch faces
+            own = _carry(values, src_tri, rows)
+            if patch_corners is None:
+                return own
+            return np.concatenate([own, _patch_corner_values(values, p_src, *patch_corners)])
+
         corner_uv = None
         if src.corner_uv is not None:
-            corner_uv = _carry(src.corner_uv, src_tri, rows)
+            corner_uv = corner_values(src.corner_uv)
         irr = None
         if light is not None and src.corner_normals is not None:
-            n = _carry(src.corner_normals, src_tri, rows)
+            n = corner_values(src.corner_normals)
             n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-300)
             pts = v_src.take(image_tris.ravel(), axis=0)
             e, _ = illumination.irradiance(pts, n.reshape(-1, 3), light.position, scene.hole, scene.r_s,
                                            light.lut, light.intensity)
             irr = e.reshape(-1, 3)
+        if patch_corners is not None:
+            src_tri = np.concatenate([src_tri, p_src])
         redshift = colour = None
         if disc is not None:
             pts = v_src
@@ -436,6 +439,23 @@ def _used_vertices(tris, n_vertices) -> np.ndarray:
     mask = np.zeros(n_vertices, dtype=bool)
     mask[tris.ravel()] = True
     return np.flatnonzero(mask)
+
+
+PATCH_SEAM_JUMP = 0.1
+"""A patch face takes its corners' values (UVs, normals) from the source triangle under each corner,
+unless they differ by more than this from the values of the face's own source triangle carried to
+the corner (a seam: a UV island's edge, a sharp normal), where it takes those for all three."""
+
+
+def _patch_corner_values(values, face_src, bary, vertex_tri, vertex_bary) -> np.ndarray:
+    """(F, 3, K) corner values of patch faces (see _patch_parts and PATCH_SEAM_JUMP) from the source
+    triangles' corner values ``values`` (T, 3, K)."""
+    values = np.asarray(values, dtype=np.float64)
+    carried = np.matmul(bary, values.take(face_src, axis=0))  # the face's triangle, extrapolated
+    own = np.matmul(vertex_bary[:, :, None, :], values.take(vertex_tri, axis=0))[:, :, 0, :]
+    seam = (np.abs(own - carried) > PATCH_SEAM_JUMP).any(axis=(1, 2))
+    own[seam] = carried[seam]
+    return own
 
 
 def _carry(corner_values, src_tri, rows):
@@ -614,8 +634,9 @@ def _presplit_levels(src, edges, src_circ, img_circs, images_v, scene, settings,
 
 def _patch_parts(patches, order, planes, offset):
     """The faces of the axis patches (axis_patch.Patch) of ``order`` as arrays to append to an image
-    mesh whose vertex count is ``offset``: (tris, source triangle, bary, image positions, directions,
-    c*dt, source positions), without faces that have a corner without an image or lie outside one
+    mesh whose vertex count is ``offset``: (tris, source triangle, corners, image positions, directions,
+    c*dt, source positions), corners = (bary (F, 3, 3) in the face's source triangle, each corner's own
+    source triangle (F, 3) and barycentrics there (F, 3, 3)), without faces that have a corner without an image or lie outside one
     frustum plane; None when no face is left."""
     out = [[] for _ in range(7)]
     for p in patches:
@@ -636,7 +657,7 @@ def _patch_parts(patches, order, planes, offset):
         remap[used] = np.arange(used.size)
         out[0].append(remap.take(faces) + offset)
         out[1].append(p.face_src[ok])
-        out[2].append(p.bary[ok])
+        out[2].append((p.bary[ok], p.vertex_tri.take(faces), p.vertex_bary.take(faces, axis=0)))
         out[3].append(im.position.take(used, axis=0))
         out[4].append(im.direction.take(used, axis=0))
         out[5].append(im.distance.take(used))
@@ -644,7 +665,8 @@ def _patch_parts(patches, order, planes, offset):
         offset += used.size
     if not out[0]:
         return None
-    return tuple(np.concatenate(a) for a in out)
+    corners = tuple(np.concatenate(a) for a in zip(*out[2]))
+    return tuple(corners if k == 2 else np.concatenate(a) for k, a in enumerate(out))
 
 
 
