@@ -110,10 +110,12 @@ def exact_pixels(cam):
     return lambda points, order: raytrace.image_pixels(points, cam, np.zeros(3), R_S, order)
 
 
-def compare(ref, poly, cam, **kw):
-    """image_metrics.compare with this benchmark's texture, wrapped U and exact screen error."""
+def compare(ref, poly, cam, src, **kw):
+    """image_metrics.compare with this benchmark's texture, wrapped U and the exact screen error of the
+    texture (``src``: the pipeline.SourceMesh whose UVs both images show)."""
     return image_metrics.compare(ref, poly, texture_size=TEXTURE, wrap_uv=(True, False),
-                                 image_pixels=exact_pixels(cam), **kw)
+                                 image_pixels=exact_pixels(cam), uv_points=lambda uv: image_metrics.uv_surface_points(
+                                     uv, src.positions, src.tris, src.corner_uv, (True, False)), **kw)
 
 
 def reference_image(scene, cam):
@@ -147,7 +149,7 @@ def main_table(angles, cam, lut, repeat, refs, png_dir=None):
         src, sc = sphere_scene(a)
         ref, t_ref = refs[a]
         poly, t_poly, t_ras, ntri = polygon_image(src, cam, lut, settings, repeat)
-        m = compare(ref, poly, cam, other_surface=OTHER_SURFACE)
+        m = compare(ref, poly, cam, src, other_surface=OTHER_SURFACE)
         results[a] = m
         m["_t_poly"] = t_poly
         m["_radii"] = {o: (_radial_range(ref, o, cam), _radial_range(poly, o, cam)) for o in (1, 2)}
@@ -271,7 +273,7 @@ def pareto(angles, cam, refs, repeat, plot_path=None):
             src, _ = sphere_scene(a)
             poly, t_poly, _, _ = polygon_image(src, cam, lut, settings, repeat)
             times.append(t_poly)
-            ms[a] = compare(refs[a][0], poly, cam)
+            ms[a] = compare(refs[a][0], poly, cam, src)
         f_off, uv_off, lt_off = aggregate([ms[a] for a in off])
         f_ring, uv_ring, _ = aggregate([ms[a] for a in ring])
         t = float(np.mean(times))
@@ -368,9 +370,10 @@ def main(argv=None):
         "part of the per-frame cost, which a GPU renderer pays);",
         "* metrics (`grlens_addon.core.image_metrics.compare`): coverage mismatch = pixels where exactly one image "
         "shows a given (object, order), as a count and as a fraction of the reference's covered pixels; UV "
-        "error on screen (\"screen err\") = the distance from the pixel's centre to where the surface point the "
-        "polygon image shows there (and so the texture point drawn there) truly appears, through the exact "
-        "connecting geodesic (`raytrace.image_pixels`, lutgen.connect); UV error via J = |J^-1 duv| with J the "
+        "error on screen (\"screen err\") = the distance from the pixel's centre to where the texture point drawn "
+        "there truly appears: the point of the sphere's mesh with that UV (`image_metrics.uv_surface_points`), "
+        "imaged through the exact connecting geodesic (`raytrace.image_pixels`, lutgen.connect); UV error via J = "
+        "|J^-1 duv| with J the "
         "reference's screen-space UV gradient from finite differences, the same quantity linearised, and in "
         f"texels of a {TEXTURE}^2 texture; light-travel-time error relative; p50 / p99 / max over the pixels "
         "where both show the same object in the same order. Orders 3 and higher (only the reference has them) "
@@ -381,7 +384,7 @@ def main(argv=None):
         "UV changes non-linearly within one pixel: J from finite differences is then wrong and nearly "
         "singular, and the linearised measure reads pixels (up to thousands) where the point drawn is a "
         "fraction of a pixel from its true place; on rings one pixel wide it has no value at all (n/a). The "
-        "reference's own points have a screen error below 1e-6 px (tests/test_raytrace.py), so the measure "
+        "reference's own UVs have a screen error below 1e-6 px (tests/test_raytrace.py), so the measure "
         "checks the ray tracer and lutgen.connect against each other as well.",
         "",
         "Targets of issue 5 (default settings, 640x360): coverage mismatch under 0.5% of the covered pixels, "

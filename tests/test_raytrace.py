@@ -292,6 +292,34 @@ def test_metrics_screen_error():
     rows = image_metrics.markdown_rows(image_metrics.compare(ref, _synthetic(shift=2), image_pixels=_identity_pixels))
     assert len(rows) == 3 and rows[0].count("|") == image_metrics.MARKDOWN_HEADER[0].count("|")
     assert "| 2.000 | 2.000 | 2.00 |" in rows[0]
+    # with uv_points the texture point drawn is imaged, not the surface point: here the geometry is
+    # right (points of the reference) but the texture is shifted by 3 columns
+    test = _synthetic()
+    test.uv[test.hit] += [3.0 / 60, 0.0]
+    uv_points = lambda uv: np.stack([uv[:, 0] * 60, uv[:, 1] * 40, np.zeros(len(uv))], -1)  # noqa: E731
+    geo = image_metrics.compare(ref, test, image_pixels=_identity_pixels)["orders"]["all"]["screen_px"]
+    tex = image_metrics.compare(ref, test, image_pixels=_identity_pixels, uv_points=uv_points)["orders"]["all"]
+    assert geo["max"] == 0 and tex["screen_px"]["p50"] == pytest.approx(3.0, rel=1e-9)
+
+
+def test_uv_surface_points():
+    """image_metrics.uv_surface_points inverts the UV mapping of a mesh: points on its triangles come
+    back from their UVs (also one period away in a wrapped coordinate); UVs on no triangle are NaN."""
+    rng = np.random.default_rng(4)
+    pts, tris = _random_triangles(rng, 20)
+    corner_uv = np.zeros((20, 3, 2))  # each triangle its own UV triangle in a 5x4 atlas
+    for k in range(20):
+        o = np.array([k % 5, k // 5]) * [0.2, 0.25]
+        corner_uv[k] = o + rng.uniform(0.01, 0.19, (3, 2)) * [1, 1.2]
+    t = rng.integers(0, 20, 500)
+    lam = rng.dirichlet([1, 1, 1], 500)
+    uv = np.einsum("nk,nkx->nx", lam, corner_uv[t])
+    want = np.einsum("nk,nkx->nx", lam, pts[tris[t]])
+    np.testing.assert_allclose(image_metrics.uv_surface_points(uv, pts, tris, corner_uv, chunk=64), want, atol=1e-9)
+    shifted = image_metrics.uv_surface_points(uv + [1.0, 0.0], pts, tris, corner_uv, wrap_uv=(True, False))
+    np.testing.assert_allclose(shifted, want, atol=1e-9)
+    assert np.isnan(image_metrics.uv_surface_points(uv + [1.0, 0.0], pts, tris, corner_uv)).all()
+    assert np.isnan(image_metrics.uv_surface_points(np.array([[5.0, 5.0], [np.nan, 0.1]]), pts, tris, corner_uv)).all()
 
 
 @pytest.mark.parametrize("angle", [135, 170])
@@ -309,6 +337,11 @@ def test_image_pixels_consistent_with_trace(angle):
         m = ref.hit & (ref.order == order)
         assert m.sum() >= (5 if order == 2 else 50)
         col, row = raytrace.image_pixels(ref.point[m], cam, HOLE, 1.0, order)
+        np.testing.assert_allclose(col, cols[m] + 0.5, atol=1e-6)
+        np.testing.assert_allclose(row, rows[m] + 0.5, atol=1e-6)
+        # the same through the UVs the tracer found (the sphere's spherical UVs, U wrapped)
+        p = image_metrics.uv_surface_points(ref.uv[m], scene.positions, scene.tris, scene.corner_uv, (True, False))
+        col, row = raytrace.image_pixels(p, cam, HOLE, 1.0, order)
         np.testing.assert_allclose(col, cols[m] + 0.5, atol=1e-6)
         np.testing.assert_allclose(row, rows[m] + 0.5, atol=1e-6)
     # no image on the axis, none behind the camera
@@ -369,6 +402,10 @@ def _exact_pixels(cam):
     return lambda points, order: raytrace.image_pixels(points, cam, HOLE, 1.0, order)
 
 
+def _uv_points(src):
+    return lambda uv: image_metrics.uv_surface_points(uv, src.positions, src.tris, src.corner_uv, (True, False))
+
+
 @pytest.fixture(scope="module")
 def lut():
     return build_lut(20.0, 1.05, 40.0, 256, 512)
@@ -386,7 +423,8 @@ def test_sphere_polygon_method_vs_reference(lut, angle):
     images = pipeline.build_images(src, mapping.Scene(cam.position, HOLE, 1.0), lut, settings,
                                    frustum_planes=cam.frustum_planes())
     poly = rasterize.rasterize(rasterize.from_images(images), cam)
-    m = image_metrics.compare(ref, poly, wrap_uv=(True, False), image_pixels=_exact_pixels(cam))
+    m = image_metrics.compare(ref, poly, wrap_uv=(True, False), image_pixels=_exact_pixels(cam),
+                              uv_points=_uv_points(src))
     a = m["orders"]["all"]
     print(f"\nsphere {angle} deg 96x54: covered {a['covered_ref']} / {a['covered_test']}, mismatch "
           f"{a['mismatch']} ({100 * a['mismatch_frac']:.2f}%), UV p99 {a['uv_px']['p99']:.3f} px, "
@@ -414,7 +452,7 @@ def test_sphere_ring_views_vs_reference(lut, angle, bound):
                                    frustum_planes=cam.frustum_planes())
     poly = rasterize.rasterize(rasterize.from_images(images), cam)
     a = image_metrics.compare(ref, poly, wrap_uv=(True, False), other_surface=0.125,
-                              image_pixels=_exact_pixels(cam))["orders"]["all"]
+                              image_pixels=_exact_pixels(cam), uv_points=_uv_points(src))["orders"]["all"]
     print(f"\nsphere {angle} deg 320x180: mismatch {a['mismatch']} of {a['covered_ref']} "
           f"({100 * a['mismatch_frac']:.2f}%), other surface {a['other_surface']} of {a['matched']}, "
           f"screen error p99 {a['screen_px']['p99']:.3f} px (via J {a['uv_px']['p99']:.3f})")

@@ -19,14 +19,17 @@ Per image order o (1, 2, and "all" = orders 1 and 2 together) the comparison rep
     with neither neighbour in a direction are left out, see ``uv_px_n``). It is how far one would
     have to move on the reference image to see the texture point the test pixel shows: a texture
     lands that many pixels off;
-  - ``screen_px`` (with ``image_pixels``): the distance in pixels from the pixel's centre to where
-    the surface point the test pixel shows (``test.point``), and with it the texture point drawn
-    there, truly appears: its image of that order through the exact connecting geodesic. This is
-    what ``uv_px`` estimates, without the linearisation: J from finite differences is wrong where
-    the image is squeezed to a pixel or less across (beside the Einstein ring the UV changes
-    non-linearly within one pixel, J is nearly singular and ``uv_px`` reads hundreds of pixels where
-    the point is drawn a fraction of a pixel off), and ``uv_px`` has no value at all on rings one
-    pixel wide. Where the image is not squeezed the two agree (benchmarks/bench_accuracy.py);
+  - ``screen_px`` (with ``image_pixels`` and ``uv_points``): the distance in pixels from the pixel's
+    centre to where the texture point drawn there truly appears: the surface point with the test
+    pixel's UV (``uv_points``, e.g. :func:`uv_surface_points` on the source mesh), imaged in that
+    order through the exact connecting geodesic (``image_pixels``). This is what ``uv_px``
+    estimates, without the linearisation: J from finite differences is wrong where the image is
+    squeezed to a pixel or less across (beside the Einstein ring the UV changes non-linearly within
+    one pixel, J is nearly singular and ``uv_px`` reads hundreds of pixels where the texture is a
+    fraction of a pixel off), and ``uv_px`` has no value at all on rings one pixel wide. Where the
+    image is not squeezed the two agree (benchmarks/bench_accuracy.py). Without ``uv_points`` the
+    surface point the test pixel shows (``test.point``) is imaged instead: the error of the geometry
+    alone, blind to corner values interpolated across several source triangles;
   - ``lt_rel``: |lt_test - lt_ref| / lt_ref, the relative light-travel-time error;
 
   each as p50 / p99 / max (NaN if there is nothing to measure).
@@ -65,6 +68,48 @@ def _key(buf, orders):
     return np.where(ok, buf.object_id * 1024 + buf.order, -1)
 
 
+def uv_surface_points(uv, points, tris, corner_uv, wrap_uv=(False, False), chunk: int = 1024) -> np.ndarray:
+    """(M, 3) the surface points (BU) of a mesh (``points`` (N, 3), ``tris`` (T, 3), ``corner_uv``
+    (T, 3, 2)) whose texture coordinates are ``uv`` (M, 2): in the triangle whose UV triangle contains
+    the query (the one it is deepest inside where UV islands overlap or touch), at the same
+    barycentric coordinates. Coordinates in ``wrap_uv`` are periodic (the query is also tried one
+    period to either side). NaN for a query outside every UV triangle by more than 1e-6 (in
+    barycentric terms) and for non-finite queries. Brute force over ``chunk`` queries at a time
+    (meant for checks and benchmarks, not per frame)."""
+    uv = np.asarray(uv, np.float64).reshape(-1, 2)
+    points = np.asarray(points, np.float64)
+    tris = np.asarray(tris, np.int64)
+    t_uv = np.asarray(corner_uv, np.float64)
+    a, b, c = t_uv[:, 0], t_uv[:, 1], t_uv[:, 2]
+    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
+    good = np.abs(det) > 0
+    a, b, c, det, t_ok = a[good], b[good], c[good], det[good], np.flatnonzero(good)
+    shifts = [(du, dv) for du in ((-1.0, 0.0, 1.0) if wrap_uv[0] else (0.0,))
+              for dv in ((-1.0, 0.0, 1.0) if wrap_uv[1] else (0.0,))]
+    out = np.full((len(uv), 3), np.nan)
+    for s in range(0, len(uv), chunk):
+        q = uv[s:s + chunk]
+        best = np.full(len(q), -np.inf)
+        pick = np.zeros(len(q), np.int64)
+        lam = np.zeros((len(q), 3))
+        rows = np.arange(len(q))
+        for du, dv in shifts:
+            qu, qv = (q[:, 0] + du)[:, None], (q[:, 1] + dv)[:, None]
+            with np.errstate(invalid="ignore"):
+                l1 = ((qu - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (qv - a[:, 1])) / det
+                l2 = ((b[:, 0] - a[:, 0]) * (qv - a[:, 1]) - (qu - a[:, 0]) * (b[:, 1] - a[:, 1])) / det
+                depth = np.nan_to_num(np.minimum(np.minimum(1.0 - l1 - l2, l1), l2), nan=-np.inf)
+            k = np.argmax(depth, axis=1)
+            better = depth[rows, k] > best
+            best = np.where(better, depth[rows, k], best)
+            pick = np.where(better, k, pick)
+            lam = np.where(better[:, None], np.stack([1.0 - l1[rows, k] - l2[rows, k], l1[rows, k], l2[rows, k]], 1), lam)
+        found = best >= -1e-6
+        p = np.einsum("mk,mkx->mx", lam, points[tris[t_ok[pick]]])
+        out[s:s + chunk][found] = p[found]
+    return out
+
+
 def uv_gradient(buf, wrap_uv=(False, False), seam: float = 0.25) -> np.ndarray:
     """(H, W, 2, 2) UV gradient J[..., i, j] = d uv_i / d (column, row)_j of a buffer, from
     neighbours showing the same object in the same order (central differences where both are there,
@@ -94,7 +139,7 @@ def uv_gradient(buf, wrap_uv=(False, False), seam: float = 0.25) -> np.ndarray:
 
 
 def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(False, False),
-            other_surface: float | None = None, image_pixels=None) -> dict:
+            other_surface: float | None = None, image_pixels=None, uv_points=None) -> dict:
     """Metrics between the reference buffers ``ref`` and ``test`` (see the module docstring).
 
     Returns {"orders": {1: {...}, 2: {...}, "all": {...}}, "higher_ref": int, "higher_test": int,
@@ -105,7 +150,9 @@ def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(Fals
     (such as its far side through a gap in the near side), which the coverage mismatch cannot see.
     With ``image_pixels``, a function (points (M, 3) BU, order) -> (column, row) giving where the
     image of that order of each point truly appears (e.g. raytrace.image_pixels for the buffers'
-    camera), also screen_px (p50, p99, max) and screen_px_n: see the module docstring.
+    camera), also screen_px (p50, p99, max) and screen_px_n, of the texture points when
+    ``uv_points`` (a function (uv (M, 2)) -> points (M, 3) BU, NaN where no surface point has that
+    UV) is given, else of the surface points: see the module docstring.
     """
     if ref.shape != test.shape:
         raise ValueError(f"buffers of different shapes: {ref.shape} vs {test.shape}")
@@ -118,7 +165,8 @@ def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(Fals
         rows, cols = np.mgrid[0:ref.shape[0], 0:ref.shape[1]]
         for o in orders:
             m = ref.hit & test.hit & (ref.order == o) & (test.order == o) & (ref.object_id == test.object_id)
-            col, row = image_pixels(test.point[m], o)
+            shown = uv_points(test.uv[m]) if uv_points is not None else test.point[m]
+            col, row = image_pixels(shown, o)
             screen[o] = np.hypot(np.asarray(col) - (cols[m] + 0.5), np.asarray(row) - (rows[m] + 0.5))
     for o in list(orders) + ["all"]:
         sel = list(orders) if o == "all" else [o]
