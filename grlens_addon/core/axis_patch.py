@@ -459,11 +459,13 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
                   orders=tuple(orders),
                   vertex_tri=np.concatenate([np.full(n_az, crossing.tri), cand[hit]]).astype(np.int64),
                   vertex_bary=np.concatenate([np.repeat(lim_bary, n_az, axis=0), lam]))
+    regs = mapping.map_vertices_orders(grid_pos, scene, lut, orders, tangents=bool(closed))
     if closed:
         p0, p1, p2 = (points[tris[face_src, k]] for k in range(3))
         normal = np.cross(p1 - p0, p2 - p0)  # (F, 3) geometric normals of the faces' source triangles
         grid_corner = faces >= n_lim  # limit vertices have no direction of their own
-        for o, (dd, _) in illumination.towards_observer(grid_pos, scene, lut, orders).items():
+        for o, reg in regs.items():
+            dd = illumination.leaving_direction(reg.plane, scene, reg.ux, reg.uy)
             with np.errstate(invalid="ignore"):
                 dots = np.einsum("fx,fcx->fc", normal, dd[np.maximum(faces - n_lim, 0)])
             away = np.where(grid_corner, dots < 0, True)  # NaN (no ray) counts as facing
@@ -471,7 +473,7 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
     shown = tuple(o for o in orders if o not in patch.facing or patch.facing[o].any())
     for o in orders:
         patch.facing.setdefault(o, np.ones(len(faces), bool))
-    for o, reg in (mapping.map_vertices_orders(grid_pos, scene, lut, shown).items() if shown else ()):
+    for o, reg in ((o, regs[o]) for o in shown):
         lim = limit_images(crossing, psi, scene, lut, o)
         patch.images[o] = mapping.Images(
             position=np.concatenate([lim.position, reg.position]),

@@ -104,8 +104,8 @@ class Images:
     direction: (N, 3) unit apparent direction from the camera;
     distance: (N,) light travel distance c*dt (BU) = camera-image distance;
     valid: (N,) bool, finite image that is not on the axis;
-    plane: the PlaneCoordinates used; xi (rad), dt (r_s/c): the LUT values (ux, uy are not looked up
-    for mapping and are None).
+    plane: the PlaneCoordinates used; xi (rad), dt (r_s/c): the LUT values; ux, uy: the ray's tangent
+    there (only from map_vertices_orders(..., tangents=True), else None).
     """
 
     position: np.ndarray
@@ -129,9 +129,10 @@ def map_vertices(points: np.ndarray, scene: Scene, lut, order: int, plane: Plane
 
 
 def map_vertices_orders(points: np.ndarray, scene: Scene, lut, orders=(1, 2),
-                        plane: PlaneCoordinates | None = None) -> dict:
+                        plane: PlaneCoordinates | None = None, tangents: bool = False) -> dict:
     """:func:`map_vertices` for several orders at once ({order: Images}); the plane coordinates and
-    the LUT's interpolation stencil are computed once."""
+    the LUT's interpolation stencil are computed once. With ``tangents`` the rays' tangents ux, uy at
+    the points are looked up too (for illumination.leaving_direction)."""
     for order in orders:
         if order not in (1, 2):
             raise ValueError(f"order must be 1 or 2, got {order!r}")
@@ -139,7 +140,8 @@ def map_vertices_orders(points: np.ndarray, scene: Scene, lut, orders=(1, 2),
         raise ValueError(f"the LUT was built for r_obs = {lut.r_obs:.9g} r_s but the camera is at "
                          f"{scene.r_obs:.9g} r_s from the hole; rebuild the LUT")
     plane = plane if plane is not None else plane_coordinates(points, scene)
-    looks = lut.lookup_orders(plane.r, plane.phi, tuple(orders), quantities=("xi", "dt"))
+    looks = lut.lookup_orders(plane.r, plane.phi, tuple(orders),
+                              quantities=("xi", "dt", "ux", "uy") if tangents else ("xi", "dt"))
     out = {}
     for order in orders:
         look = looks[order]
