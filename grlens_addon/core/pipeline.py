@@ -215,6 +215,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                                        crossings=crossings,
                                        closed=seen_closed,
                                        ) if crossings else []
+    axis_xy = None  # axis coordinates (x, y) of the source vertices, when needed
     for order in settings.orders:
         order_patches = [p for p in patches if order in p.orders]
         replaced = None
@@ -253,6 +254,14 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                 up = raise_edges & sil_edge[probe]
                 levels[probe[up]] = tight[up]
                 want = np.where(maybe & sil_tri[cand] & (sharp <= SILHOUETTE_RING_LEVEL_MAX), sharp, want)
+            if order_patches and order in RING_EDGE_ORDERS and cand.size:
+                # next to a patch, this order's ring is less than a pixel wide: its edge needs the
+                # silhouette's tolerance, whatever the level (see RING_EDGE_REACH)
+                if axis_xy is None:
+                    axis_xy = culling.axis_coordinates(src.positions, scene.camera, scene.hole)[:2]
+                reach = RING_EDGE_REACH * max(p.radius for p in order_patches)
+                near = culling.axis_distance(axis_xy[0], axis_xy[1], src.tris.take(cand, axis=0)) < reach
+                want = np.where(near, np.maximum(want, sharp), want)
             np.maximum.at(levels, edges.of_tri[cand].ravel(), np.repeat(want, 3))
         tri_sel, out_v = _inside_frustum(img_v, img_m, probe, src.tris, edges, planes)
         n_pre = len(src.tris) - len(tri_sel)
@@ -487,6 +496,17 @@ thousands of pieces, most of which the ring culling drops anyway (the sphere gra
 degrees of its orbit went from 38k to 100k pieces per order); up to it the tighter tolerance is what
 brings the 180-degree view's second-order ring to the target (benchmarks/bench_accuracy.py)."""
 
+
+RING_EDGE_REACH = 2.0
+RING_EDGE_ORDERS = (2,)
+"""Magnified source triangles within RING_EDGE_REACH patch radii of the axis (axis_patch.Patch.radius)
+get the ring levels of the silhouette's tolerance (SILHOUETTE_FACTOR), without the cap of
+SILHOUETTE_RING_LEVEL_MAX, in the orders RING_EDGE_ORDERS. Their pieces draw the second-order ring
+next to the patch, which is less than a pixel wide, so the straight sides of a piece that fall a
+quarter of a pixel inside it flip a pixel at its edge: with the sphere grazing the axis in front of
+the hole, 1-2% of the pixels (355 and 5 deg of its orbit) before, 0.3-0.5% after, at twice the
+second-order pieces (benchmarks/bench_accuracy.py --orbit 5). The first-order ring is wide there; it
+gains as much only at twice the first-order pieces of the frames behind the hole."""
 
 RING_LEVEL_MARGIN = 0.75
 """Fraction of the largest allowed azimuth per piece that :func:`_ring_levels` aims at: pieces
