@@ -362,6 +362,14 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     radius = RADIUS_FACTOR * float(np.hypot(x[t0], y[t0]).max())
     if not np.isfinite(radius) or radius <= 0:
         return None
+    if closed:
+        cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
+        if _hidden_whole(cr, cand, orders, points, tris, scene, lut):
+            corner_d = np.hypot(x[tris[cand]], y[tris[cand]]).max(axis=1)
+            return Patch(crossing=cr, n_azimuths=0, source_position=np.zeros((0, 3)), tris=np.zeros((0, 3), np.int64),
+                         face_src=np.zeros(0, np.int64), bary=np.zeros((0, 3, 3)), replaced=cand[corner_d <= radius],
+                         radius=radius, orders=tuple(orders), vertex_tri=np.zeros(0, np.int64),
+                         vertex_bary=np.zeros((0, 3)), facing={o: np.zeros(0, bool) for o in orders})
     # the ring's radius on screen, per order
     ring = {o: limit_images(cr, np.zeros(1), scene, lut, o) for o in orders}
     if not all(bool(im.valid[0]) for im in ring.values()):
@@ -394,11 +402,55 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     # the surface under the grid: triangles connected to the crossed one whose projection meets the disc
     # and is wound the same way (a closed surface folds over where it turns parallel to the axis: the
     # sheet beyond the fold projects with the opposite winding and belongs to another crossing)
-    near = np.flatnonzero(axis_distance(x, y, tris) <= radius)
-    near = near[_projected_area(x, y, tris[near]) * _projected_area(x, y, t0[None])[0] > 0]
-    cand = near[_connected(cr.tri, near, of_tri, n_edges)]
+    cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
     return _grid_patch(radii, n_az, cand, _projected_area(x, y, t0[None])[0] < 0, points, tris, x, y, z,
                        scene, lut, orders, closed, cr)
+
+
+def _sheet(cr, radius, tris, of_tri, n_edges, x, y) -> np.ndarray:
+    """Indices of the triangles connected to the crossed one whose projection along the axis meets the
+    disc of ``radius`` (BU) and is wound the same way (a closed surface folds over where it turns
+    parallel to the axis: the sheet beyond the fold projects with the opposite winding and belongs to
+    another crossing)."""
+    near = np.flatnonzero(axis_distance(x, y, tris) <= radius)
+    near = near[_projected_area(x, y, tris[near]) * _projected_area(x, y, tris[cr.tri][None])[0] > 0]
+    return near[_connected(cr.tri, near, of_tri, n_edges)]
+
+
+HIDDEN_AZIMUTHS = 16
+"""Azimuths at which :func:`_hidden_whole` samples the rays that arrive at a crossing point."""
+
+
+def _hidden_whole(cr, cand, orders, points, tris, scene, lut) -> bool:
+    """True if the sheet ``cand`` around the crossing ``cr`` of a closed surface seen from outside is
+    turned away from the camera along the rays of every order: at every corner of its triangles
+    (silhouette.turned_away, margin 0) and, at the crossing point, for the rays arriving from
+    HIDDEN_AZIMUTHS directions around the axis (the point's rays form a cone: its Einstein ring). Such
+    a patch draws nothing, so its grid is not built (the far side of an object behind the hole)."""
+    from .silhouette import turned_away
+
+    corners, local = np.unique(tris[cand], return_inverse=True)
+    pts = points[corners]
+    local = local.reshape(-1, 3)
+    t0 = tris[cr.tri]
+    normal = np.cross(points[t0[1]] - points[t0[0]], points[t0[2]] - points[t0[0]])
+    normal = normal / np.linalg.norm(normal)
+    psi = 2.0 * np.pi * np.arange(HIDDEN_AZIMUTHS) / HIDDEN_AZIMUTHS
+    u = mapping.any_perpendicular(scene.e1)
+    v = np.cross(scene.e1, u)
+    e2 = np.cos(psi)[:, None] * u + np.sin(psi)[:, None] * v
+    r = np.full(len(psi), np.linalg.norm(cr.point - scene.hole) / scene.r_s)
+    phi = np.full(len(psi), np.pi if cr.along < 0 else 0.0)
+    plane = mapping.PlaneCoordinates(r=r, phi=phi, e2=e2, on_axis=np.ones(len(psi), bool))
+    looks = lut.lookup_orders(r, phi, tuple(orders), quantities=("ux", "uy"))
+    for o, (d, _) in illumination.towards_observer(pts, scene, lut, orders).items():
+        if not turned_away(pts, local, d, 0.0).all():
+            return False
+        cone = illumination.leaving_direction(plane, scene, looks[o].ux, looks[o].uy)
+        with np.errstate(invalid="ignore"):
+            if not (cone @ normal < 0).all():
+                return False
+    return True
 
 
 def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orders, closed, crossing):
