@@ -181,6 +181,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
     img_circs = {o: _circumference_from_edges(img_chord_lens[o], edges.of_tri) for o in settings.orders}
     patching = ring_levels and settings.max_tess_level > 1
     closed_memo = []
+    leaving = _Leaving(src.positions, scene, lut, settings.orders)
 
     def seen_closed() -> bool:  # a closed, outward-wound surface seen from outside (computed once)
         if not closed_memo:
@@ -192,7 +193,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                                           src_near_axis) if patching else []
     if _presplit and patching and not crossings:
         pre = _presplit_levels(src, edges, src_circ, img_circs, images_v, scene, settings,
-                               hidden=lambda t: _turned_away(src, t, scene, lut, settings.orders)
+                               hidden=lambda t: _turned_away(src, t, leaving, settings.orders)
                                if seen_closed() else np.zeros(len(t), bool))
         if pre is not None:
             sub = subdivision.subdivide(src.positions, src.tris, edges, pre)
@@ -216,6 +217,15 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                                        closed=seen_closed,
                                        ) if crossings else []
     axis_xy = None  # axis coordinates (x, y) of the source vertices, when needed
+    # edge midpoints are mapped only where a level above 1 is possible: an edge whose image spans at
+    # most one pixel keeps level 1 whatever its curvature (see subdivision.edge_levels); the orders'
+    # edges are mapped together
+    chords = {o: subdivision.angle_of_chord(img_chord_lens[o]) for o in settings.orders}
+    probes = {o: np.flatnonzero(~(chords[o] <= settings.pixel_angle)) if settings.pixel_angle else np.arange(len(ev0))
+              for o in settings.orders}
+    probed = np.unique(np.concatenate([np.zeros(0, np.int64)] + list(probes.values())))
+    mids = mapping.map_vertices_orders(0.5 * (src.positions.take(ev0[probed], axis=0)
+                                              + src.positions.take(ev1[probed], axis=0)), scene, lut, settings.orders)
     for order in settings.orders:
         order_patches = [p for p in patches if order in p.orders]
         replaced = None
@@ -225,13 +235,10 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                 replaced[p.replaced] = True
         img_v = images_v[order]
         img_circ = img_circs[order]
-        chord = subdivision.angle_of_chord(img_chord_lens[order])
-        # edge midpoints are mapped only where a level above 1 is possible: an edge whose image spans
-        # at most one pixel keeps level 1 whatever its curvature (see subdivision.edge_levels)
-        probe = np.flatnonzero(~(chord <= settings.pixel_angle)) if settings.pixel_angle else np.arange(len(ev0))
+        chord = chords[order]
+        probe = probes[order]
         p0, p1 = ev0[probe], ev1[probe]
-        img_m = mapping.map_vertices(0.5 * (src.positions.take(p0, axis=0) + src.positions.take(p1, axis=0)),
-                                     scene, lut, order)
+        img_m = _subset(mids[order], np.searchsorted(probed, probe))
         if order == 2 and _below_pixel(img_v, img_m, settings.pixel_angle):
             out[order] = _empty(order, n_bad, below_pixel=len(src.tris))
             continue
@@ -249,7 +256,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             cand, want, sharp = _ring_levels(src, src_circ, img_circ, scene, img_v, order, settings, replaced)
             maybe = sharp != want
             if raise_edges.any() or maybe.any():
-                sil_edge, sil_tri = _silhouette(src, edges, scene, lut, order, np.concatenate(
+                sil_edge, sil_tri = _silhouette(src, edges, leaving, order, np.concatenate(
                     [probe[raise_edges], edges.of_tri[cand[maybe]].ravel()]))
                 up = raise_edges & sil_edge[probe]
                 levels[probe[up]] = tight[up]
@@ -275,7 +282,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         if split.size and int((tri_level[tri_level > 1] ** 2).sum()) >= max(BACK_FACE_MIN_PIECES, len(src.tris)) \
                 and seen_closed():
             # hidden behind the object's own front: not subdivided (see BACK_FACE_MARGIN)
-            away = split[_turned_away(src, split, scene, lut, (order,))]
+            away = split[_turned_away(src, split, leaving, (order,))]
             if away.size:
                 drop = np.zeros(len(src.tris), bool)
                 drop[away] = True
@@ -534,7 +541,29 @@ their corners and checks that the mesh is closed, which costs more than it saves
 hardly subdivided."""
 
 
-def _turned_away(src, tri_idx, scene, lut, orders) -> np.ndarray:
+class _Leaving:
+    """The unit directions (illumination.towards_observer) in which light leaves the source vertices
+    towards the camera, per order: looked up on demand, for all the build's orders at once, and kept
+    for the rest of the build (the silhouette and the back faces need them at the same corners)."""
+
+    def __init__(self, points, scene, lut, orders):
+        self.points, self.scene, self.lut, self.orders = points, scene, lut, tuple(orders)
+        self.known = np.zeros(len(points), bool)
+        self.d = {o: np.full((len(points), 3), np.nan) for o in self.orders}
+
+    def at(self, vertices, order) -> np.ndarray:
+        """(len(vertices), 3) the directions of ``order`` at the source vertices ``vertices``."""
+        new = vertices[~self.known[vertices]]
+        if new.size:
+            new = np.unique(new)
+            for o, (d, _) in illumination.towards_observer(self.points.take(new, axis=0), self.scene, self.lut,
+                                                           self.orders).items():
+                self.d[o][new] = d
+            self.known[new] = True
+        return self.d[order].take(vertices, axis=0)
+
+
+def _turned_away(src, tri_idx, leaving: _Leaving, orders) -> np.ndarray:
     """(len(tri_idx),) bool: the source triangles ``tri_idx`` turned away (BACK_FACE_MARGIN) along the
     rays of every order in ``orders``; only their corners are looked up."""
     tris = src.tris.take(tri_idx, axis=0)
@@ -542,12 +571,12 @@ def _turned_away(src, tri_idx, scene, lut, orders) -> np.ndarray:
     pts = src.positions.take(corners, axis=0)
     local = local.reshape(-1, 3)
     away = np.ones(len(tri_idx), bool)
-    for d, _ in illumination.towards_observer(pts, scene, lut, tuple(orders)).values():
-        away &= silhouette.turned_away(pts, local, d, BACK_FACE_MARGIN)
+    for o in orders:
+        away &= silhouette.turned_away(pts, local, leaving.at(corners, o), BACK_FACE_MARGIN)
     return away
 
 
-def _silhouette(src, edges, scene, lut, order, of_edges):
+def _silhouette(src, edges, leaving: _Leaving, order, of_edges):
     """silhouette.silhouette of ``order`` as (edge mask (E,), triangle mask (T,)), right for the edges
     ``of_edges`` (indices) and for the triangles whose three edges are among them; only the corners of
     the triangles around those edges are looked up."""
@@ -557,9 +586,8 @@ def _silhouette(src, edges, scene, lut, order, of_edges):
     tris = src.tris.take(near, axis=0)
     corners, local = np.unique(tris, return_inverse=True)
     pts = src.positions.take(corners, axis=0)
-    d, _ = illumination.towards_observer(pts, scene, lut, (order,))[order]
     edge, tri_near = silhouette.silhouette(pts, local.reshape(-1, 3), edges.of_tri.take(near, axis=0),
-                                           len(edges.verts), d)
+                                           len(edges.verts), leaving.at(corners, order))
     tri = np.zeros(len(src.tris), bool)
     tri[near] = tri_near
     return edge, tri
@@ -689,6 +717,13 @@ def _patch_parts(patches, order, planes, offset):
     return tuple(corners if k == 2 else np.concatenate(a) for k, a in enumerate(out))
 
 
+
+
+def _subset(img: mapping.Images, rows) -> mapping.Images:
+    """The images ``rows`` (indices) of ``img`` (positions, directions, distances, validity, LUT values)."""
+    return mapping.Images(position=img.position.take(rows, axis=0), direction=img.direction.take(rows, axis=0),
+                          distance=img.distance.take(rows), valid=img.valid.take(rows), plane=None,
+                          xi=img.xi.take(rows), dt=img.dt.take(rows), ux=None, uy=None)
 
 
 def _below_pixel(img_v: mapping.Images, img_m: mapping.Images, pixel_angle) -> bool:
