@@ -34,6 +34,11 @@ azimuths) whose four corners are on the surface, and replaces only the triangles
 such cells; the innermost circle must be complete (the ring's edge needs every azimuth), else there
 is no patch.
 
+Each vertex of a patch lies on one source triangle, whose corner values (UVs, normals) it takes
+(the pipeline falls back to one triangle's values per face across a seam). On a closed surface seen
+from outside, faces turned away along the rays are not drawn, and a patch whose whole sheet is
+turned away (the far side of an object behind the hole) gets no grid at all.
+
 Units: positions in Blender units (BU); delta in BU; angles in radians; pixel quantities in pixels
 of ``pixel_angle`` radians. Axis coordinates: (x, y, z) relative to the hole, z along the axis
 towards the camera (culling.axis_coordinates).
@@ -46,7 +51,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from . import illumination, mapping
+from . import illumination, mapping, silhouette
 from .culling import axis_coordinates, axis_crossing, axis_distance, hole_angle, max_ring_span
 
 EDGE_FACTOR = 1.0 / 16.0
@@ -362,14 +367,16 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     radius = RADIUS_FACTOR * float(np.hypot(x[t0], y[t0]).max())
     if not np.isfinite(radius) or radius <= 0:
         return None
+    cand, first_radius = None, radius
     if closed:
         cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
-        if _hidden_whole(cr, cand, orders, points, tris, scene, lut):
+        if _hidden_whole(cr, cand, orders, points, tris, scene, lut):  # no grid: it would draw nothing
             corner_d = np.hypot(x[tris[cand]], y[tris[cand]]).max(axis=1)
-            return Patch(crossing=cr, n_azimuths=0, source_position=np.zeros((0, 3)), tris=np.zeros((0, 3), np.int64),
-                         face_src=np.zeros(0, np.int64), bary=np.zeros((0, 3, 3)), replaced=cand[corner_d <= radius],
-                         radius=radius, orders=tuple(orders), vertex_tri=np.zeros(0, np.int64),
-                         vertex_bary=np.zeros((0, 3)), facing={o: np.zeros(0, bool) for o in orders})
+            return Patch(crossing=cr, n_azimuths=0, source_position=np.zeros((0, 3)),
+                         tris=np.zeros((0, 3), np.int64), face_src=np.zeros(0, np.int64), bary=np.zeros((0, 3, 3)),
+                         replaced=cand[corner_d <= radius], radius=radius, orders=tuple(orders),
+                         vertex_tri=np.zeros(0, np.int64), vertex_bary=np.zeros((0, 3)),
+                         facing={o: np.zeros(0, bool) for o in orders})
     # the ring's radius on screen, per order
     ring = {o: limit_images(cr, np.zeros(1), scene, lut, o) for o in orders}
     if not all(bool(im.valid[0]) for im in ring.values()):
@@ -399,10 +406,9 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     n_circles = int(first[0]) + 1 if first.size else len(k) - start  # circles radius q^-k, k = first .. 0
     n_circles = max(1, min(n_circles, MAX_GRID // n_az))
     radii = radius * q ** (-np.arange(n_circles - 1, -1, -1, dtype=np.float64))
-    # the surface under the grid: triangles connected to the crossed one whose projection meets the disc
-    # and is wound the same way (a closed surface folds over where it turns parallel to the axis: the
-    # sheet beyond the fold projects with the opposite winding and belongs to another crossing)
-    cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
+    # the surface under the grid
+    if cand is None or radius != first_radius:
+        cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
     return _grid_patch(radii, n_az, cand, _projected_area(x, y, t0[None])[0] < 0, points, tris, x, y, z,
                        scene, lut, orders, closed, cr)
 
@@ -427,8 +433,6 @@ def _hidden_whole(cr, cand, orders, points, tris, scene, lut) -> bool:
     (silhouette.turned_away, margin 0) and, at the crossing point, for the rays arriving from
     HIDDEN_AZIMUTHS directions around the axis (the point's rays form a cone: its Einstein ring). Such
     a patch draws nothing, so its grid is not built (the far side of an object behind the hole)."""
-    from .silhouette import turned_away
-
     corners, local = np.unique(tris[cand], return_inverse=True)
     pts = points[corners]
     local = local.reshape(-1, 3)
@@ -444,7 +448,7 @@ def _hidden_whole(cr, cand, orders, points, tris, scene, lut) -> bool:
     plane = mapping.PlaneCoordinates(r=r, phi=phi, e2=e2, on_axis=np.ones(len(psi), bool))
     looks = lut.lookup_orders(r, phi, tuple(orders), quantities=("ux", "uy"))
     for o, (d, _) in illumination.towards_observer(pts, scene, lut, orders).items():
-        if not turned_away(pts, local, d, 0.0).all():
+        if not silhouette.turned_away(pts, local, d, 0.0).all():
             return False
         cone = illumination.leaving_direction(plane, scene, looks[o].ux, looks[o].uy)
         with np.errstate(invalid="ignore"):

@@ -103,7 +103,8 @@ def uv_surface_points(uv, points, tris, corner_uv, wrap_uv=(False, False), chunk
             better = depth[rows, k] > best
             best = np.where(better, depth[rows, k], best)
             pick = np.where(better, k, pick)
-            lam = np.where(better[:, None], np.stack([1.0 - l1[rows, k] - l2[rows, k], l1[rows, k], l2[rows, k]], 1), lam)
+            here = np.stack([1.0 - l1[rows, k] - l2[rows, k], l1[rows, k], l2[rows, k]], 1)
+            lam = np.where(better[:, None], here, lam)
         found = best >= -1e-6
         p = np.einsum("mk,mkx->mx", lam, points[tris[t_ok[pick]]])
         out[s:s + chunk][found] = p[found]

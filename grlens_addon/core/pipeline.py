@@ -682,10 +682,10 @@ def _presplit_levels(src, edges, src_circ, img_circs, images_v, scene, settings,
 
 def _patch_parts(patches, order, planes, offset):
     """The faces of the axis patches (axis_patch.Patch) of ``order`` as arrays to append to an image
-    mesh whose vertex count is ``offset``: (tris, source triangle, corners, image positions, directions,
-    c*dt, source positions), corners = (bary (F, 3, 3) in the face's source triangle, each corner's own
-    source triangle (F, 3) and barycentrics there (F, 3, 3)), without faces that have a corner without an image or lie outside one
-    frustum plane; None when no face is left."""
+    mesh whose vertex count is ``offset``: (tris, source triangle, corners, image positions,
+    directions, c*dt, source positions), corners = (bary (F, 3, 3) in the face's source triangle, each
+    corner's own source triangle (F, 3) and barycentrics there (F, 3, 3)), without faces that have a
+    corner without an image or lie outside one frustum plane; None when no face is left."""
     out = [[] for _ in range(7)]
     for p in patches:
         im = p.images.get(order)
@@ -715,8 +715,6 @@ def _patch_parts(patches, order, planes, offset):
         return None
     corners = tuple(np.concatenate(a) for a in zip(*out[2]))
     return tuple(corners if k == 2 else np.concatenate(a) for k, a in enumerate(out))
-
-
 
 
 def _subset(img: mapping.Images, rows) -> mapping.Images:
