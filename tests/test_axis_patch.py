@@ -114,6 +114,7 @@ def test_patch_on_a_tilted_plane(lut):
     EDGE_FACTOR * max_error_px."""
     pts, tris = _grid(-4.0, 1.0, 10, tilt=0.5)
     (p,) = _patches(pts, tris, lut)
+    assert p.complete
     n = p.n_azimuths
     grid = p.source_position[n:]
     x, y, z = culling.axis_coordinates(grid, CAMERA, HOLE)
@@ -195,7 +196,7 @@ def test_patch_stops_at_the_mesh(lut):
     crossing's circles give no patch."""
     pts, tris = _grid(-4.0, 0.04, 2)
     (p,) = _patches(pts, tris, lut)
-    assert 0.04 < p.radius <= 0.04 * math.sqrt(2)
+    assert 0.04 < p.radius <= 0.04 * math.sqrt(2) and not p.complete
     _, y, z = p.source_position.T
     assert np.abs(y).max() <= 0.04 + 1e-12 and np.abs(z).max() <= 0.04 + 1e-12
     n = p.n_azimuths

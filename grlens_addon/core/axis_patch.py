@@ -106,7 +106,9 @@ class Patch:
     barycentric coordinates of each face corner in that triangle (projected along the axis;
     extrapolated for corners in a neighbouring triangle); vertex_tri (V,) and vertex_bary (V, 3): the
     source triangle each vertex lies on and its barycentric coordinates there (the crossed triangle
-    for the limit vertices); replaced: source triangles the patch stands
+    for the limit vertices); complete: every cell out to its outer circle is drawn (False where the
+    surface folds over or ends inside it, so that kept triangles draw part of the ring near the axis);
+    replaced: source triangles the patch stands
     in for; radius (BU): its outer circle's distance from the axis; orders: the image orders whose
     Einstein ring it is; images: {order: mapping.Images} of its vertices; facing: {order: (F,) bool}
     the faces to draw (all, unless back faces of a closed surface are left out, see
@@ -124,6 +126,7 @@ class Patch:
     orders: tuple
     vertex_tri: np.ndarray = field(default=None, repr=False)
     vertex_bary: np.ndarray = field(default=None, repr=False)
+    complete: bool = True
     images: dict = field(default_factory=dict, repr=False)
     facing: dict = field(default_factory=dict, repr=False)
 
@@ -514,7 +517,7 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
                   face_src=face_src, bary=bary.reshape(-1, 3, 3), replaced=replaced, radius=float(ring_radii[-1]),
                   orders=tuple(orders),
                   vertex_tri=np.concatenate([np.full(n_az, crossing.tri), cand[hit]]).astype(np.int64),
-                  vertex_bary=np.concatenate([np.repeat(lim_bary, n_az, axis=0), lam]))
+                  vertex_bary=np.concatenate([np.repeat(lim_bary, n_az, axis=0), lam]), complete=bool(cell.all()))
     regs = mapping.map_vertices_orders(grid_pos, scene, lut, orders, tangents=bool(closed))
     if closed:
         p0, p1, p2 = (points[tris[face_src, k]] for k in range(3))

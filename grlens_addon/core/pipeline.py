@@ -261,9 +261,11 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                 up = raise_edges & sil_edge[probe]
                 levels[probe[up]] = tight[up]
                 want = np.where(maybe & sil_tri[cand] & (sharp <= SILHOUETTE_RING_LEVEL_MAX), sharp, want)
-            if order_patches and order in RING_EDGE_ORDERS and cand.size:
-                # next to a patch, this order's ring is less than a pixel wide: its edge needs the
-                # silhouette's tolerance, whatever the level (see RING_EDGE_REACH)
+            if order_patches and cand.size and (order in RING_EDGE_ORDERS
+                                                or not all(p.complete for p in order_patches)):
+                # next to a patch this order's ring is less than a pixel wide, or the patch stops
+                # short of the surface's fold: the ring's edge there needs the silhouette's tolerance,
+                # whatever the level (see RING_EDGE_REACH)
                 if axis_xy is None:
                     axis_xy = culling.axis_coordinates(src.positions, scene.camera, scene.hole)[:2]
                 reach = RING_EDGE_REACH * max(p.radius for p in order_patches)
@@ -508,12 +510,18 @@ RING_EDGE_REACH = 2.0
 RING_EDGE_ORDERS = (2,)
 """Magnified source triangles within RING_EDGE_REACH patch radii of the axis (axis_patch.Patch.radius)
 get the ring levels of the silhouette's tolerance (SILHOUETTE_FACTOR), without the cap of
-SILHOUETTE_RING_LEVEL_MAX, in the orders RING_EDGE_ORDERS. Their pieces draw the second-order ring
-next to the patch, which is less than a pixel wide, so the straight sides of a piece that fall a
-quarter of a pixel inside it flip a pixel at its edge: with the sphere grazing the axis in front of
-the hole, 1-2% of the pixels (355 and 5 deg of its orbit) before, 0.3-0.5% after, at twice the
-second-order pieces (benchmarks/bench_accuracy.py --orbit 5). The first-order ring is wide there; it
-gains as much only at twice the first-order pieces of the frames behind the hole."""
+SILHOUETTE_RING_LEVEL_MAX, in the orders RING_EDGE_ORDERS, and in every order next to an incomplete
+patch (Patch.complete False).
+- Second order: its pieces draw the ring next to the patch, which is less than a pixel wide, so the
+  straight sides of a piece that fall a quarter of a pixel inside it flip a pixel at its edge. With
+  the sphere grazing the axis in front of the hole, 1-2% of the pixels differed (355 and 5 deg of its
+  orbit), 0.3-0.5% with the rule, at twice the second-order pieces
+  (benchmarks/bench_accuracy.py --orbit 5).
+- First order: its ring is wide where the patch is complete, and the rule would only double its
+  pieces (180 deg: 26k -> 53k). Where the axis crosses the surface next to its fold (the sphere at
+  171-172 and 188 deg), the patch stops short and kept pieces draw the ring's edge: 2.0% -> 0.4% of
+  the pixels differ at 171 deg, and the UV error falls from 1.3 to 0.8 px, at a quarter more time in
+  those frames."""
 
 RING_LEVEL_MARGIN = 0.75
 """Fraction of the largest allowed azimuth per piece that :func:`_ring_levels` aims at: pieces
