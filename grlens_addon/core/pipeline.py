@@ -529,7 +529,7 @@ of a triangle subdivided uniformly in space cover unequal azimuths, and the cull
 bound (culling.cull) must not catch the widest of them."""
 
 
-BACK_FACE_MARGIN = 0.2
+BACK_FACE_MARGIN = 0.1
 """On a closed, outward-wound surface seen from outside (is_closed_outward, winding_number), a
 triangle turned away from the camera along the rays of an order by more than this at all three
 corners (silhouette.turned_away: the cosine between its normal and the direction in which light
@@ -538,9 +538,9 @@ front, so it is not subdivided and its image is not built (CullReport.back_face)
 Einstein ring most of the pieces of a ring frame are such back faces (the sphere at 170 deg: 60% of
 the first-order pieces, at 180 deg 40% of the second-order ones). Back faces closer to the
 silhouette are kept: where the front's straight pieces fall short of the curved outline, the fold
-behind it fills in (with margin 0 the coverage mismatch of the benchmark sphere rises from 0.09% to
-0.31% at 135 deg and from 0.38% to 0.52% at 180 deg; with 0.2 it is unchanged,
-benchmarks/bench_accuracy.py)."""
+behind it fills in. Measured on the benchmark sphere (benchmarks/bench_accuracy.py), coverage
+mismatch at 170 / 180 deg: 0.34% / 0.47% with margin 0, 0.21% / 0.37% with 0.05, 0.21% / 0.33%
+with 0.1 and 0.2 (0.1 is 3-6% faster in those frames than 0.2)."""
 
 BACK_FACE_MIN_PIECES = 4096
 """Back faces are looked for only when the subdivided triangles of an order would make at least
