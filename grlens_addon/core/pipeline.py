@@ -465,12 +465,12 @@ unless they differ by more than this from the values of the face's own source tr
 the corner (a seam: a UV island's edge, a sharp normal), where it takes those for all three."""
 
 
-def _patch_corner_values(values, face_src, bary, vertex_tri, vertex_bary) -> np.ndarray:
+def _patch_corner_values(values, face_src, bary, vertex_tri, vertex_bary, corner_row) -> np.ndarray:
     """(F, 3, K) corner values of patch faces (see _patch_parts and PATCH_SEAM_JUMP) from the source
     triangles' corner values ``values`` (T, 3, K)."""
     values = np.asarray(values, dtype=np.float64)
     carried = np.matmul(bary, values.take(face_src, axis=0))  # the face's triangle, extrapolated
-    own = np.matmul(vertex_bary[:, :, None, :], values.take(vertex_tri, axis=0))[:, :, 0, :]
+    own = subdivision.carry_rows(vertex_bary, vertex_tri, corner_row, values)
     seam = (np.abs(own - carried) > PATCH_SEAM_JUMP).any(axis=(1, 2))
     own[seam] = carried[seam]
     return own
@@ -698,10 +698,12 @@ def _presplit_levels(src, edges, src_circ, img_circs, images_v, scene, settings,
 def _patch_parts(patches, order, planes, offset):
     """The faces of the axis patches (axis_patch.Patch) of ``order`` as arrays to append to an image
     mesh whose vertex count is ``offset``: (tris, source triangle, corners, image positions,
-    directions, c*dt, source positions), corners = (bary (F, 3, 3) in the face's source triangle, each
-    corner's own source triangle (F, 3) and barycentrics there (F, 3, 3)), without faces that have a
+    directions, c*dt, source positions), corners = (bary (F, 3, 3) in the face's source triangle, and
+    the rows of subdivision.carry_rows: each appended vertex's own source triangle (V,) and
+    barycentrics there (V, 3), and the faces' corners among them (F, 3)), without faces that have a
     corner without an image or lie outside one frustum plane; None when no face is left."""
     out = [[] for _ in range(7)]
+    first_offset = offset
     for p in patches:
         im = p.images.get(order)
         if im is None:  # hidden (back faces of a closed surface)
@@ -720,7 +722,7 @@ def _patch_parts(patches, order, planes, offset):
         remap[used] = np.arange(used.size)
         out[0].append(remap.take(faces) + offset)
         out[1].append(p.face_src[ok])
-        out[2].append((p.bary[ok], p.vertex_tri.take(faces), p.vertex_bary.take(faces, axis=0)))
+        out[2].append((p.bary[ok], p.vertex_tri.take(used), p.vertex_bary.take(used, axis=0)))
         out[3].append(im.position.take(used, axis=0))
         out[4].append(im.direction.take(used, axis=0))
         out[5].append(im.distance.take(used))
@@ -728,8 +730,10 @@ def _patch_parts(patches, order, planes, offset):
         offset += used.size
     if not out[0]:
         return None
-    corners = tuple(np.concatenate(a) for a in zip(*out[2]))
-    return tuple(corners if k == 2 else np.concatenate(a) for k, a in enumerate(out))
+    tris = np.concatenate(out[0])
+    bary, vertex_tri, vertex_bary = (np.concatenate(a) for a in zip(*out[2]))
+    corners = (bary, vertex_tri, vertex_bary, tris - first_offset)  # rows: the patch vertices appended
+    return (tris, np.concatenate(out[1]), corners, *(np.concatenate(a) for a in out[3:]))
 
 
 def _subset(img: mapping.Images, rows) -> mapping.Images:
@@ -789,10 +793,7 @@ def _map_subdivided(sub, n_pts, coarse: mapping.Images, scene, lut, order) -> ma
         return coarse
     is_corner = sub.vertex_key < n_pts
     if is_corner.all():
-        idx = sub.vertex_key
-        return mapping.Images(position=coarse.position.take(idx, axis=0), direction=coarse.direction.take(idx, axis=0),
-                              distance=coarse.distance[idx], valid=coarse.valid[idx], plane=None,
-                              xi=coarse.xi[idx], dt=coarse.dt[idx], ux=None, uy=None)
+        return _subset(coarse, sub.vertex_key)
     new = mapping.map_vertices(sub.positions[~is_corner], scene, lut, order)
     n = len(sub.positions)
     position = np.empty((n, 3))
