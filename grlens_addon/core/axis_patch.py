@@ -172,24 +172,30 @@ def limit_images(crossing: Crossing, psi, scene: mapping.Scene, lut, order) -> m
     about the axis (measured in the frame of culling.axis_coordinates): the points of its Einstein
     ring, at the LUT's angle xi for phi = pi (behind the hole) or 0 (in front), at position angle psi
     (order 1) or psi + pi (order 2)."""
-    psi = np.asarray(psi, np.float64)
-    e1 = scene.e1
-    u = mapping.any_perpendicular(e1)
-    v = np.cross(e1, u)
-    e2 = np.cos(psi)[:, None] * u + np.sin(psi)[:, None] * v
-    r = np.full(psi.shape, np.linalg.norm(crossing.point - scene.hole) / scene.r_s)
-    phi = np.full(psi.shape, np.pi if crossing.along < 0 else 0.0)
-    look = lut.lookup(r, phi, order, quantities=("xi", "dt"))
+    plane = _limit_plane(crossing, psi, scene)
+    look = lut.lookup(plane.r, plane.phi, order, quantities=("xi", "dt"))
     sign = 1.0 if order == 1 else -1.0
     c, s = np.cos(look.xi), np.sin(look.xi)
-    direction = c[:, None] * e1 + (sign * s)[:, None] * e2
+    direction = c[:, None] * scene.e1 + (sign * s)[:, None] * plane.e2
     distance = look.dt * scene.r_s
     position = scene.camera + distance[:, None] * direction
     valid = np.isfinite(distance) & np.isfinite(c)
     position[~valid] = np.nan
-    plane = mapping.PlaneCoordinates(r=r, phi=phi, e2=e2, on_axis=np.ones(psi.shape, bool))
     return mapping.Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
                           xi=look.xi, dt=look.dt, ux=None, uy=None)
+
+
+def _limit_plane(crossing: Crossing, psi, scene: mapping.Scene) -> mapping.PlaneCoordinates:
+    """The plane coordinates of the crossing point approached from azimuths ``psi`` (K,) radians about
+    the axis: its radius, phi = pi (behind the hole) or 0 (in front), and the planes through the axis
+    at those azimuths (frame of culling.axis_coordinates)."""
+    psi = np.asarray(psi, np.float64)
+    u = mapping.any_perpendicular(scene.e1)
+    v = np.cross(scene.e1, u)
+    e2 = np.cos(psi)[:, None] * u + np.sin(psi)[:, None] * v
+    r = np.full(psi.shape, np.linalg.norm(crossing.point - scene.hole) / scene.r_s)
+    phi = np.full(psi.shape, np.pi if crossing.along < 0 else 0.0)
+    return mapping.PlaneCoordinates(r=r, phi=phi, e2=e2, on_axis=np.ones(psi.shape, bool))
 
 
 def _connected(seed, cand, of_tri, n_edges) -> np.ndarray:
@@ -221,14 +227,8 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     bary = np.full((m, 3), np.nan)
     if len(cand_tris) == 0 or m == 0:
         return best, bary
-    px, py = x[cand_tris], y[cand_tris]  # (C, 3)
-    d_lo = axis_distance(x, y, cand_tris)
-    d_hi = np.hypot(px, py).max(axis=1)
+    d_lo, d_hi, a_lo, a_hi = _polar_box(cand_tris, x, y)
     step = 2.0 * np.pi / n_az
-    ang = np.arctan2(py, px)
-    rel = np.angle(np.exp(1j * (ang - ang[:, :1])))  # corners' azimuths relative to corner 0, (-pi, pi]
-    a_lo = ang[:, 0] + rel.min(axis=1)
-    a_hi = ang[:, 0] + rel.max(axis=1)
     j_lo = np.floor(a_lo / step).astype(np.int64)
     j_hi = np.ceil(a_hi / step).astype(np.int64)
     full = d_lo == 0.0  # the axis crosses the projection: every azimuth
@@ -265,6 +265,18 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     return best, bary
 
 
+def _polar_box(tris, x, y):
+    """(d_lo, d_hi, a_lo, a_hi), each (T,): the range of distance from the axis (BU; d_lo = 0 when the
+    axis passes through the projection) and of azimuth (radians, a_lo <= a_hi, unwrapped from the
+    first corner's) of the triangles ``tris`` (T, 3) projected along it; x, y from
+    culling.axis_coordinates. When the axis passes through, every azimuth is in the box."""
+    px, py = x[tris], y[tris]  # (T, 3)
+    ang = np.arctan2(py, px)
+    rel = np.angle(np.exp(1j * (ang - ang[:, :1])))  # corners' azimuths relative to corner 0, (-pi, pi]
+    return (axis_distance(x, y, tris), np.hypot(px, py).max(axis=1),
+            ang[:, 0] + rel.min(axis=1), ang[:, 0] + rel.max(axis=1))
+
+
 def _inside_cells(cell, ring_radii, cand_tris, x, y) -> np.ndarray:
     """(C,) bool: the triangles ``cand_tris`` (C, 3) whose projection lies inside drawn cells only.
     ``cell`` (R - 1, N): drawn cells between rings of radii ``ring_radii`` (R,) (BU, increasing, the
@@ -272,13 +284,9 @@ def _inside_cells(cell, ring_radii, cand_tris, x, y) -> np.ndarray:
     azimuth (its corners' range; all azimuths when the axis passes through it), which contains it."""
     n_rows, n_az = cell.shape
     step = 2.0 * np.pi / n_az
-    d_lo = axis_distance(x, y, cand_tris)
-    d_hi = np.hypot(x[cand_tris], y[cand_tris]).max(axis=1)
-    ang = np.arctan2(y[cand_tris], x[cand_tris])
-    rel = np.angle(np.exp(1j * (ang - ang[:, :1])))  # corners' azimuths relative to corner 0, (-pi, pi]
-    a_lo = ang[:, 0] + rel.min(axis=1)
+    d_lo, d_hi, a_lo, a_hi = _polar_box(cand_tris, x, y)
     j0 = np.floor(a_lo / step).astype(np.int64)
-    j1 = np.ceil((ang[:, 0] + rel.max(axis=1)) / step).astype(np.int64)  # exclusive
+    j1 = np.ceil(a_hi / step).astype(np.int64)  # exclusive
     count = np.where(d_lo == 0.0, n_az, np.minimum(j1 - j0, n_az))
     j0 = np.where(d_lo == 0.0, 0, j0 % n_az)
     r0 = np.clip(np.searchsorted(ring_radii, d_lo, side="right") - 1, 0, n_rows)
@@ -442,14 +450,8 @@ def _hidden_whole(cr, cand, orders, points, tris, scene, lut) -> bool:
     t0 = tris[cr.tri]
     normal = np.cross(points[t0[1]] - points[t0[0]], points[t0[2]] - points[t0[0]])
     normal = normal / np.linalg.norm(normal)
-    psi = 2.0 * np.pi * np.arange(HIDDEN_AZIMUTHS) / HIDDEN_AZIMUTHS
-    u = mapping.any_perpendicular(scene.e1)
-    v = np.cross(scene.e1, u)
-    e2 = np.cos(psi)[:, None] * u + np.sin(psi)[:, None] * v
-    r = np.full(len(psi), np.linalg.norm(cr.point - scene.hole) / scene.r_s)
-    phi = np.full(len(psi), np.pi if cr.along < 0 else 0.0)
-    plane = mapping.PlaneCoordinates(r=r, phi=phi, e2=e2, on_axis=np.ones(len(psi), bool))
-    looks = lut.lookup_orders(r, phi, tuple(orders), quantities=("ux", "uy"))
+    plane = _limit_plane(cr, 2.0 * np.pi * np.arange(HIDDEN_AZIMUTHS) / HIDDEN_AZIMUTHS, scene)
+    looks = lut.lookup_orders(plane.r, plane.phi, tuple(orders), quantities=("ux", "uy"))
     for o, (d, _) in illumination.towards_observer(pts, scene, lut, orders).items():
         if not silhouette.turned_away(pts, local, d, 0.0).all():
             return False
