@@ -436,6 +436,23 @@ def test_sphere_polygon_method_vs_reference(lut, angle):
     assert a["lt_rel"]["p99"] < 2e-3
 
 
+def _ring_view(lut, angle):
+    """The benchmark sphere at ``angle`` deg of its orbit seen at 320x180: (camera, source mesh,
+    reference buffers, render) with render() rasterizing the pipeline's images as the add-on builds
+    them (called again after a test changes a setting)."""
+    bench = _bench_accuracy()
+    cam = bench.camera(320, 180)
+    src, scene = bench.sphere_scene(angle)
+    ref = raytrace.trace(scene, cam, HOLE, 1.0)
+
+    def render():
+        images = pipeline.build_images(src, mapping.Scene(cam.position, HOLE, 1.0), lut, bench.make_settings(cam),
+                                       frustum_planes=cam.frustum_planes())
+        return rasterize.rasterize(rasterize.from_images(images), cam)
+
+    return cam, src, ref, render
+
+
 @pytest.mark.parametrize("angle, bound", [(0, 0.05), (170, 0.008), (180, 0.006)])
 def test_sphere_ring_views_vs_reference(lut, angle, bound):
     """The paper's sphere next to and on the observer-hole axis at 320x180, where the second-order
@@ -444,14 +461,8 @@ def test_sphere_ring_views_vs_reference(lut, angle, bound):
     axis (170 deg) the near side has no gaps the far side shows through: under 1% of the pixels
     show a point of the sphere more than a quarter of its radius from the reference's (6.7% before
     the first split next to the axis, pipeline._presplit_levels)."""
-    bench = _bench_accuracy()
-    cam = bench.camera(320, 180)
-    src, scene = bench.sphere_scene(angle)
-    ref = raytrace.trace(scene, cam, HOLE, 1.0)
-    images = pipeline.build_images(src, mapping.Scene(cam.position, HOLE, 1.0), lut, bench.make_settings(cam),
-                                   frustum_planes=cam.frustum_planes())
-    poly = rasterize.rasterize(rasterize.from_images(images), cam)
-    a = image_metrics.compare(ref, poly, wrap_uv=(True, False), other_surface=0.125,
+    cam, src, ref, render = _ring_view(lut, angle)
+    a = image_metrics.compare(ref, render(), wrap_uv=(True, False), other_surface=0.125,
                               image_pixels=_exact_pixels(cam), uv_points=_uv_points(src))["orders"]["all"]
     print(f"\nsphere {angle} deg 320x180: mismatch {a['mismatch']} of {a['covered_ref']} "
           f"({100 * a['mismatch_frac']:.2f}%), other surface {a['other_surface']} of {a['matched']}, "
@@ -468,16 +479,10 @@ def test_second_order_ring_edge_next_to_a_patch(lut, monkeypatch, angle):
     """The sphere grazing the axis in front of the hole, at 320x180: its second-order ring, less than a
     pixel wide, is drawn next to the axis patch by pieces whose ring levels aim at the silhouette's
     tolerance (pipeline.RING_EDGE_REACH); without that, 2-4% of the covered pixels differ."""
-    bench = _bench_accuracy()
-    cam = bench.camera(320, 180)
-    src, scene = bench.sphere_scene(angle)
-    ref = raytrace.trace(scene, cam, HOLE, 1.0)
+    _, _, ref, render = _ring_view(lut, angle)
 
     def mismatch():
-        images = pipeline.build_images(src, mapping.Scene(cam.position, HOLE, 1.0), lut, bench.make_settings(cam),
-                                       frustum_planes=cam.frustum_planes())
-        poly = rasterize.rasterize(rasterize.from_images(images), cam)
-        return image_metrics.compare(ref, poly)["orders"]["all"]["mismatch_frac"]
+        return image_metrics.compare(ref, render())["orders"]["all"]["mismatch_frac"]
 
     assert mismatch() < 0.006
     monkeypatch.setattr(pipeline, "RING_EDGE_ORDERS", ())
@@ -489,16 +494,10 @@ def test_first_order_ring_edge_next_to_an_incomplete_patch(lut, monkeypatch):
     patch stops short (Patch.complete False) and kept pieces draw the first-order ring's edge, to the
     silhouette's tolerance (pipeline.RING_EDGE_REACH). Treating the patch as complete leaves 2.9% of
     the covered pixels different."""
-    bench = _bench_accuracy()
-    cam = bench.camera(320, 180)
-    src, scene = bench.sphere_scene(171)
-    ref = raytrace.trace(scene, cam, HOLE, 1.0)
+    _, _, ref, render = _ring_view(lut, 171)
 
     def mismatch():
-        images = pipeline.build_images(src, mapping.Scene(cam.position, HOLE, 1.0), lut, bench.make_settings(cam),
-                                       frustum_planes=cam.frustum_planes())
-        poly = rasterize.rasterize(rasterize.from_images(images), cam)
-        return image_metrics.compare(ref, poly)["orders"]["all"]["mismatch_frac"]
+        return image_metrics.compare(ref, render())["orders"]["all"]["mismatch_frac"]
 
     assert mismatch() < 0.012
     grid_patch = axis_patch._grid_patch
