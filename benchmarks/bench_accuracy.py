@@ -7,8 +7,8 @@ Scene (seed 000, section 4.2, as benchmarks/bench_frame.py): r_s = 1 BU, a UV sp
 exact null geodesic per pixel), the polygon pipeline (pipeline.build_images, both orders, LUT
 20 r_s / [1.05, 40] r_s / 256x512, the add-on's default settings, frustum culling as the add-on does;
 time = best of --repeat) rasterized with grlens_addon.core.rasterize, and the metrics of
-grlens_addon.core.image_metrics (coverage mismatch; screen error: how far from the pixel the surface
-point it shows truly appears, through the exact connecting geodesic; UV error in pixels through the
+grlens_addon.core.image_metrics (coverage mismatch; screen error: how far from the pixel the texture
+point drawn there truly appears, through the exact connecting geodesic; UV error in pixels through the
 reference's UV gradient and in texels of a 1024^2 texture; relative light-travel-time error; per
 order).
 
@@ -415,7 +415,7 @@ def main(argv=None):
         "The UV target is checked on the screen error. Where the image is not squeezed the two UV measures "
         "agree (45-135 deg below). Where it is squeezed to about a pixel across, beside the Einstein ring, the "
         "UV changes non-linearly within one pixel: J from finite differences is then wrong and nearly "
-        "singular, and the linearised measure reads pixels (up to thousands) where the point drawn is a "
+        "singular, and the linearised measure reads pixels (up to thousands) where the texture drawn is a "
         "fraction of a pixel from its true place; on rings one pixel wide it has no value at all (n/a). The "
         "reference's own UVs have a screen error below 1e-6 px (tests/test_raytrace.py), so the measure "
         "checks the ray tracer and lutgen.connect against each other as well.",
