@@ -128,6 +128,38 @@ def test_subdivision_is_watertight_for_any_levels(seed):
     assert len(S.row_bary) < 0.75 * 3 * len(S.tris)  # corners are shared: fewer rows than face corners
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_subdivision_strips_are_watertight_and_linear_in_the_levels(seed):
+    """Strips (subdivide(..., strips=)) on some triangles, the uniform grid on the others: still
+    closed and consistently wound, area unchanged, barycentrics right, and a strip triangle with side
+    levels l1, l2, l3 makes l1 + l2 + l3 - 2 faces with no interior vertex."""
+    rng = np.random.default_rng(seed)
+    P, T = _octahedron()
+    P = P + rng.normal(0, 0.05, P.shape)
+    E = subdivision.mesh_edges(T)
+    levels = rng.integers(1, 20, len(E.verts)) if seed % 2 else rng.choice([1, 2, 3, 40], len(E.verts))
+    mask = rng.random(len(T)) < 0.7
+    xy = P[:, :2] + np.array([3.0, 0.5]) * (seed % 3 > 0)  # the origin inside some triangles' projections or beside all
+    S = subdivision.subdivide(P, T, E, levels, strips=(mask, xy))
+    directed, undirected = _directed_edge_counts(S.tris)
+    assert directed.max() == 1 and np.all(undirected == 2)
+    assert len(S.positions) - len(undirected) + len(S.tris) == 2
+    area = lambda X, F: 0.5 * np.linalg.norm(np.cross(X[F[:, 1]] - X[F[:, 0]], X[F[:, 2]] - X[F[:, 0]]), axis=1)
+    np.testing.assert_allclose(np.bincount(S.source_tri, area(S.positions, S.tris), len(T)), area(P, T), rtol=1e-9)
+    np.testing.assert_allclose(np.einsum("fck,fkx->fcx", S.bary, P[T[S.source_tri]]), S.positions[S.tris], atol=1e-12)
+    np.testing.assert_allclose(S.corner_values(P[T]), S.positions[S.tris], atol=1e-12)
+    side = levels[E.of_tri]
+    counts = np.bincount(S.source_tri, minlength=len(T))
+    _, a, _, b = subdivision._strip_corners(T, xy)
+    strip = mask & (side[np.arange(len(T)), subdivision._slot(a, b)] > 1)
+    np.testing.assert_array_equal(counts[strip], side[strip].sum(axis=1) - 2)
+    # a face of a strip triangle has its corners on the triangle's sides
+    f = np.flatnonzero(strip[S.source_tri])
+    assert np.all((S.bary[f] < 1e-12).any(axis=2))
+    uniform = S.source_tri[~strip[S.source_tri]]
+    assert np.all(counts[np.unique(uniform)] >= 1)
+
+
 def test_subdivision_levels_and_rho():
     lv = subdivision.edge_levels(np.array([0.0, 1e-4, 0.01, 0.05, 1.0, np.nan]), 64, 5.0, 0.75)
     assert list(lv) == [1, 1, 11, 34, 64, 1]  # ceil(64 * min(1, 5 rho^0.75)): 0.3, 10.1, 33.8, 320

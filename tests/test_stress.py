@@ -239,8 +239,8 @@ class SubdivideSpy:
         self.calls = []
         self.original = original = subdivision.subdivide
 
-        def spy(points, tris, edges, levels):
-            out = original(points, tris, edges, levels)
+        def spy(points, tris, edges, levels, strips=None):
+            out = original(points, tris, edges, levels, strips)
             self.calls.append((len(tris), len(out.tris), int(np.unique(out.source_tri).size)))
             return out
 

@@ -11,7 +11,7 @@ Units: positions in Blender units (BU); light travel time as a length c*dt in BU
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -226,6 +226,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
     probed = np.unique(np.concatenate([np.zeros(0, np.int64)] + list(probes.values())))
     mids = mapping.map_vertices_orders(0.5 * (src.positions.take(ev0[probed], axis=0)
                                               + src.positions.take(ev1[probed], axis=0)), scene, lut, settings.orders)
+    given_settings = settings
     for order in settings.orders:
         order_patches = [p for p in patches if order in p.orders]
         replaced = None
@@ -242,8 +243,12 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         if order == 2 and _below_pixel(img_v, img_m, settings.pixel_angle):
             out[order] = _empty(order, n_bad, below_pixel=len(src.tris))
             continue
+        settings = given_settings  # the order's own tolerance (THIN_FACTOR) applies to its levels only
+        if ring_levels and THIN_FACTOR != 1.0 and _thin_image(img_v, scene, settings.pixel_angle):
+            settings = replace(settings, max_error_px=settings.max_error_px * THIN_FACTOR)
         rho = subdivision.rho(img_v.direction.take(p0, axis=0), img_v.direction.take(p1, axis=0), img_m.direction)
         levels = np.ones(len(ev0), dtype=np.int64)  # edges not probed keep level 1
+        strip_tri = None
         levels[probe] = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
                                                 chord[probe], settings.pixel_angle, settings.max_error_px)
         if ring_levels:
@@ -253,7 +258,8 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                                             chord[probe], settings.pixel_angle,
                                             settings.max_error_px * SILHOUETTE_FACTOR)
             raise_edges = tight != levels[probe]
-            cand, want, sharp = _ring_levels(src, src_circ, img_circ, scene, img_v, order, settings, replaced)
+            cand, want, sharp, r_px = _ring_levels(src, src_circ, img_circ, scene, img_v, order, settings, replaced)
+            want0 = want
             maybe = sharp != want
             if raise_edges.any() or maybe.any():
                 sil_edge, sil_tri = _silhouette(src, edges, leaving, order, np.concatenate(
@@ -271,7 +277,20 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                 reach = RING_EDGE_REACH * max(p.radius for p in order_patches)
                 near = culling.axis_distance(axis_xy[0], axis_xy[1], src.tris.take(cand, axis=0)) < reach
                 want = np.where(near, np.maximum(want, sharp), want)
-            np.maximum.at(levels, edges.of_tri[cand].ravel(), np.repeat(want, 3))
+            strip = np.zeros(cand.size, bool)
+            if STRIP_BAND_PX and cand.size:
+                strip = _strip_candidates(src, cand, want, r_px, leaving, order)
+            if strip.any():
+                # strips: each side gets the level of its own azimuth (see STRIP_BAND_PX)
+                if axis_xy is None:
+                    axis_xy = culling.axis_coordinates(src.positions, scene.camera, scene.hole)[:2]
+                tight = (want > want0)[strip]  # raised to the silhouette's tolerance
+                side = _side_levels(axis_xy, src.tris.take(cand[strip], axis=0), r_px[strip],
+                                    settings.max_error_px * np.where(tight, SILHOUETTE_FACTOR, STRIP_TOLERANCE), settings)
+                np.maximum.at(levels, edges.of_tri[cand[strip]].ravel(), side.ravel())
+                strip_tri = np.zeros(len(src.tris), bool)
+                strip_tri[cand[strip]] = True
+            np.maximum.at(levels, edges.of_tri[cand[~strip]].ravel(), np.repeat(want[~strip], 3))
         tri_sel, out_v = _inside_frustum(img_v, img_m, probe, src.tris, edges, planes)
         n_pre = len(src.tris) - len(tri_sel)
         if replaced is not None:  # drawn by the axis patches instead
@@ -290,8 +309,11 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                 drop[away] = True
                 tri_sel = tri_sel[~drop[tri_sel]]
                 n_back = int(away.size)
+        strips = None
+        if strip_tri is not None:
+            strips = (strip_tri[tri_sel], np.column_stack(axis_xy))
         sub = subdivision.subdivide(src.positions, src.tris[tri_sel],
-                                    subdivision.Edges(edges.verts, edges.of_tri[tri_sel]), levels)
+                                    subdivision.Edges(edges.verts, edges.of_tri[tri_sel]), levels, strips)
         img = _map_subdivided(sub, n_pts, img_v, scene, lut, order)
         face_src = tri_sel[sub.source_tri]  # each face's source triangle (index into src.tris)
         bits = None
@@ -302,7 +324,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             bits[~is_corner] = culling.outside_bits(img.position[~is_corner], planes)
         keep, report = culling.cull(
             sub.tris, img.direction, img.valid, sub.positions, scene.camera, settings.cull_ratio, planes,
-            img.position, scene.hole, order, settings.pixel_angle, settings.max_error_px,
+            img.position, scene.hole, order, settings.pixel_angle, given_settings.max_error_px,
             source_circumference=_face_values(sub, face_src, src_circ, lambda t: culling.circumference(
                 culling.unit_directions(sub.positions, scene.camera), t)),
             image_circumference=_face_values(sub, face_src, img_circ,
@@ -617,25 +639,84 @@ def _ring_levels(src, src_circ, img_circ, scene, img_v: mapping.Images, order, s
     triangles' circumferences (culling.circumference) undistorted and of this order's image;
     ``skip`` (T,) bool: triangles left alone (replaced by an axis patch).
 
-    Returns (cand, want, sharp): the candidate triangles (indices) and their levels for
-    ``max_error_px`` and for SILHOUETTE_FACTOR * max_error_px (the silhouette's tolerance)."""
+    Returns (cand, want, sharp, corner_px): the candidate triangles (indices), their levels for
+    ``max_error_px`` and for SILHOUETTE_FACTOR * max_error_px (the silhouette's tolerance), and the
+    angular radii (pixels) of their corners' images (len(cand), 3)."""
     top = int(np.clip(settings.max_tess_level, 1, subdivision.GRID))
     tris = src.tris
     cand = _ring_candidates(src_circ, img_circ)
     if skip is not None:
         cand = cand[~skip[cand]]
     if cand.size == 0:
-        return cand, np.ones(0, np.int64), np.ones(0, np.int64)
+        return cand, np.ones(0, np.int64), np.ones(0, np.int64), np.zeros((0, 3))
     _, span = culling.axis_geometry(src.positions, tris[cand], scene.camera, scene.hole, order)
     with np.errstate(invalid="ignore", divide="ignore"):
         radius = culling.hole_angle(img_v.direction, scene.camera, scene.hole) / settings.pixel_angle  # px
-        r_px = radius[tris[cand]].max(axis=1)
+        corner_px = radius[tris[cand]]
+        r_px = corner_px.max(axis=1)
         out = []
         for tol in (settings.max_error_px, settings.max_error_px * SILHOUETTE_FACTOR):
             # the subdivision is uniform in space, not in azimuth: aim at RING_LEVEL_MARGIN of d_max
             n = np.ceil(span / (RING_LEVEL_MARGIN * culling.max_ring_span(r_px, tol)))
             out.append(np.clip(np.nan_to_num(n, nan=1.0), 1, top).astype(np.int64))
-    return cand, out[0], out[1]
+    return cand, out[0], out[1], corner_px
+
+
+THIN_PX = 2.0
+THIN_FACTOR = 0.5
+"""An order whose whole image lies within a band of THIN_PX pixels in radius about the hole's
+direction (the second-order image of an object in front of the hole, around the Einstein ring) is
+subdivided to THIN_FACTOR times ``max_error_px``: such an image is about a pixel wide, so every one
+of its pixels is an edge pixel and a fraction of a pixel flips it."""
+
+
+def _thin_image(img_v: mapping.Images, scene, pixel_angle) -> bool:
+    """True when the images ``img_v`` of the source vertices lie within THIN_PX pixels of radius about
+    the hole's direction (see THIN_PX)."""
+    with np.errstate(invalid="ignore"):
+        r = culling.hole_angle(img_v.direction, scene.camera, scene.hole)
+        r = r[np.isfinite(r)]
+    return bool(r.size) and float(r.max() - r.min()) < THIN_PX * pixel_angle
+
+
+STRIP_BAND_PX = 1.0
+STRIP_MIN_LEVEL = 3
+STRIP_TOLERANCE = 0.25
+"""Ring triangles (_ring_levels) whose image lies within a band of this many pixels in radius about
+the hole's direction (their corners'), that face one way at all corners (no fold inside) and whose
+level is at least STRIP_MIN_LEVEL are cut into strips across the ring (subdivision.subdivide,
+``strips``) instead of the uniform grid: the ring's straight-side bound concerns the pieces' extent
+in azimuth only, and across a band that narrow the straight strips stay within the tolerance. Each
+side gets the level of its own azimuth (_side_levels). 0 turns strips off."""
+
+
+def _strip_candidates(src, cand, want, corner_px, leaving: _Leaving, order) -> np.ndarray:
+    """(len(cand),) bool: the ring triangles ``cand`` to cut into strips (see STRIP_BAND_PX)."""
+    band = corner_px.max(axis=1) - corner_px.min(axis=1)
+    ok = (band < STRIP_BAND_PX) & (want >= STRIP_MIN_LEVEL)
+    if ok.any():
+        t = cand[ok]
+        tris = src.tris.take(t, axis=0)
+        corners, local = np.unique(tris, return_inverse=True)
+        sign = silhouette.facing_signs(src.positions.take(corners, axis=0), local.reshape(-1, 3),
+                                       leaving.at(corners, order))
+        ok[ok] = (sign == sign[:, :1]).all(axis=1) & (sign[:, 0] != 0)
+    return ok
+
+
+def _side_levels(axis_xy, tris, corner_px, tolerance, settings) -> np.ndarray:
+    """(S, 3) ring levels of the sides of the triangles ``tris`` (S, 3) cut into strips: side k
+    (corner k -> k + 1) covering the azimuth D_k about the axis gets ceil(D_k / (RING_LEVEL_MARGIN d_max))
+    as in :func:`_ring_levels`, with d_max from the triangle's largest corner radius ``corner_px``
+    and ``tolerance`` (S,) pixels."""
+    top = int(np.clip(settings.max_tess_level, 1, subdivision.GRID))
+    x, y = axis_xy[0].take(tris), axis_xy[1].take(tris)
+    xn, yn = np.roll(x, -1, axis=1), np.roll(y, -1, axis=1)
+    span = np.abs(np.arctan2(x * yn - y * xn, x * xn + y * yn))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d_max = culling.max_ring_span(corner_px.max(axis=1), tolerance)
+        n = np.ceil(span / (RING_LEVEL_MARGIN * d_max[:, None]))
+    return np.clip(np.nan_to_num(n, nan=1.0), 1, top).astype(np.int64)
 
 
 PRESPLIT_MIN = 12

@@ -186,15 +186,141 @@ def carry_rows(row_bary, row_src, corner_row, values) -> np.ndarray:
     return per_row.take(corner_row, axis=0)
 
 
-def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.ndarray) -> Subdivided:
+def _strip_corners(src, xy):
+    """For strips (see :func:`subdivide`): the angles (S, 3) of the corners of the triangles ``src``
+    (S, 3) about the origin of the 2-D coordinates ``xy`` (N, 2), and the local indices (S,) of the
+    first, middle and last corner in angle (a, c, b)."""
+    ang = np.arctan2(xy.take(src, axis=0)[..., 1], xy.take(src, axis=0)[..., 0])
+    rel = np.mod(ang - ang[:, :1] + np.pi, 2 * np.pi) - np.pi
+    order = np.argsort(rel, axis=1, kind="stable")
+    return ang, order[:, 0], order[:, 1], order[:, 2]
+
+
+def _slot(i, j):
+    """Edge slot (0, 1, 2) of the side joining local corners ``i`` and ``j`` (arrays): slot k joins
+    corner k and corner (k + 1) % 3."""
+    lo, hi = np.minimum(i, j), np.maximum(i, j)
+    return np.where(hi - lo == 1, lo, 2)
+
+
+def _chain(src, of_tri, verts, levels, n_pts, x, y, xy):
+    """Interior points of the sides from local corner ``x`` to local corner ``y`` (S,) of the triangles
+    ``src`` (S, 3): per point (in order along each side, triangles in order) its triangle (local index),
+    key, barycentrics (P, 3) and the 2-D coordinates (P, 2) of ``xy`` interpolated there."""
+    rows = np.arange(len(src))
+    e = of_tri[rows, _slot(x, y)]
+    lev = levels.take(e)
+    count = lev - 1
+    tri = np.repeat(rows, count)
+    start = np.cumsum(count) - count
+    m = np.arange(int(count.sum())) - np.repeat(start, count) + 1  # 1 .. lev - 1 from corner x
+    lev_p, e_p = lev.take(tri), e.take(tri)
+    t = m / lev_p
+    vx, vy = src[tri, x.take(tri)], src[tri, y.take(tri)]
+    forward = vx == verts[e_p, 0]  # the edge's own grid runs from its lower vertex
+    key = n_pts + e_p * (GRID + 1) + np.where(forward, m, lev_p - m)
+    bary = np.zeros((tri.size, 3))
+    bary[np.arange(tri.size), x.take(tri)] = 1.0 - t
+    bary[np.arange(tri.size), y.take(tri)] = t
+    p = (1.0 - t)[:, None] * xy.take(vx, axis=0) + t[:, None] * xy.take(vy, axis=0)
+    return tri, key, bary, p
+
+
+def _strip_faces(src, of_tri, verts, levels, n_pts, xy):
+    """Strip triangulation of the triangles ``src`` (S, 3) (see :func:`subdivide`, ``strips``).
+
+    Returns (keys (P,), bary (P, 3), row_tri (P,), faces (F, 3) indexing the P points, face_tri (F,)):
+    the points are the corners (3 per triangle, in corner order) and the sides' interior grid points;
+    faces are wound like their source triangle."""
+    S = len(src)
+    ang, a, c, b = _strip_corners(src, xy)
+    rows = np.arange(S)
+    # chain 1: side a -> b; chain 2: sides a -> c, the corner c, c -> b
+    t1, k1, b1, p1 = _chain(src, of_tri, verts, levels, n_pts, a, b, xy)
+    ta, ka, ba, pa = _chain(src, of_tri, verts, levels, n_pts, a, c, xy)
+    tb, kb, bb, pb = _chain(src, of_tri, verts, levels, n_pts, c, b, xy)
+    bc = np.zeros((S, 3))
+    bc[rows, c] = 1.0
+    t2 = np.concatenate([ta, rows, tb])
+    s2 = np.concatenate([np.zeros(ta.size), np.ones(S), np.full(tb.size, 2.0)])
+    o2 = np.lexsort((s2, t2))  # per triangle: side a -> c, corner c, side c -> b
+    t2, k2 = t2[o2], np.concatenate([ka, src[rows, c], kb])[o2]
+    b2, p2 = np.concatenate([ba, bc, bb])[o2], np.concatenate([pa, xy.take(src[rows, c], axis=0), pb])[o2]
+    n1, n2 = np.bincount(t1, minlength=S), np.bincount(t2, minlength=S)
+    off1, off2 = np.cumsum(n1) - n1, np.cumsum(n2) - n2
+    # angle of each point from corner a, made non-decreasing along each chain (the triangle's index
+    # keeps the chains of different triangles apart)
+    base = ang[rows, a]
+
+    def along(t, p):
+        r = np.mod(np.arctan2(p[:, 1], p[:, 0]) - base.take(t) + np.pi, 2 * np.pi) - np.pi
+        return np.maximum.accumulate(4.0 * t + np.clip(r, 0.0, np.pi))
+
+    s1, s2 = along(t1, p1), along(t2, p2)
+    # merge the chains by angle; every interleaving triangulates the (convex) triangle
+    merged = np.argsort(np.concatenate([s1, s2]), kind="stable")
+    tri_m = np.concatenate([t1, t2])[merged]
+    is2 = merged >= t1.size
+    idx = np.where(is2, merged - t1.size, merged)  # index within its chain array
+    local = idx - np.where(is2, off2.take(tri_m), off1.take(tri_m))  # position along its chain
+    c1 = np.cumsum(~is2) - (~is2)  # chain-1 points before (global); per triangle below
+    c2 = np.cumsum(is2) - is2
+    c1 -= off1.take(tri_m)
+    c2 -= off2.take(tri_m)
+    # points: corners (3 per triangle), chain 1, chain 2
+    n_c = 3 * S
+    P1, P2 = n_c + off1, n_c + t1.size + off2  # first point of each triangle's chains
+    corner_pt = 3 * rows[:, None] + np.arange(3)[None, :]
+    ev = local > 0  # the first point of each chain starts the strip
+    e1, e2 = ev & ~is2, ev & is2
+    tm1, tm2 = tri_m[e1], tri_m[e2]
+    f1 = np.stack([P1.take(tm1) + local[e1] - 1, P1.take(tm1) + local[e1],
+                   P2.take(tm1) + np.maximum(c2[e1] - 1, 0)], axis=1)
+    f2 = np.stack([P2.take(tm2) + local[e2], P2.take(tm2) + local[e2] - 1,
+                   P1.take(tm2) + np.maximum(c1[e2] - 1, 0)], axis=1)
+    first = np.stack([corner_pt[rows, a], P1, P2], axis=1)
+    last = np.stack([P1 + n1 - 1, corner_pt[rows, b], P2 + n2 - 1], axis=1)
+    faces = np.concatenate([first, f1, f2, last])
+    face_tri = np.concatenate([rows, tm1, tri_m[e2], rows])
+    # wound like the source: (a, b, c) is an even permutation of (0, 1, 2) when b follows a
+    flip = (b != (a + 1) % 3).take(face_tri)
+    faces[flip] = faces[flip][:, ::-1]
+    keys = np.concatenate([src.ravel(), k1, k2])
+    bary = np.concatenate([np.tile(np.eye(3), (S, 1)), b1, b2])
+    row_tri = np.concatenate([np.repeat(rows, 3), t1, t2])
+    return keys, bary, row_tri, faces, face_tri
+
+
+def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.ndarray, strips=None) -> Subdivided:
     """Subdivide triangles ``tris`` (T, 3) of vertices ``points`` (N, 3) with per-edge ``levels``
-    (integers 1 .. GRID, shape (E,)). See the module docstring for the scheme."""
+    (integers 1 .. GRID, shape (E,)). See the module docstring for the scheme.
+
+    ``strips``: None, or (mask (T,) bool, xy (N, 2)): the masked triangles are cut into strips instead
+    of the uniform grid. Seen from the origin of the 2-D coordinates ``xy`` of the points, the side
+    joining the first and the last corner in angle and the two sides through the middle corner are
+    two chains of the sides' own grid points, and consecutive points in angle are joined across the
+    triangle (a zipper): l1 + l2 + l3 - 2 faces for side levels l1, l2, l3 instead of about L^2, with
+    no interior vertices. Meant for triangles whose image is long in that angle and narrow across it
+    (around an Einstein ring, with xy the coordinates across the observer-hole axis). Triangles whose
+    first-to-last side has level 1 get the uniform grid."""
     points = np.asarray(points, dtype=np.float64)
     tris = np.asarray(tris, dtype=np.int64)
     n_pts, n_edges = len(points), len(edges.verts)
     lev = levels.take(edges.of_tri)
     tri_level = np.maximum(np.maximum(lev[:, 0], lev[:, 1]), lev[:, 2])
-    if len(tris) and tri_level.max() == 1:  # nothing to split: the source itself
+    strip_sel = None
+    if strips is not None and len(tris):
+        strip_sel = np.flatnonzero(strips[0] & (tri_level > 1))
+        if strip_sel.size:
+            xy = np.asarray(strips[1], dtype=np.float64)
+            _, a, _, b = _strip_corners(tris[strip_sel], xy)
+            strip_sel = strip_sel[lev[strip_sel, _slot(a, b)] > 1]
+        if strip_sel.size:
+            tri_level = tri_level.copy()
+            tri_level[strip_sel] = 0  # not in the uniform groups below
+        else:
+            strip_sel = None
+    if len(tris) and tri_level.max() == 1 and strip_sel is None:  # nothing to split: the source itself
         return Subdivided(positions=points, tris=tris.copy(), source_tri=np.arange(len(tris)), row_bary=None,
                           row_src=None, corner_row=None, vertex_key=np.arange(n_pts), identity=True, n_pass=len(tris))
     src_parts, other_key_parts, other_pos_parts, level_parts = [], [], [], []
@@ -203,6 +329,8 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     unsplit_faces = None
     interior_base = n_pts + n_edges * (GRID + 1)
     for L in np.unique(tri_level):
+        if L == 0:
+            continue
         sel = np.flatnonzero(tri_level == L)
         src = tris[sel]  # (S, 3)
         if L == 1:  # unsplit triangles: their corners are source vertices, keyed by their indices
@@ -256,6 +384,18 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
         row_src_parts.append(np.repeat(sel, nv))
         corner_row_parts.append((n_rows + nv * np.arange(sel.size)[:, None, None] + ttris[None]).reshape(-1, 3))
         n_rows += sel.size * nv
+    if strip_sel is not None:
+        keys, sbary, row_tri, sfaces, face_tri = _strip_faces(tris[strip_sel], edges.of_tri[strip_sel],
+                                                              edges.verts, levels, n_pts, xy)
+        other = keys >= n_pts
+        other_key_parts.append(keys[other])
+        other_pos_parts.append((sbary[other], tris[strip_sel[row_tri[other]]]))
+        level_parts.append((keys[None, :], other[None, :], sfaces))
+        src_parts.append(strip_sel[face_tri])
+        row_bary_parts.append(sbary)
+        row_src_parts.append(strip_sel[row_tri])
+        corner_row_parts.append(n_rows + sfaces)
+        n_rows += keys.size
     if not level_parts:
         return Subdivided(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64),
                           np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros((0, 3), np.int64), np.zeros(0, np.int64))
@@ -285,7 +425,7 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
         face_parts.append(vid[:, ttris].reshape(-1, 3))
     faces = np.concatenate(face_parts)
     keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
-    n_unsplit = int(np.count_nonzero(tri_level == 1))  # np.unique put level 1 first
+    n_unsplit = int(np.count_nonzero(tri_level == 1))  # np.unique put level 1 first (level 0: strips)
     n_pass = n_unsplit if keep[:n_unsplit].all() else 0
     source_tri, corner_row = np.concatenate(src_parts), np.concatenate(corner_row_parts)
     if not keep.all():
