@@ -18,6 +18,14 @@ Vertices are then welded by integer keys (source corner / edge and l-grid index 
 interior), so the result is watertight whenever the source is; triangles that collapse under
 snapping are dropped. All of this is vectorised per level.
 
+Strips (optional, per triangle): around an Einstein ring a triangle's image is long in azimuth and
+can be a fraction of a pixel across. The uniform grid then makes L^2 pieces where about 2 L thin ones
+do: the triangle is cut by joining the grid points of its sides in order of their angle about a
+given centre (the observer-hole axis), so that only the sides' own points are used. That keeps the
+shared-edge rule above (crack-free against uniform neighbours) and adds no interior vertex. The
+pieces are straight across the triangle, so the caller uses strips only where the image is that
+narrow (pipeline.STRIP_BAND_PX).
+
 Units: positions in Blender units; barycentric coordinates are dimensionless.
 """
 from __future__ import annotations
