@@ -144,7 +144,9 @@ def test_subdivision_strips_are_watertight_and_linear_in_the_levels(seed):
     directed, undirected = _directed_edge_counts(S.tris)
     assert directed.max() == 1 and np.all(undirected == 2)
     assert len(S.positions) - len(undirected) + len(S.tris) == 2
-    area = lambda X, F: 0.5 * np.linalg.norm(np.cross(X[F[:, 1]] - X[F[:, 0]], X[F[:, 2]] - X[F[:, 0]]), axis=1)
+    def area(X, F):
+        return 0.5 * np.linalg.norm(np.cross(X[F[:, 1]] - X[F[:, 0]], X[F[:, 2]] - X[F[:, 0]]), axis=1)
+
     np.testing.assert_allclose(np.bincount(S.source_tri, area(S.positions, S.tris), len(T)), area(P, T), rtol=1e-9)
     np.testing.assert_allclose(np.einsum("fck,fkx->fcx", S.bary, P[T[S.source_tri]]), S.positions[S.tris], atol=1e-12)
     np.testing.assert_allclose(S.corner_values(P[T]), S.positions[S.tris], atol=1e-12)
