@@ -127,6 +127,12 @@ def reference_image(scene, cam):
     return buf, time.perf_counter() - t0
 
 
+def _angle(text):
+    """An orbit angle from the command line (degrees): an int when whole (171), else a float (170.5)."""
+    v = float(text)
+    return int(v) if v.is_integer() else v
+
+
 def _fmt_pct(x):
     return "n/a" if not np.isfinite(x) else f"{100 * x:.2f}%"
 
@@ -160,7 +166,8 @@ def main_table(angles, cam, lut, repeat, refs, png_dir=None):
                      f"{ntri.get(1, 0)} / {ntri.get(2, 0)} |")
         rows += image_metrics.markdown_rows(m, f"{a} deg")
         if png_dir:
-            image_metrics.save_png(os.path.join(png_dir, f"accuracy_{a:03d}.png"), {"reference": ref, "polygon": poly})
+            image_metrics.save_png(os.path.join(png_dir, f"accuracy_{a:05.1f}.png" if isinstance(a, float)
+                                                else f"accuracy_{a:03d}.png"), {"reference": ref, "polygon": poly})
     targets = ["| angle [deg] | view | mismatch / covered (< 0.5%) | UV err p99 [px] (< 0.5): screen error | "
                "UV err via J p99 [px] | speed-up (>= 100x) |",
                "|---|---|---|---|---|---|"]
@@ -364,8 +371,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore", RuntimeWarning)
     w, h = (int(x) for x in args.resolution.lower().split("x"))
-    angles = [int(a) for a in args.angles.split(",") if a.strip()]
-    sweep_angles = [int(a) for a in args.sweep_angles.split(",")] if args.sweep_angles else angles
+    angles = [_angle(a) for a in args.angles.split(",") if a.strip()]
+    sweep_angles = [_angle(a) for a in args.sweep_angles.split(",")] if args.sweep_angles else angles
     cam = camera(w, h)
     if args.png_dir:
         os.makedirs(args.png_dir, exist_ok=True)
