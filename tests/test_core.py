@@ -162,6 +162,21 @@ def test_subdivision_strips_are_watertight_and_linear_in_the_levels(seed):
     assert np.all(counts[np.unique(uniform)] >= 1)
 
 
+def test_subdivision_strips_fall_back_to_the_grid_without_finite_coordinates():
+    """A strip triangle with a corner whose 2-D coordinates are not finite is split on the uniform grid,
+    so the result is the same as without strips for it (and still closed)."""
+    P, T = _octahedron()
+    E = subdivision.mesh_edges(T)
+    levels = np.full(len(E.verts), 5)
+    xy = P[:, :2] + 3.0
+    xy[4] = np.nan  # the top vertex: triangles 0-3
+    S = subdivision.subdivide(P, T, E, levels, strips=(np.ones(len(T), bool), xy))
+    directed, undirected = _directed_edge_counts(S.tris)
+    assert directed.max() == 1 and np.all(undirected == 2)
+    counts = np.bincount(S.source_tri, minlength=len(T))
+    assert np.all(counts[:4] == 25) and np.all(counts[4:] == 13)  # grid 5^2; strips 5 + 5 + 5 - 2
+
+
 def test_subdivision_levels_and_rho():
     lv = subdivision.edge_levels(np.array([0.0, 1e-4, 0.01, 0.05, 1.0, np.nan]), 64, 5.0, 0.75)
     assert list(lv) == [1, 1, 11, 34, 64, 1]  # ceil(64 * min(1, 5 rho^0.75)): 0.3, 10.1, 33.8, 320

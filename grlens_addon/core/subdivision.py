@@ -318,9 +318,10 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     tri_level = np.maximum(np.maximum(lev[:, 0], lev[:, 1]), lev[:, 2])
     strip_sel = None
     if strips is not None and len(tris):
-        strip_sel = np.flatnonzero(strips[0] & (tri_level > 1))
+        xy = np.asarray(strips[1], dtype=np.float64)
+        finite = np.isfinite(xy).all(axis=1)
+        strip_sel = np.flatnonzero(strips[0] & (tri_level > 1) & finite[tris].all(axis=1))
         if strip_sel.size:
-            xy = np.asarray(strips[1], dtype=np.float64)
             _, a, _, b = _strip_corners(tris[strip_sel], xy)
             strip_sel = strip_sel[lev[strip_sel, _slot(a, b)] > 1]
         if strip_sel.size:
