@@ -52,7 +52,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from . import illumination, mapping, silhouette
-from .culling import axis_coordinates, axis_crossing, axis_distance, hole_angle, max_ring_span
+from .culling import (axis_coordinates, axis_crossing, axis_distance, hole_angle, max_ring_span,
+                      within_axis_distance)
 
 EDGE_FACTOR = 1.0 / 16.0
 """The ring's edge is drawn with chords that sag by at most this times ``max_error_px``: a second-order
@@ -429,7 +430,7 @@ def _sheet(cr, radius, tris, of_tri, n_edges, x, y) -> np.ndarray:
     disc of ``radius`` (BU) and is wound the same way (a closed surface folds over where it turns
     parallel to the axis: the sheet beyond the fold projects with the opposite winding and belongs to
     another crossing)."""
-    near = np.flatnonzero(axis_distance(x, y, tris) <= radius)
+    near = np.flatnonzero(within_axis_distance(x, y, tris, radius))
     near = near[_projected_area(x, y, tris[near]) * _projected_area(x, y, tris[cr.tri][None])[0] > 0]
     return near[_connected(cr.tri, near, of_tri, n_edges)]
 

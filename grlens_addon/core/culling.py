@@ -139,6 +139,21 @@ def axis_distance(x, y, tris) -> np.ndarray:
     return np.where(inside, 0.0, d)
 
 
+def within_axis_distance(x, y, tris, limit) -> np.ndarray:
+    """(T,) bool: :func:`axis_distance` of the triangles ``tris`` (T, 3) <= ``limit`` (BU), computed only
+    for those not excluded by their corners' box (all corners more than ``limit`` to one side of the
+    axis along x or along y puts the whole triangle farther): the same answer, far cheaper on a large
+    mesh of which a few triangles lie next to the axis."""
+    with np.errstate(invalid="ignore"):  # NaN compares False: never excluded
+        side = ((x > limit).astype(np.uint8) | ((x < -limit).astype(np.uint8) << 1)
+                | ((y > limit).astype(np.uint8) << 2) | ((y < -limit).astype(np.uint8) << 3))
+    maybe = (side.take(tris[:, 0]) & side.take(tris[:, 1]) & side.take(tris[:, 2])) == 0
+    out = np.zeros(len(tris), bool)
+    t = np.flatnonzero(maybe)
+    out[t] = axis_distance(x, y, tris.take(t, axis=0)) <= limit
+    return out
+
+
 def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     """Per triangle: (straddles, span).
 

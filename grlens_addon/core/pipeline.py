@@ -274,7 +274,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                 if axis_xy is None:
                     axis_xy = culling.axis_coordinates(src.positions, scene.camera, scene.hole)[:2]
                 reach = RING_EDGE_REACH * max(p.radius for p in order_patches)
-                near = culling.axis_distance(axis_xy[0], axis_xy[1], src.tris.take(cand, axis=0)) < reach
+                near = culling.within_axis_distance(axis_xy[0], axis_xy[1], src.tris.take(cand, axis=0), reach)
                 want = np.where(near, np.maximum(want, sharp), want)
             strip = np.zeros(cand.size, bool)
             if STRIP_BAND_PX and cand.size:
@@ -297,7 +297,8 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             n_replaced = int(by_patch.sum())
             tri_sel = tri_sel[~by_patch]
         n_back = 0
-        tri_level = levels.take(edges.of_tri.take(tri_sel, axis=0)).max(axis=1)
+        lv = levels.take(edges.of_tri.take(tri_sel, axis=0))
+        tri_level = np.maximum(np.maximum(lv[:, 0], lv[:, 1]), lv[:, 2])
         split = tri_sel[tri_level > 1]
         if split.size and int((tri_level[tri_level > 1] ** 2).sum()) >= max(BACK_FACE_MIN_PIECES, len(src.tris)) \
                 and seen_closed():
@@ -651,8 +652,8 @@ def _ring_levels(src, src_circ, img_circ, scene, img_v: mapping.Images, order, s
     _, span = culling.axis_geometry(src.positions, tris[cand], scene.camera, scene.hole, order)
     with np.errstate(invalid="ignore", divide="ignore"):
         radius = culling.hole_angle(img_v.direction, scene.camera, scene.hole) / settings.pixel_angle  # px
-        corner_px = radius[tris[cand]]
-        r_px = corner_px.max(axis=1)
+        corner_px = radius.take(tris.take(cand, axis=0))
+        r_px = np.maximum(np.maximum(corner_px[:, 0], corner_px[:, 1]), corner_px[:, 2])
         out = []
         for tol in (settings.max_error_px, settings.max_error_px * SILHOUETTE_FACTOR):
             # the subdivision is uniform in space, not in azimuth: aim at RING_LEVEL_MARGIN of d_max
@@ -701,7 +702,8 @@ coverage mismatch 0.21 / 0.33% -> 0.19 / 0.36% at 170 / 180 deg. A band of 2 px 
 
 def _strip_candidates(src, cand, want, corner_px, leaving: _Leaving, order) -> np.ndarray:
     """(len(cand),) bool: the ring triangles ``cand`` to cut into strips (see STRIP_BAND_PX)."""
-    band = corner_px.max(axis=1) - corner_px.min(axis=1)
+    c0, c1, c2 = corner_px[:, 0], corner_px[:, 1], corner_px[:, 2]
+    band = np.maximum(np.maximum(c0, c1), c2) - np.minimum(np.minimum(c0, c1), c2)
     ok = (band < STRIP_BAND_PX) & (want >= STRIP_MIN_LEVEL)
     if ok.any():
         t = cand[ok]

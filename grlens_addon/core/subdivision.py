@@ -319,8 +319,9 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     strip_sel = None
     if strips is not None and len(tris):
         xy = np.asarray(strips[1], dtype=np.float64)
-        finite = np.isfinite(xy).all(axis=1)
-        strip_sel = np.flatnonzero(strips[0] & (tri_level > 1) & finite[tris].all(axis=1))
+        strip_sel = np.flatnonzero(strips[0] & (tri_level > 1))
+        finite = np.isfinite(xy.take(tris.take(strip_sel, axis=0), axis=0))  # (S, 3, 2)
+        strip_sel = strip_sel[finite.reshape(len(strip_sel), 6).all(axis=1)]
         if strip_sel.size:
             _, a, _, b = _strip_corners(tris[strip_sel], xy)
             strip_sel = strip_sel[lev[strip_sel, _slot(a, b)] > 1]
