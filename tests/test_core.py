@@ -177,6 +177,22 @@ def test_subdivision_strips_fall_back_to_the_grid_without_finite_coordinates():
     assert np.all(counts[:4] == 25) and np.all(counts[4:] == 13)  # grid 5^2; strips 5 + 5 + 5 - 2
 
 
+def test_within_axis_distance_agrees_with_axis_distance():
+    """The box-filtered test gives exactly axis_distance <= limit: random triangles around the axis,
+    ones the axis passes through, ones beside it whose corners are all farther than the limit although
+    an edge passes closer, and a corner with NaN coordinates (never excluded by the box)."""
+    rng = np.random.default_rng(5)
+    x, y = rng.uniform(-2, 2, 3000), rng.uniform(-2, 2, 3000)
+    x[:3], y[:3] = [1.0, -1.0, 1.0], [0.2, 0.2, 5.0]  # edge (1, 0.2)-(-1, 0.2) passes at 0.2
+    x[3] = np.nan
+    tris = np.vstack([[0, 1, 2], [3, 4, 5], rng.integers(0, 3000, (4000, 3))])
+    for limit in (0.1, 0.3, 1.0):
+        with np.errstate(invalid="ignore"):
+            expect = culling.axis_distance(x, y, tris) <= limit
+        np.testing.assert_array_equal(culling.within_axis_distance(x, y, tris, limit), expect)
+    assert culling.within_axis_distance(x, y, tris[:1], 0.3)[0] and not culling.within_axis_distance(x, y, tris[:1], 0.1)[0]
+
+
 def test_subdivision_levels_and_rho():
     lv = subdivision.edge_levels(np.array([0.0, 1e-4, 0.01, 0.05, 1.0, np.nan]), 64, 5.0, 0.75)
     assert list(lv) == [1, 1, 11, 34, 64, 1]  # ceil(64 * min(1, 5 rho^0.75)): 0.3, 10.1, 33.8, 320
