@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .mapping import any_perpendicular
+from .mapping import any_perpendicular, row_norm
 
 
 @dataclass
@@ -55,7 +55,7 @@ def unit_directions(points, camera):
     """Unit vectors from ``camera`` (3,) to ``points`` (N, 3) (BU); NaN for the camera itself."""
     v = np.asarray(points, dtype=np.float64) - camera
     with np.errstate(invalid="ignore", divide="ignore"):
-        return v / np.linalg.norm(v, axis=1)[:, None]
+        return v / row_norm(v)[:, None]
 
 
 AZIMUTH_SPAN_MAX = np.radians(30.0)
@@ -213,7 +213,7 @@ def side_planes(origin, corner_directions) -> np.ndarray:
     centre = corners.mean(axis=0)
     n = np.cross(corners, np.roll(corners, -1, axis=0))
     n *= np.where(n @ centre < 0, -1.0, 1.0)[:, None]
-    n /= np.linalg.norm(n, axis=1)[:, None]
+    n /= row_norm(n)[:, None]
     return np.column_stack([n, -(n @ origin)])
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mapping import R_OBS_TOLERANCE, Scene, plane_coordinates
+from .mapping import R_OBS_TOLERANCE, Scene, plane_coordinates, row_norm
 
 
 def irradiance(points, normals, light, hole, r_s, lut, intensity=1.0, orders=(1, 2)):
@@ -66,5 +66,5 @@ def leaving_direction(plane, scene: Scene, ux, uy) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         f_r = u_r / np.sqrt(1.0 - 1.0 / plane.r)  # local static frame components
         d = -(f_r[:, None] * e_r + r_uphi[:, None] * e_phi)
-        d /= np.linalg.norm(d, axis=1)[:, None]
+        d /= row_norm(d)[:, None]
     return d

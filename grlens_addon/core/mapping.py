@@ -79,13 +79,19 @@ def plane_coordinates(points: np.ndarray, scene: Scene) -> PlaneCoordinates:
         p = (np.asarray(points, dtype=np.float64) - scene.hole) / scene.r_s
         along = p @ e1
         perp = p - along[:, None] * e1
-        n_perp = np.linalg.norm(perp, axis=1)
-        r = np.linalg.norm(p, axis=1)
+        n_perp = row_norm(perp)
+        r = row_norm(p)
         on_axis = n_perp <= AXIS_EPS * r
         fallback = any_perpendicular(e1)
         e2 = np.where(on_axis[:, None], fallback, perp / n_perp[:, None])
         phi = np.arctan2(n_perp, along)
     return PlaneCoordinates(r=r, phi=phi, e2=e2, on_axis=on_axis)
+
+
+def row_norm(v) -> np.ndarray:
+    """(N,) Euclidean lengths of the rows of ``v`` (N, 3): as np.linalg.norm(v, axis=1) to the last bit
+    or so, several times faster on long arrays (one fused pass instead of a reduction per row)."""
+    return np.sqrt(np.einsum("ij,ij->i", v, v))
 
 
 def any_perpendicular(e1):

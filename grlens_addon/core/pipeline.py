@@ -427,7 +427,7 @@ def winding_number(points, tris, query) -> float:
     tris = np.asarray(tris, dtype=np.int64)
     p = np.asarray(points, dtype=np.float64) - np.asarray(query, np.float64)
     a, b, c = (p.take(tris[:, k], axis=0) for k in range(3))
-    la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
+    la, lb, lc = (mapping.row_norm(v) for v in (a, b, c))
     num = np.einsum("ij,ij->i", a, np.cross(b, c))
     den = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", b, c) * la
            + np.einsum("ij,ij->i", c, a) * lb)

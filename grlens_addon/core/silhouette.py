@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .mapping import row_norm
+
 
 def facing_signs(points, tris, directions) -> np.ndarray:
     """(T, 3) sign of n . d at each corner of the triangles ``tris`` (T, 3) of ``points`` (N, 3; BU),
@@ -38,7 +40,7 @@ def turned_away(points, tris, directions, margin: float) -> np.ndarray:
     p0, p1, p2 = (points.take(tris[:, k], axis=0) for k in range(3))
     n = np.cross(p1 - p0, p2 - p0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        n /= np.linalg.norm(n, axis=1)[:, None]
+        n /= row_norm(n)[:, None]
         dots = np.einsum("fx,fcx->fc", n, directions.take(tris, axis=0))
         return (dots < -margin).all(axis=1)
 

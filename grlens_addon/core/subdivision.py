@@ -35,6 +35,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from .mapping import row_norm
+
 GRID = 64  # largest level (GPU tessellators' usual maximum, as in seed 000)
 
 
@@ -72,7 +74,7 @@ def edge_levels(rho: np.ndarray, max_tess_level: int, a: float, b: float,
 
 def chord_angle(d_a: np.ndarray, d_b: np.ndarray) -> np.ndarray:
     """Angle (radians) between unit directions (E, 3): an edge's image size on the view sphere."""
-    return angle_of_chord(np.linalg.norm(d_b - d_a, axis=1))
+    return angle_of_chord(row_norm(d_b - d_a))
 
 
 def angle_of_chord(chord):
@@ -82,8 +84,8 @@ def angle_of_chord(chord):
 
 def rho(d_a: np.ndarray, d_b: np.ndarray, d_mid: np.ndarray) -> np.ndarray:
     """Eq. (18) on unit apparent directions (E, 3) of the end points and of the mapped midpoint."""
-    chord = np.linalg.norm(d_b - d_a, axis=1)
-    dev = np.linalg.norm(d_mid - 0.5 * (d_a + d_b), axis=1)
+    chord = row_norm(d_b - d_a)
+    dev = row_norm(d_mid - 0.5 * (d_a + d_b))
     with np.errstate(invalid="ignore", divide="ignore"):
         out = dev / chord
     return np.where(chord > 0, out, 0.0)
