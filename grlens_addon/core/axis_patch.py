@@ -250,7 +250,9 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     tr = cand_tris[pt]
     with np.errstate(invalid="ignore", divide="ignore"):
         lam = _projected_bary(qx, qy, tr, x, y)  # not finite for edge-on projections
-    inside = np.isfinite(lam).all(axis=1) & (lam >= -1e-12).all(axis=1)
+    with np.errstate(invalid="ignore"):  # (NaN compares False; an infinite one makes the sum NaN or inf)
+        inside = ((lam[:, 0] >= -1e-12) & (lam[:, 1] >= -1e-12) & (lam[:, 2] >= -1e-12)
+                  & np.isfinite(lam[:, 0] + lam[:, 1] + lam[:, 2]))
     if not inside.any():
         return best, bary
     sel = np.flatnonzero(inside)
