@@ -245,8 +245,9 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     pt = np.repeat(ti, reps)
     offs = np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps)
     pj = (np.repeat(j_lo[ti], reps) + offs) % n_az
-    qx = radii[pc] * np.cos(pj * step)
-    qy = radii[pc] * np.sin(pj * step)
+    psi = 2.0 * np.pi * pj / n_az  # as _grid_patch's azimuths, to the bit
+    qx = radii[pc] * np.cos(psi)
+    qy = radii[pc] * np.sin(psi)
     tr = cand_tris[pt]
     with np.errstate(invalid="ignore", divide="ignore"):
         lam = _projected_bary(qx, qy, tr, x, y)  # not finite for edge-on projections
@@ -513,27 +514,43 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
     vy = np.concatenate([np.zeros(n_az), qy[grid]])
     # each face's source triangle: the one under its corner of largest index (on its outer circle;
     # faces are small, so their centroid lies in that triangle or next to it)
-    where = hit[faces.max(axis=1) - n_lim]
+    where = hit[np.maximum(np.maximum(faces[:, 0], faces[:, 1]), faces[:, 2]) - n_lim]
     face_src = cand[where]
-    bary = _projected_bary(vx[faces].ravel(), vy[faces].ravel(), np.repeat(tris[face_src], 3, axis=0), x, y)
     replaced = cand[_inside_cells(cell, ring_radii, tris[cand], x, y)]
     lim_bary = _projected_bary(np.zeros(1), np.zeros(1), tris[crossing.tri][None], x, y)
+    vertex_tri = np.concatenate([np.full(n_az, crossing.tri), cand[hit]]).astype(np.int64)
+    vertex_bary = np.concatenate([np.repeat(lim_bary, n_az, axis=0), lam])
+    # the corners' barycentrics in their face's source triangle: the vertex's own where that is the
+    # triangle under it (the same numbers), computed for the others
+    bary = vertex_bary[faces]  # (F, 3, 3)
+    other = vertex_tri[faces] != face_src[:, None]
+    if other.any():
+        f_o, c_o = np.nonzero(other)
+        v_o = faces[f_o, c_o]
+        bary[f_o, c_o] = _projected_bary(vx[v_o], vy[v_o], tris[face_src[f_o]], x, y)
     patch = Patch(crossing=crossing, n_azimuths=n_az, source_position=src_pos, tris=faces.astype(np.int64),
-                  face_src=face_src, bary=bary.reshape(-1, 3, 3), replaced=replaced, radius=float(ring_radii[-1]),
-                  orders=tuple(orders),
-                  vertex_tri=np.concatenate([np.full(n_az, crossing.tri), cand[hit]]).astype(np.int64),
-                  vertex_bary=np.concatenate([np.repeat(lim_bary, n_az, axis=0), lam]), complete=bool(cell.all()))
+                  face_src=face_src, bary=bary, replaced=replaced, radius=float(ring_radii[-1]),
+                  orders=tuple(orders), vertex_tri=vertex_tri, vertex_bary=vertex_bary, complete=bool(cell.all()))
     regs = mapping.map_vertices_orders(grid_pos, scene, lut, orders, tangents=bool(closed))
     if closed:
-        p0, p1, p2 = (points[tris[face_src, k]] for k in range(3))
-        normal = np.cross(p1 - p0, p2 - p0)  # (F, 3) geometric normals of the faces' source triangles
+        def normals(t):  # (len(t), 3) geometric normals of the source triangles t
+            p0, p1, p2 = (points[tris[t, k]] for k in range(3))
+            return np.cross(p1 - p0, p2 - p0)
+
         grid_corner = faces >= n_lim  # limit vertices have no direction of their own
+        at = np.maximum(faces - n_lim, 0)  # each corner's grid vertex
+        # n . d per grid vertex with its own triangle's normal, and per corner where the face's
+        # source triangle is another one
+        v_normal = normals(vertex_tri[n_lim:])
+        f_o, c_o = np.nonzero(other & grid_corner)
+        o_normal = normals(face_src[f_o])
         for o, reg in regs.items():
             dd = illumination.leaving_direction(reg.plane, scene, reg.ux, reg.uy)
             with np.errstate(invalid="ignore"):
-                dots = np.einsum("fx,fcx->fc", normal, dd[np.maximum(faces - n_lim, 0)])
+                dots = np.einsum("vx,vx->v", v_normal, dd)[at]
+                dots[f_o, c_o] = np.einsum("ix,ix->i", o_normal, dd[at[f_o, c_o]])
             away = np.where(grid_corner, dots < 0, True)  # NaN (no ray) counts as facing
-            patch.facing[o] = ~away.all(axis=1)
+            patch.facing[o] = ~(away[:, 0] & away[:, 1] & away[:, 2])
     shown = tuple(o for o in orders if o not in patch.facing or patch.facing[o].any())
     for o in orders:
         patch.facing.setdefault(o, np.ones(len(faces), bool))
