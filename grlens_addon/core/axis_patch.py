@@ -448,9 +448,7 @@ def _hidden_whole(cr, cand, orders, points, tris, scene, lut) -> bool:
     (silhouette.turned_away, margin 0) and, at the crossing point, for the rays arriving from
     HIDDEN_AZIMUTHS directions around the axis (the point's rays form a cone: its Einstein ring). Such
     a patch draws nothing, so its grid is not built (the far side of an object behind the hole)."""
-    corners, local = np.unique(tris[cand], return_inverse=True)
-    pts = points[corners]
-    local = local.reshape(-1, 3)
+    _, pts, local = silhouette.compact(points, tris[cand])
     t0 = tris[cr.tri]
     normal = np.cross(points[t0[1]] - points[t0[0]], points[t0[2]] - points[t0[0]])
     normal = normal / np.linalg.norm(normal)

@@ -596,10 +596,7 @@ class _Leaving:
 def _turned_away(src, tri_idx, leaving: _Leaving, orders) -> np.ndarray:
     """(len(tri_idx),) bool: the source triangles ``tri_idx`` turned away (BACK_FACE_MARGIN) along the
     rays of every order in ``orders``; only their corners are looked up."""
-    tris = src.tris.take(tri_idx, axis=0)
-    corners, local = np.unique(tris, return_inverse=True)
-    pts = src.positions.take(corners, axis=0)
-    local = local.reshape(-1, 3)
+    corners, pts, local = silhouette.compact(src.positions, src.tris.take(tri_idx, axis=0))
     away = np.ones(len(tri_idx), bool)
     for o in orders:
         away &= silhouette.turned_away(pts, local, leaving.at(corners, o), BACK_FACE_MARGIN)
@@ -613,11 +610,9 @@ def _silhouette(src, edges, leaving: _Leaving, order, of_edges):
     mark = np.zeros(len(edges.verts), bool)
     mark[of_edges] = True
     near = np.flatnonzero(mark.take(edges.of_tri).any(axis=1))
-    tris = src.tris.take(near, axis=0)
-    corners, local = np.unique(tris, return_inverse=True)
-    pts = src.positions.take(corners, axis=0)
-    edge, tri_near = silhouette.silhouette(pts, local.reshape(-1, 3), edges.of_tri.take(near, axis=0),
-                                           len(edges.verts), leaving.at(corners, order))
+    corners, pts, local = silhouette.compact(src.positions, src.tris.take(near, axis=0))
+    edge, tri_near = silhouette.silhouette(pts, local, edges.of_tri.take(near, axis=0), len(edges.verts),
+                                           leaving.at(corners, order))
     tri = np.zeros(len(src.tris), bool)
     tri[near] = tri_near
     return edge, tri
@@ -706,11 +701,8 @@ def _strip_candidates(src, cand, want, corner_px, leaving: _Leaving, order) -> n
     band = np.maximum(np.maximum(c0, c1), c2) - np.minimum(np.minimum(c0, c1), c2)
     ok = (band < STRIP_BAND_PX) & (want >= STRIP_MIN_LEVEL)
     if ok.any():
-        t = cand[ok]
-        tris = src.tris.take(t, axis=0)
-        corners, local = np.unique(tris, return_inverse=True)
-        sign = silhouette.facing_signs(src.positions.take(corners, axis=0), local.reshape(-1, 3),
-                                       leaving.at(corners, order))
+        corners, pts, local = silhouette.compact(src.positions, src.tris.take(cand[ok], axis=0))
+        sign = silhouette.facing_signs(pts, local, leaving.at(corners, order))
         ok[ok] = (sign == sign[:, :1]).all(axis=1) & (sign[:, 0] != 0)
     return ok
 

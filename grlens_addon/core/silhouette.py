@@ -19,6 +19,14 @@ import numpy as np
 from .mapping import row_norm
 
 
+def compact(points, tris):
+    """(corners, corner points, local tris): the vertex indices that the triangles ``tris`` (T, 3) use
+    (sorted), their ``points``, and ``tris`` re-indexed into them, so that the functions below (and the
+    rays they need) run on those corners only."""
+    corners, local = np.unique(tris, return_inverse=True)
+    return corners, points.take(corners, axis=0), local.reshape(-1, 3)
+
+
 def facing_signs(points, tris, directions) -> np.ndarray:
     """(T, 3) sign of n . d at each corner of the triangles ``tris`` (T, 3) of ``points`` (N, 3; BU),
     with ``directions`` (N, 3) the vertices' leaving directions d: +1 facing, -1 facing away, 0 on the
