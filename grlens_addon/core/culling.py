@@ -154,6 +154,15 @@ def within_axis_distance(x, y, tris, limit) -> np.ndarray:
     return out
 
 
+def side_azimuths(x, y, tris) -> np.ndarray:
+    """(T, 3) the angle (radians, <= pi) about the axis between the projected corners k and k + 1 of
+    the triangles ``tris`` (T, 3): the azimuth side k covers; x, y from :func:`axis_coordinates`."""
+    px, py = x[tris], y[tris]
+    qx, qy = np.roll(px, -1, axis=1), np.roll(py, -1, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.abs(np.arctan2(px * qy - py * qx, px * qx + py * qy))
+
+
 def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     """Per triangle: (straddles, span).
 
@@ -172,18 +181,10 @@ def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     tris = np.asarray(tris, dtype=np.int64)
     x, y, z = axis_coordinates(source_points, camera, hole)
     inside, crossed, along = axis_crossing(x, y, z, tris)
-    xa, xb, xc = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
-    ya, yb, yc = y[tris[:, 0]], y[tris[:, 1]], y[tris[:, 2]]
-    with np.errstate(invalid="ignore", divide="ignore"):
-
-        def angle(x1, y1, x2, y2):  # angle between the projected corners, seen from the axis
-            return np.abs(np.arctan2(x1 * y2 - y1 * x2, x1 * x2 + y1 * y2))
-
-        span = np.full(len(tris), np.nan)
-        sel = slice(None) if span_of is None else span_of
-        xa_, xb_, xc_, ya_, yb_, yc_ = (c[sel] for c in (xa, xb, xc, ya, yb, yc))
-        span[sel] = np.maximum(np.maximum(angle(xa_, ya_, xb_, yb_), angle(xb_, yb_, xc_, yc_)),
-                               angle(xc_, yc_, xa_, ya_))
+    span = np.full(len(tris), np.nan)
+    sel = slice(None) if span_of is None else span_of
+    sides = side_azimuths(x, y, tris[sel])
+    span[sel] = np.maximum(np.maximum(sides[:, 0], sides[:, 1]), sides[:, 2])
     span = np.where(inside, np.pi, span)
     straddles = crossed & (along < 0) if order == 1 else crossed
     return straddles, span

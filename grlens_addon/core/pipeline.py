@@ -216,7 +216,13 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                                        crossings=crossings,
                                        closed=seen_closed,
                                        ) if crossings else []
-    axis_xy = None  # axis coordinates (x, y) of the source vertices, when needed
+    xy_memo = []
+
+    def axis_xy():  # (N, 2) axis coordinates x, y of the source vertices (computed once, when needed)
+        if not xy_memo:
+            xy_memo.append(np.column_stack(culling.axis_coordinates(src.positions, scene.camera, scene.hole)[:2]))
+        return xy_memo[0]
+
     # edge midpoints are mapped only where a level above 1 is possible: an edge whose image spans at
     # most one pixel keeps level 1 whatever its curvature (see subdivision.edge_levels); the orders'
     # edges are mapped together
@@ -271,20 +277,17 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                 # next to a patch this order's ring is less than a pixel wide, or the patch stops
                 # short of the surface's fold: the ring's edge there needs the silhouette's tolerance,
                 # whatever the level (see RING_EDGE_REACH)
-                if axis_xy is None:
-                    axis_xy = culling.axis_coordinates(src.positions, scene.camera, scene.hole)[:2]
                 reach = RING_EDGE_REACH * max(p.radius for p in order_patches)
-                near = culling.within_axis_distance(axis_xy[0], axis_xy[1], src.tris.take(cand, axis=0), reach)
+                xy = axis_xy()
+                near = culling.within_axis_distance(xy[:, 0], xy[:, 1], src.tris.take(cand, axis=0), reach)
                 want = np.where(near, np.maximum(want, sharp), want)
             strip = np.zeros(cand.size, bool)
             if STRIP_BAND_PX and cand.size:
                 strip = _strip_candidates(src, cand, want, r_px, leaving, order)
             if strip.any():
                 # strips: each side gets the level of its own azimuth (see STRIP_BAND_PX)
-                if axis_xy is None:
-                    axis_xy = culling.axis_coordinates(src.positions, scene.camera, scene.hole)[:2]
                 tight = (want > want0)[strip]  # raised to the silhouette's tolerance
-                side = _side_levels(axis_xy, src.tris.take(cand[strip], axis=0), r_px[strip],
+                side = _side_levels(axis_xy(), src.tris.take(cand[strip], axis=0), r_px[strip],
                                     fit.max_error_px * np.where(tight, SILHOUETTE_FACTOR, STRIP_TOLERANCE), fit)
                 np.maximum.at(levels, edges.of_tri[cand[strip]].ravel(), side.ravel())
                 strip_tri = np.zeros(len(src.tris), bool)
@@ -311,7 +314,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                 n_back = int(away.size)
         strips = None
         if strip_tri is not None:
-            strips = (strip_tri[tri_sel], np.column_stack(axis_xy))
+            strips = (strip_tri[tri_sel], axis_xy())
         sub = subdivision.subdivide(src.positions, src.tris[tri_sel],
                                     subdivision.Edges(edges.verts, edges.of_tri[tri_sel]), levels, strips)
         img = _map_subdivided(sub, n_pts, img_v, scene, lut, order)
@@ -707,15 +710,14 @@ def _strip_candidates(src, cand, want, corner_px, leaving: _Leaving, order) -> n
     return ok
 
 
-def _side_levels(axis_xy, tris, corner_px, tolerance, settings) -> np.ndarray:
-    """(S, 3) ring levels of the sides of the triangles ``tris`` (S, 3) cut into strips: side k
+def _side_levels(xy, tris, corner_px, tolerance, settings) -> np.ndarray:
+    """(S, 3) ring levels of the sides of the triangles ``tris`` (S, 3) of the source vertices with axis
+    coordinates ``xy`` (N, 2) (culling.axis_coordinates' x, y), cut into strips: side k
     (corner k -> k + 1) covering the azimuth D_k about the axis gets ceil(D_k / (RING_LEVEL_MARGIN d_max))
     as in :func:`_ring_levels`, with d_max from the triangle's largest corner radius ``corner_px``
     and ``tolerance`` (S,) pixels."""
     top = int(np.clip(settings.max_tess_level, 1, subdivision.GRID))
-    x, y = axis_xy[0].take(tris), axis_xy[1].take(tris)
-    xn, yn = np.roll(x, -1, axis=1), np.roll(y, -1, axis=1)
-    span = np.abs(np.arctan2(x * yn - y * xn, x * xn + y * yn))
+    span = culling.side_azimuths(xy[:, 0], xy[:, 1], tris)
     with np.errstate(invalid="ignore", divide="ignore"):
         d_max = culling.max_ring_span(corner_px.max(axis=1), tolerance)
         n = np.ceil(span / (RING_LEVEL_MARGIN * d_max[:, None]))

@@ -236,14 +236,15 @@ def _chain(src, of_tri, verts, levels, n_pts, x, y, xy):
     return tri, key, bary, p
 
 
-def _strip_faces(src, of_tri, verts, levels, n_pts, xy):
-    """Strip triangulation of the triangles ``src`` (S, 3) (see :func:`subdivide`, ``strips``).
+def _strip_faces(src, of_tri, verts, levels, n_pts, xy, corner_order):
+    """Strip triangulation of the triangles ``src`` (S, 3) (see :func:`subdivide`, ``strips``), with
+    ``corner_order`` their :func:`_strip_corners`.
 
     Returns (keys (P,), bary (P, 3), row_tri (P,), faces (F, 3) indexing the P points, face_tri (F,)):
     the points are the corners (3 per triangle, in corner order) and the sides' interior grid points;
     faces are wound like their source triangle."""
     S = len(src)
-    ang, a, c, b = _strip_corners(src, xy)
+    ang, a, c, b = corner_order
     rows = np.arange(S)
     # chain 1: side a -> b; chain 2: sides a -> c, the corner c, c -> b
     t1, k1, b1, p1 = _chain(src, of_tri, verts, levels, n_pts, a, b, xy)
@@ -312,7 +313,7 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     triangle (a zipper): l1 + l2 + l3 - 2 faces for side levels l1, l2, l3 instead of about L^2, with
     no interior vertices. Meant for triangles whose image is long in that angle and narrow across it
     (around an Einstein ring, with xy the coordinates across the observer-hole axis). Triangles whose
-    first-to-last side has level 1 get the uniform grid."""
+    first-to-last side has level 1, or with a corner whose xy is not finite, get the uniform grid."""
     points = np.asarray(points, dtype=np.float64)
     tris = np.asarray(tris, dtype=np.int64)
     n_pts, n_edges = len(points), len(edges.verts)
@@ -325,8 +326,9 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
         finite = np.isfinite(xy.take(tris.take(strip_sel, axis=0), axis=0))  # (S, 3, 2)
         strip_sel = strip_sel[finite.reshape(len(strip_sel), 6).all(axis=1)]
         if strip_sel.size:
-            _, a, _, b = _strip_corners(tris[strip_sel], xy)
-            strip_sel = strip_sel[lev[strip_sel, _slot(a, b)] > 1]
+            order = _strip_corners(tris[strip_sel], xy)
+            ok = lev[strip_sel, _slot(order[1], order[3])] > 1
+            strip_sel, order = strip_sel[ok], tuple(v[ok] for v in order)
         if strip_sel.size:
             tri_level = tri_level.copy()
             tri_level[strip_sel] = 0  # not in the uniform groups below
@@ -398,7 +400,7 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
         n_rows += sel.size * nv
     if strip_sel is not None:
         keys, sbary, row_tri, sfaces, face_tri = _strip_faces(tris[strip_sel], edges.of_tri[strip_sel],
-                                                              edges.verts, levels, n_pts, xy)
+                                                              edges.verts, levels, n_pts, xy, order)
         other = keys >= n_pts
         other_key_parts.append(keys[other])
         other_pos_parts.append((sbary[other], tris[strip_sel[row_tri[other]]]))
