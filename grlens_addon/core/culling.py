@@ -139,15 +139,23 @@ def axis_distance(x, y, tris) -> np.ndarray:
     return np.where(inside, 0.0, d)
 
 
+def _beside_axis(x, y, tris, tol) -> np.ndarray:
+    """(T,) bits, nonzero where all three corners of the triangles ``tris`` lie more than ``tol`` (a
+    number, or one per point) to the same side of the axis along x or along y (bits 0-3: x > tol,
+    x < -tol, y > tol, y < -tol), which puts the whole triangle farther than ``tol`` from it. NaN
+    coordinates compare False: such a corner is on no side, so its triangle is never excluded."""
+    with np.errstate(invalid="ignore"):
+        side = ((x > tol).astype(np.uint8) | ((x < -tol).astype(np.uint8) << 1)
+                | ((y > tol).astype(np.uint8) << 2) | ((y < -tol).astype(np.uint8) << 3))
+    return side.take(tris[:, 0]) & side.take(tris[:, 1]) & side.take(tris[:, 2])
+
+
 def within_axis_distance(x, y, tris, limit) -> np.ndarray:
     """(T,) bool: :func:`axis_distance` of the triangles ``tris`` (T, 3) <= ``limit`` (BU), computed only
     for those not excluded by their corners' box (all corners more than ``limit`` to one side of the
     axis along x or along y puts the whole triangle farther): the same answer, far cheaper on a large
     mesh of which a few triangles lie next to the axis."""
-    with np.errstate(invalid="ignore"):  # NaN compares False: never excluded
-        side = ((x > limit).astype(np.uint8) | ((x < -limit).astype(np.uint8) << 1)
-                | ((y > limit).astype(np.uint8) << 2) | ((y < -limit).astype(np.uint8) << 3))
-    maybe = (side.take(tris[:, 0]) & side.take(tris[:, 1]) & side.take(tris[:, 2])) == 0
+    maybe = _beside_axis(x, y, tris, limit) == 0
     out = np.zeros(len(tris), bool)
     t = np.flatnonzero(maybe)
     out[t] = axis_distance(x, y, tris.take(t, axis=0)) <= limit
@@ -199,10 +207,7 @@ def near_axis(source_points, tris, camera, hole, margin=1e-9) -> np.ndarray:
     tris = np.asarray(tris, dtype=np.int64)
     x, y, z = axis_coordinates(source_points, camera, hole)
     tol = margin * np.sqrt(x * x + y * y + z * z)  # margin times the distance from the hole (orthonormal axes)
-    with np.errstate(invalid="ignore"):  # NaN compares False: no side, so never excluded
-        side = ((x > tol).astype(np.uint8) | ((x < -tol).astype(np.uint8) << 1)
-                | ((y > tol).astype(np.uint8) << 2) | ((y < -tol).astype(np.uint8) << 3))
-    return (side[tris[:, 0]] & side[tris[:, 1]] & side[tris[:, 2]]) == 0
+    return _beside_axis(x, y, tris, tol) == 0
 
 
 def side_planes(origin, corner_directions) -> np.ndarray:
