@@ -450,7 +450,7 @@ def _hidden_whole(cr, cand, orders, points, tris, scene, lut) -> bool:
     a patch draws nothing, so its grid is not built (the far side of an object behind the hole)."""
     _, pts, local = silhouette.compact(points, tris[cand])
     t0 = tris[cr.tri]
-    normal = np.cross(points[t0[1]] - points[t0[0]], points[t0[2]] - points[t0[0]])
+    normal = silhouette.normals(points, t0[None])[0]
     normal = normal / np.linalg.norm(normal)
     plane = _limit_plane(cr, 2.0 * np.pi * np.arange(HIDDEN_AZIMUTHS) / HIDDEN_AZIMUTHS, scene)
     looks = lut.lookup_orders(plane.r, plane.phi, tuple(orders), quantities=("ux", "uy"))
@@ -531,17 +531,13 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
                   orders=tuple(orders), vertex_tri=vertex_tri, vertex_bary=vertex_bary, complete=bool(cell.all()))
     regs = mapping.map_vertices_orders(grid_pos, scene, lut, orders, tangents=bool(closed))
     if closed:
-        def normals(t):  # (len(t), 3) geometric normals of the source triangles t
-            p0, p1, p2 = (points[tris[t, k]] for k in range(3))
-            return np.cross(p1 - p0, p2 - p0)
-
         grid_corner = faces >= n_lim  # limit vertices have no direction of their own
         at = np.maximum(faces - n_lim, 0)  # each corner's grid vertex
         # n . d per grid vertex with its own triangle's normal, and per corner where the face's
         # source triangle is another one
-        v_normal = normals(vertex_tri[n_lim:])
+        v_normal = silhouette.normals(points, tris[vertex_tri[n_lim:]])
         f_o, c_o = np.nonzero(other & grid_corner)
-        o_normal = normals(face_src[f_o])
+        o_normal = silhouette.normals(points, tris[face_src[f_o]])
         for o, reg in regs.items():
             dd = illumination.leaving_direction(reg.plane, scene, reg.ux, reg.uy)
             with np.errstate(invalid="ignore"):

@@ -27,13 +27,20 @@ def compact(points, tris):
     return corners, points.take(corners, axis=0), local.reshape(-1, 3)
 
 
+def normals(points, tris) -> np.ndarray:
+    """(T, 3) geometric normals (p1 - p0) x (p2 - p0) of the triangles ``tris`` (T, 3) of ``points``
+    (BU^2, not normalised; right-handed with the winding)."""
+    tris = np.asarray(tris, dtype=np.int64)
+    p0, p1, p2 = (points.take(tris[:, k], axis=0) for k in range(3))
+    return np.cross(p1 - p0, p2 - p0)
+
+
 def facing_signs(points, tris, directions) -> np.ndarray:
     """(T, 3) sign of n . d at each corner of the triangles ``tris`` (T, 3) of ``points`` (N, 3; BU),
     with ``directions`` (N, 3) the vertices' leaving directions d: +1 facing, -1 facing away, 0 on the
     silhouette or without a ray (NaN)."""
     tris = np.asarray(tris, dtype=np.int64)
-    p0, p1, p2 = (points.take(tris[:, k], axis=0) for k in range(3))
-    n = np.cross(p1 - p0, p2 - p0)
+    n = normals(points, tris)
     with np.errstate(invalid="ignore"):
         dots = np.einsum("fx,fcx->fc", n, directions.take(tris, axis=0))
     return np.sign(np.nan_to_num(dots, nan=0.0))
@@ -45,8 +52,7 @@ def turned_away(points, tris, directions, margin: float) -> np.ndarray:
     ``directions`` (N, 3) the vertices' unit leaving directions d (so n . d is the cosine of the angle
     between them). A corner without a ray (NaN) is not turned away."""
     tris = np.asarray(tris, dtype=np.int64)
-    p0, p1, p2 = (points.take(tris[:, k], axis=0) for k in range(3))
-    n = np.cross(p1 - p0, p2 - p0)
+    n = normals(points, tris)
     with np.errstate(invalid="ignore", divide="ignore"):
         n /= row_norm(n)[:, None]
         dots = np.einsum("fx,fcx->fc", n, directions.take(tris, axis=0))
