@@ -249,7 +249,10 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             out[order] = _empty(order, n_bad, below_pixel=len(src.tris))
             continue
         fit = settings  # the settings of this order's levels: a thin image's tighter tolerance (THIN_FACTOR)
-        if ring_levels and THIN_FACTOR != 1.0 and _thin_image(img_v, scene, settings.pixel_angle):
+        if ring_levels:  # the images' angles from the hole's direction (radians)
+            with np.errstate(invalid="ignore"):
+                hole_r = culling.hole_angle(img_v.direction, scene.camera, scene.hole)
+        if ring_levels and THIN_FACTOR != 1.0 and _thin_image(hole_r, settings.pixel_angle):
             fit = replace(settings, max_error_px=settings.max_error_px * THIN_FACTOR)
         rho = subdivision.rho(img_v.direction.take(p0, axis=0), img_v.direction.take(p1, axis=0), img_m.direction)
         levels = np.ones(len(ev0), dtype=np.int64)  # edges not probed keep level 1
@@ -263,7 +266,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                                             chord[probe], fit.pixel_angle,
                                             fit.max_error_px * SILHOUETTE_FACTOR)
             raise_edges = tight != levels[probe]
-            cand, want, sharp, r_px = _ring_levels(src, src_circ, img_circ, scene, img_v, order, fit, replaced)
+            cand, want, sharp, r_px = _ring_levels(src, src_circ, img_circ, scene, hole_r, order, fit, replaced)
             want0 = want
             maybe = sharp != want
             if raise_edges.any() or maybe.any():
@@ -627,7 +630,7 @@ def _ring_candidates(src_circ, img_circ) -> np.ndarray:
         return np.flatnonzero(img_circ > RING_MAGNIFICATION * src_circ)
 
 
-def _ring_levels(src, src_circ, img_circ, scene, img_v: mapping.Images, order, settings: Settings, skip=None):
+def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settings, skip=None):
     """The levels that strongly magnified source triangles near the axis need so that their
     sub-triangles are narrow enough on screen (see culling.ring_sagitta: a piece covering an azimuth d
     at an angular radius R from the hole's direction has straight sides R (1 - cos(d/2)) inside the
@@ -635,7 +638,8 @@ def _ring_levels(src, src_circ, img_circ, scene, img_v: mapping.Images, order, s
     d_max = culling.max_ring_span(R_px, tolerance), on all its edges (levels are per edge, so
     neighbours stay crack-free), capped at max_tess_level. ``src_circ``, ``img_circ``: the source
     triangles' circumferences (culling.circumference) undistorted and of this order's image;
-    ``skip`` (T,) bool: triangles left alone (replaced by an axis patch).
+    ``hole_r`` (N,): the angles (radians) of the source vertices' images of this order from the hole's
+    direction (culling.hole_angle); ``skip`` (T,) bool: triangles left alone (replaced by an axis patch).
 
     Returns (cand, want, sharp, corner_px): the candidate triangles (indices), their levels for
     ``max_error_px`` and for SILHOUETTE_FACTOR * max_error_px (the silhouette's tolerance), and the
@@ -649,7 +653,7 @@ def _ring_levels(src, src_circ, img_circ, scene, img_v: mapping.Images, order, s
         return cand, np.ones(0, np.int64), np.ones(0, np.int64), np.zeros((0, 3))
     _, span = culling.axis_geometry(src.positions, tris[cand], scene.camera, scene.hole, order)
     with np.errstate(invalid="ignore", divide="ignore"):
-        radius = culling.hole_angle(img_v.direction, scene.camera, scene.hole) / settings.pixel_angle  # px
+        radius = hole_r / settings.pixel_angle  # px
         corner_px = radius.take(tris.take(cand, axis=0))
         r_px = np.maximum(np.maximum(corner_px[:, 0], corner_px[:, 1]), corner_px[:, 2])
         out = []
@@ -671,12 +675,10 @@ at 340 / 350 / 355 / 10 deg 0.51 / 0.53 / 0.45 / 0.37% -> 0.10 / 0.25 / 0.34 / 0
 the second-order pieces of those frames. The culling keeps ``max_error_px``."""
 
 
-def _thin_image(img_v: mapping.Images, scene, pixel_angle) -> bool:
-    """True when the images ``img_v`` of the source vertices lie within THIN_PX pixels of radius about
-    the hole's direction (see THIN_PX)."""
-    with np.errstate(invalid="ignore"):
-        r = culling.hole_angle(img_v.direction, scene.camera, scene.hole)
-        r = r[np.isfinite(r)]
+def _thin_image(hole_r, pixel_angle) -> bool:
+    """True when the images of the source vertices, at the angles ``hole_r`` (radians) from the hole's
+    direction, lie within THIN_PX pixels of radius about it (see THIN_PX)."""
+    r = hole_r[np.isfinite(hole_r)]
     return bool(r.size) and float(r.max() - r.min()) < THIN_PX * pixel_angle
 
 
