@@ -259,6 +259,39 @@ def test_back_faces_of_a_closed_sphere(lut):
     assert all(set(p.images) == {1, 2} for p in both)
 
 
+def test_patch_images_are_looked_up_for_drawn_faces_only(lut):
+    """On a closed surface a patch's faces are tested for facing from the rays' tangents first; then
+    only the grid vertices of faces drawn in some order get images, the same as map_vertices gives
+    them; the others have none. The sphere is where the benchmark orbit's 175 deg frame puts it: the far
+    crossing's patch shows a few order-1 faces and no order-2 face."""
+    a = math.radians(175.0)
+    pts, tris = _sphere([3.0 * math.cos(a), 3.0 * math.sin(a), 0.01])
+    far, near = sorted(_patches(pts, tris, lut, closed=True), key=lambda p: p.crossing.along)
+    assert set(far.images) == {1} and 0 < far.facing[1].sum() < 0.2 * len(far.tris)
+    for p in (far, near):
+        n_lim = p.n_azimuths
+        drawn = np.zeros(len(p.tris), bool)
+        for o in p.images:
+            drawn |= p.facing[o]
+        with_image = np.zeros(len(p.source_position), bool)
+        with_image[p.tris[drawn].ravel()] = True
+        with_image[:n_lim] = False  # limit vertices: limit_images
+        for o, im in p.images.items():
+            want = mapping.map_vertices(p.source_position[with_image], SCENE, lut, o)
+            np.testing.assert_array_equal(im.position[with_image], want.position)
+            np.testing.assert_array_equal(im.distance[with_image], want.distance)
+            rest = ~with_image
+            rest[:n_lim] = False
+            assert not im.valid[rest].any() and np.isnan(im.position[rest]).all()
+        if p is far:
+            assert (~with_image[n_lim:]).sum() > 0.5 * (len(with_image) - n_lim)
+    open_patches = _patches(pts, tris, lut, closed=False)
+    for p in open_patches:
+        for o, im in p.images.items():
+            np.testing.assert_array_equal(im.position[p.n_azimuths:],
+                                          mapping.map_vertices(p.source_position[p.n_azimuths:], SCENE, lut, o).position)
+
+
 def test_hidden_patches_are_not_built(lut, monkeypatch):
     """A crossing whose sheet is turned away along every order's rays (the far side of the sphere behind
     the hole) gets no grid at all, only its replaced triangles; the image meshes are the same as when

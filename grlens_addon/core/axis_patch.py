@@ -111,7 +111,8 @@ class Patch:
     surface folds over or ends inside it, so that kept triangles draw part of the ring near the axis);
     replaced: source triangles the patch stands
     in for; radius (BU): its outer circle's distance from the axis; orders: the image orders whose
-    Einstein ring it is; images: {order: mapping.Images} of its vertices; facing: {order: (F,) bool}
+    Einstein ring it is; images: {order: mapping.Images} of its vertices (no image, NaN, for the
+    grid vertices of faces drawn in no order); facing: {order: (F,) bool}
     the faces to draw (all, unless back faces of a closed surface are left out, see
     :func:`build_patches`).
     """
@@ -174,16 +175,18 @@ def limit_images(crossing: Crossing, psi, scene: mapping.Scene, lut, order) -> m
     ring, at the LUT's angle xi for phi = pi (behind the hole) or 0 (in front), at position angle psi
     (order 1) or psi + pi (order 2)."""
     plane = _limit_plane(crossing, psi, scene)
-    look = lut.lookup(plane.r, plane.phi, order, quantities=("xi", "dt"))
+    # one point: the same (r, phi) at every azimuth
+    look = lut.lookup(plane.r[:1], plane.phi[:1], order, quantities=("xi", "dt"))
+    xi, dt = np.broadcast_to(look.xi, plane.r.shape), np.broadcast_to(look.dt, plane.r.shape)
     sign = 1.0 if order == 1 else -1.0
-    c, s = np.cos(look.xi), np.sin(look.xi)
+    c, s = np.cos(xi), np.sin(xi)
     direction = c[:, None] * scene.e1 + (sign * s)[:, None] * plane.e2
-    distance = look.dt * scene.r_s
+    distance = dt * scene.r_s
     position = scene.camera + distance[:, None] * direction
     valid = np.isfinite(distance) & np.isfinite(c)
     position[~valid] = np.nan
     return mapping.Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
-                          xi=look.xi, dt=look.dt, ux=None, uy=None)
+                          xi=xi.copy(), dt=dt.copy(), ux=None, uy=None)
 
 
 def _limit_plane(crossing: Crossing, psi, scene: mapping.Scene) -> mapping.PlaneCoordinates:
@@ -303,6 +306,25 @@ def _inside_cells(cell, ring_radii, cand_tris, x, y) -> np.ndarray:
     c1 = j0 + count
     got = total[r1, c1] - total[r0, c1] - total[r1, j0] + total[r0, j0]
     return inside & (got == (r1 - r0) * count)
+
+
+def _used_grid(faces, n_lim, n_grid) -> np.ndarray:
+    """Sorted indices, among the ``n_grid`` grid vertices of a patch, of those that are corners of
+    ``faces`` (F, 3) (vertex indices: the ``n_lim`` limit vertices first, then the grid)."""
+    used = np.zeros(n_lim + n_grid, bool)
+    used[faces.ravel()] = True
+    return np.flatnonzero(used[n_lim:])
+
+
+def _spread(img: mapping.Images, rows, n) -> mapping.Images:
+    """Images of ``n`` points of which ``img`` holds those at ``rows`` (indices); the others have none
+    (NaN, not valid)."""
+    def put(values, fill=np.nan):
+        out = np.full((n,) + values.shape[1:], fill, values.dtype)
+        out[rows] = values
+        return out
+    return mapping.Images(position=put(img.position), direction=put(img.direction), distance=put(img.distance),
+                          valid=put(img.valid, False), plane=None, xi=put(img.xi), dt=put(img.dt), ux=None, uy=None)
 
 
 def _projected_area(x, y, tris) -> np.ndarray:
@@ -453,11 +475,12 @@ def _hidden_whole(cr, cand, orders, points, tris, scene, lut) -> bool:
     normal = silhouette.normals(points, t0[None])[0]
     normal = normal / np.linalg.norm(normal)
     plane = _limit_plane(cr, 2.0 * np.pi * np.arange(HIDDEN_AZIMUTHS) / HIDDEN_AZIMUTHS, scene)
-    looks = lut.lookup_orders(plane.r, plane.phi, tuple(orders), quantities=("ux", "uy"))
+    looks = lut.lookup_orders(plane.r[:1], plane.phi[:1], tuple(orders), quantities=("ux", "uy"))  # alike at every azimuth
     for o, (d, _) in illumination.towards_observer(pts, scene, lut, orders).items():
         if not silhouette.turned_away(pts, local, d, 0.0).all():
             return False
-        cone = illumination.leaving_direction(plane, scene, looks[o].ux, looks[o].uy)
+        ux, uy = (np.broadcast_to(v, plane.r.shape) for v in (looks[o].ux, looks[o].uy))
+        cone = illumination.leaving_direction(plane, scene, ux, uy)
         with np.errstate(invalid="ignore"):
             if not (cone @ normal < 0).all():
                 return False
@@ -529,8 +552,11 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
     patch = Patch(crossing=crossing, n_azimuths=n_az, source_position=src_pos, tris=faces.astype(np.int64),
                   face_src=face_src, bary=bary, replaced=replaced, radius=float(ring_radii[-1]),
                   orders=tuple(orders), vertex_tri=vertex_tri, vertex_bary=vertex_bary, complete=bool(cell.all()))
-    regs = mapping.map_vertices_orders(grid_pos, scene, lut, orders, tangents=bool(closed))
+    plane = mapping.plane_coordinates(grid_pos, scene)
     if closed:
+        # which faces face the camera along each order's rays: from the rays' tangents alone (the
+        # images are then looked up only for the grid vertices of faces that are drawn)
+        tangent = lut.lookup_orders(plane.r, plane.phi, tuple(orders), quantities=("ux", "uy"))
         grid_corner = faces >= n_lim  # limit vertices have no direction of their own
         at = np.maximum(faces - n_lim, 0)  # each corner's grid vertex
         # n . d per grid vertex with its own triangle's normal, and per corner where the face's
@@ -538,8 +564,8 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
         v_normal = silhouette.normals(points, tris[vertex_tri[n_lim:]])
         f_o, c_o = np.nonzero(other & grid_corner)
         o_normal = silhouette.normals(points, tris[face_src[f_o]])
-        for o, reg in regs.items():
-            dd = illumination.leaving_direction(reg.plane, scene, reg.ux, reg.uy)
+        for o in orders:
+            dd = illumination.leaving_direction(plane, scene, tangent[o].ux, tangent[o].uy)
             with np.errstate(invalid="ignore"):
                 dots = np.einsum("vx,vx->v", v_normal, dd)[at]
                 dots[f_o, c_o] = np.einsum("ix,ix->i", o_normal, dd[at[f_o, c_o]])
@@ -548,7 +574,19 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
     shown = tuple(o for o in orders if o not in patch.facing or patch.facing[o].any())
     for o in orders:
         patch.facing.setdefault(o, np.ones(len(faces), bool))
-    for o, reg in ((o, regs[o]) for o in shown):
+    if not shown:
+        return patch
+    # the grid vertices of the faces drawn in some order (all of them on an open surface)
+    drawn = np.zeros(len(faces), bool)
+    for o in shown:
+        drawn |= patch.facing[o]
+    rows = _used_grid(faces[drawn], n_lim, len(grid_pos))
+    if rows.size == len(grid_pos):
+        regs = mapping.map_vertices_orders(grid_pos, scene, lut, shown, plane)
+    else:
+        regs = {o: _spread(reg, rows, len(grid_pos)) for o, reg in mapping.map_vertices_orders(
+            grid_pos.take(rows, axis=0), scene, lut, shown, plane.take(rows)).items()}
+    for o, reg in regs.items():
         lim = limit_images(crossing, psi, scene, lut, o)
         patch.images[o] = mapping.Images(
             position=np.concatenate([lim.position, reg.position]),

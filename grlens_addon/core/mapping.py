@@ -67,6 +67,11 @@ class PlaneCoordinates:
     e2: np.ndarray
     on_axis: np.ndarray
 
+    def take(self, rows) -> "PlaneCoordinates":
+        """The coordinates of the points ``rows`` (indices)."""
+        return PlaneCoordinates(r=self.r.take(rows), phi=self.phi.take(rows), e2=self.e2.take(rows, axis=0),
+                                on_axis=self.on_axis.take(rows))
+
 
 def plane_coordinates(points: np.ndarray, scene: Scene) -> PlaneCoordinates:
     """Polar coordinates of world-space ``points`` (N, 3; BU) in their planes through hole and camera.
