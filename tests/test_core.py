@@ -248,6 +248,23 @@ def test_illumination_flat_limit_and_shadowing():
     assert np.all(tot[expect == 0] < 1e-3 * expect.max())
 
 
+def test_leaving_in_plane_is_the_leaving_direction_unnormalised(lut):
+    """illumination.leaving_in_plane's (a, b) point along leaving_direction: (a e1 + b e2) / |.| is it,
+    for both orders, and NaN where the ray is (outside the LUT's range)."""
+    rng = np.random.default_rng(7)
+    pts = np.concatenate([random_points(300, rng, 2.5, 60.0), [[100.0, 0.0, 0.0]]])  # 1.25-30 r_s, 50 r_s
+    scene = mapping.Scene(CAMERA, HOLE, R_S)
+    plane = mapping.plane_coordinates(pts, scene)
+    for o in (1, 2):
+        look = lut.lookup(plane.r, plane.phi, o, quantities=("ux", "uy"))
+        d = illumination.leaving_direction(plane, scene, look.ux, look.uy)
+        a, b = illumination.leaving_in_plane(plane, look.ux, look.uy)
+        v = a[:, None] * scene.e1 + b[:, None] * plane.e2
+        ok = np.isfinite(d).all(axis=1)
+        assert ok.sum() == len(pts) - 1 and np.isnan(a[~ok]).all() and np.isnan(b[~ok]).all()
+        np.testing.assert_allclose(v[ok] / np.linalg.norm(v[ok], axis=1)[:, None], d[ok], atol=1e-12)
+
+
 def test_illumination_back_side_gets_only_light_around_the_hole(lut):
     """A point behind the hole, facing away from the light, still receives second-order light."""
     light = CAMERA  # r = 20 r_s, same LUT

@@ -561,14 +561,18 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
         at = np.maximum(faces - n_lim, 0)  # each corner's grid vertex
         # n . d per grid vertex with its own triangle's normal, and per corner where the face's
         # source triangle is another one
+        # (the leaving direction d = (a e1 + b e2) / |.|, so n . d has the sign of a n.e1 + b n.e2)
         v_normal = silhouette.normals(points, tris[vertex_tri[n_lim:]])
+        v_n1, v_n2 = v_normal @ scene.e1, np.einsum("vx,vx->v", v_normal, plane.e2)
         f_o, c_o = np.nonzero(other & grid_corner)
+        v_o = at[f_o, c_o]
         o_normal = silhouette.normals(points, tris[face_src[f_o]])
+        o_n1, o_n2 = o_normal @ scene.e1, np.einsum("ix,ix->i", o_normal, plane.e2[v_o])
         for o in orders:
-            dd = illumination.leaving_direction(plane, scene, tangent[o].ux, tangent[o].uy)
+            a, b = illumination.leaving_in_plane(plane, tangent[o].ux, tangent[o].uy)
             with np.errstate(invalid="ignore"):
-                dots = np.einsum("vx,vx->v", v_normal, dd)[at]
-                dots[f_o, c_o] = np.einsum("ix,ix->i", o_normal, dd[at[f_o, c_o]])
+                dots = (a * v_n1 + b * v_n2)[at]
+                dots[f_o, c_o] = a[v_o] * o_n1 + b[v_o] * o_n2
             away = np.where(grid_corner, dots < 0, True)  # NaN (no ray) counts as facing
             patch.facing[o] = ~(away[:, 0] & away[:, 1] & away[:, 2])
     shown = tuple(o for o in orders if o not in patch.facing or patch.facing[o].any())

@@ -58,13 +58,30 @@ def leaving_direction(plane, scene: Scene, ux, uy) -> np.ndarray:
     LUT (components along e1 and e2 of the plane, see lutgen): the way the light leaves the point
     towards the observer. NaN where the ray is undefined."""
     e1 = scene.e1
-    c, s = np.cos(plane.phi), np.sin(plane.phi)
+    c, s, f_r, r_uphi = _static_frame(plane, ux, uy)
     e_r = c[:, None] * e1 + s[:, None] * plane.e2
     e_phi = -s[:, None] * e1 + c[:, None] * plane.e2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = -(f_r[:, None] * e_r + r_uphi[:, None] * e_phi)
+        d /= row_norm(d)[:, None]
+    return d
+
+
+def leaving_in_plane(plane, ux, uy):
+    """(a, b), each (N,): :func:`leaving_direction` = (a e1 + b e2) / |(a, b)|, without the
+    normalisation (a positive factor per point: enough for the sign of n . d). NaN where the ray is
+    undefined."""
+    c, s, f_r, r_uphi = _static_frame(plane, ux, uy)
+    with np.errstate(invalid="ignore"):
+        return -(f_r * c - r_uphi * s), -(f_r * s + r_uphi * c)
+
+
+def _static_frame(plane, ux, uy):
+    """cos phi, sin phi and the ray's tangent in the points' static frame: its components along e_r
+    and e_phi (f_r, r_uphi), from the LUT's (ux, uy) (along e1 and e2)."""
+    c, s = np.cos(plane.phi), np.sin(plane.phi)
     u_r = ux * c + uy * s  # dr/dlambda
     r_uphi = -ux * s + uy * c  # r dphi/dlambda
     with np.errstate(invalid="ignore", divide="ignore"):
         f_r = u_r / np.sqrt(1.0 - 1.0 / plane.r)  # local static frame components
-        d = -(f_r[:, None] * e_r + r_uphi[:, None] * e_phi)
-        d /= row_norm(d)[:, None]
-    return d
+    return c, s, f_r, r_uphi
