@@ -213,6 +213,20 @@ def test_patch_stops_at_the_mesh(lut):
     assert _patches(pts, tris[keep], lut) == []
 
 
+def test_first_smallest_is_lexsorts_first_of_each_key():
+    """axis_patch._first_smallest picks, per key, the element np.lexsort((value, key)) puts first: the
+    smallest value, the earliest among equal ones, NaN last (ties, NaN and all-NaN keys included)."""
+    rng = np.random.default_rng(3)
+    for _ in range(500):
+        n = int(rng.integers(1, 60))
+        key = rng.integers(0, int(rng.integers(1, 30)), n)
+        value = rng.integers(0, 4, n).astype(float)
+        value[rng.random(n) < 0.2] = np.nan
+        order = np.lexsort((value, key))
+        want = order[np.r_[True, key[order][1:] != key[order][:-1]]]
+        np.testing.assert_array_equal(axis_patch._first_smallest(key, value), want)
+
+
 def test_connected_stays_inside_the_candidates():
     """axis_patch._connected: the triangles reachable from the seed through shared edges without
     leaving the candidates; a seed that is not a candidate reaches nothing."""

@@ -263,13 +263,29 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     point = pc[sel] * n_az + pj[sel]
     ls, zs = lam[sel], z[tr[sel]]
     gap = np.abs(ls[:, 0] * zs[:, 0] + ls[:, 1] * zs[:, 1] + ls[:, 2] * zs[:, 2] - z_target)
-    order = np.lexsort((gap, point))
-    first = order[np.r_[True, point[order][1:] != point[order][:-1]]]
+    first = _first_smallest(point, gap)
     pts = point[first]
     k = sel[first]
     best[pts] = pt[k]
     bary[pts] = lam[k]
     return best, bary
+
+
+def _first_smallest(key, value) -> np.ndarray:
+    """Indices of one element per distinct ``key`` (ints): the one of smallest ``value`` (the first in
+    order among equals; NaN only where all of its key's values are NaN), in increasing key order. As
+    np.lexsort((value, key)) and the first of each key, with one stable integer sort instead."""
+    order = np.argsort(key, kind="stable")
+    k, v = key[order], value[order]
+    start = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+    if start.size == len(k):  # every key once
+        return order
+    smallest = np.repeat(np.fmin.reduceat(v, start), np.diff(np.r_[start, len(k)]))
+    candidate = (v == smallest) | np.isnan(smallest)
+    at = np.flatnonzero(candidate)
+    group = np.cumsum(np.r_[True, k[1:] != k[:-1]]) - 1
+    keep = np.r_[True, group[at][1:] != group[at][:-1]]
+    return order[at[keep]]
 
 
 def _polar_box(tris, x, y):
