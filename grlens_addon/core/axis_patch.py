@@ -375,7 +375,8 @@ def grid_shape(ring_radius_px, max_error_px) -> tuple[int, float]:
 
 
 def build_patches(src_positions, src_tris, edges_of_tri, n_edges, scene: mapping.Scene, lut, orders,
-                  pixel_angle, max_error_px, candidates=None, closed=False, crossings=None) -> list[Patch]:
+                  pixel_angle, max_error_px, candidates=None, closed=False, crossings=None,
+                  leaving=None) -> list[Patch]:
     """The patches of a source mesh (positions (N, 3) BU, triangles (T, 3), ``edges_of_tri`` (T, 3) edge
     indices of subdivision.Edges) for the image ``orders``, with their images. ``candidates``: the
     triangles the axis may cross (culling.near_axis); ``crossings``: :func:`find_crossings`' result, when
@@ -387,7 +388,10 @@ def build_patches(src_positions, src_tris, edges_of_tri, n_edges, scene: mapping
     the face's source triangle and d from illumination.towards_observer) are hidden by the surface
     itself. Patch faces whose grid corners all face away are then left out (``Patch.facing``): on
     the side of a closed object turned away from the hole, the whole patch is hidden and its images
-    are not computed (``images`` lacks that order), but it still replaces its triangles."""
+    are not computed (``images`` lacks that order), but it still replaces its triangles.
+
+    ``leaving``: a function (vertices (K,) indices, order) -> (K, 3) giving d at source vertices (a
+    cache the caller shares with its own uses); default: looked up here."""
     if not pixel_angle or not max_error_px:
         return []
     points = np.asarray(src_positions, np.float64)
@@ -408,14 +412,14 @@ def build_patches(src_positions, src_tris, edges_of_tri, n_edges, scene: mapping
         ords = ring_orders(cr, orders)
         if ords:
             patch = _build_one(cr, ords, points, tris, edges_of_tri, n_edges, x, y, z, scene, lut,
-                               pixel_angle, max_error_px, closed)
+                               pixel_angle, max_error_px, closed, leaving)
             if patch is not None:
                 out.append(patch)
     return out
 
 
 def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, scene, lut, pixel_angle, max_error_px,
-               closed=False):
+               closed=False, leaving=None):
     t0 = tris[cr.tri]
     radius = RADIUS_FACTOR * float(np.hypot(x[t0], y[t0]).max())
     if not np.isfinite(radius) or radius <= 0:
@@ -423,7 +427,7 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     cand, first_radius = None, radius
     if closed:
         cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
-        if _hidden_whole(cr, cand, orders, points, tris, scene, lut):  # no grid: it would draw nothing
+        if _hidden_whole(cr, cand, orders, points, tris, scene, lut, leaving):  # no grid: it would draw nothing
             corner_d = np.hypot(x[tris[cand]], y[tris[cand]]).max(axis=1)
             return Patch(crossing=cr, n_azimuths=0, source_position=np.zeros((0, 3)),
                          tris=np.zeros((0, 3), np.int64), face_src=np.zeros(0, np.int64), bary=np.zeros((0, 3, 3)),
@@ -480,20 +484,23 @@ HIDDEN_AZIMUTHS = 16
 """Azimuths at which :func:`_hidden_whole` samples the rays that arrive at a crossing point."""
 
 
-def _hidden_whole(cr, cand, orders, points, tris, scene, lut) -> bool:
+def _hidden_whole(cr, cand, orders, points, tris, scene, lut, leaving=None) -> bool:
     """True if the sheet ``cand`` around the crossing ``cr`` of a closed surface seen from outside is
     turned away from the camera along the rays of every order: at every corner of its triangles
     (silhouette.turned_away, margin 0) and, at the crossing point, for the rays arriving from
     HIDDEN_AZIMUTHS directions around the axis (the point's rays form a cone: its Einstein ring). Such
     a patch draws nothing, so its grid is not built (the far side of an object behind the hole)."""
-    _, pts, local = silhouette.compact(points, tris[cand])
+    corners, pts, local = silhouette.compact(points, tris[cand])
+    if leaving is None:
+        looked = illumination.towards_observer(pts, scene, lut, orders)
+        leaving = lambda _, o: looked[o][0]  # noqa: E731
     t0 = tris[cr.tri]
     normal = silhouette.normals(points, t0[None])[0]
     normal = normal / np.linalg.norm(normal)
     plane = _limit_plane(cr, 2.0 * np.pi * np.arange(HIDDEN_AZIMUTHS) / HIDDEN_AZIMUTHS, scene)
     looks = lut.lookup_orders(plane.r[:1], plane.phi[:1], tuple(orders), quantities=("ux", "uy"))  # alike at every azimuth
-    for o, (d, _) in illumination.towards_observer(pts, scene, lut, orders).items():
-        if not silhouette.turned_away(pts, local, d, 0.0).all():
+    for o in orders:
+        if not silhouette.turned_away(pts, local, leaving(corners, o), 0.0).all():
             return False
         ux, uy = (np.broadcast_to(v, plane.r.shape) for v in (looks[o].ux, looks[o].uy))
         cone = illumination.leaving_direction(plane, scene, ux, uy)

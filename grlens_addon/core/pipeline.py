@@ -213,8 +213,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             return out
     patches = axis_patch.build_patches(src.positions, src.tris, edges.of_tri, len(edges.verts), scene, lut,
                                        settings.orders, settings.pixel_angle, settings.max_error_px,
-                                       crossings=crossings,
-                                       closed=seen_closed,
+                                       crossings=crossings, closed=seen_closed, leaving=leaving.at,
                                        ) if crossings else []
     xy_memo = []
 
