@@ -152,6 +152,34 @@ def test_patch_on_a_tilted_plane(lut):
         assert np.abs(inner - theta[0]).max() / PIXEL <= axis_patch.BAND_FACTOR * MAX_ERROR * 1.5
 
 
+@pytest.mark.parametrize("tilt_deg", [0.0, 50.0, 70.0, 80.0])
+def test_patch_circles_on_a_steep_plane(lut, monkeypatch, tilt_deg):
+    """On a plane at ``tilt`` to the axis' normal plane, a step across the axis is 1 / cos(tilt) times
+    longer on the surface: the patch's intervals between circles are each cut into
+    ceil(1 / (cos(tilt) STEEP_RATIO)) (1, 1, 2, 3 for 0, 50, 70, 80 deg), and the circles keep
+    their geometric spacing within each interval."""
+    tilt = math.radians(tilt_deg)
+    pts, tris = _grid(-4.0, 3.0, 30, tilt=tilt)  # 0.5 across the axis at 80 deg: the patch is complete
+
+    def circles(p):
+        n = p.n_azimuths
+        d = np.hypot(*culling.axis_coordinates(p.source_position[n:], CAMERA, HOLE)[:2])
+        return d.reshape(-1, n)[:, 0]
+
+    (p,) = _patches(pts, tris, lut)
+    monkeypatch.setattr(axis_patch, "STEEP_RATIO", 0.0)
+    (plain,) = _patches(pts, tris, lut)
+    parts = math.ceil(1.0 / (math.cos(tilt) * 2.0) - 1e-9)
+    assert axis_patch.STEEP_RATIO == 0.0 and p.complete and plain.complete
+    fine, coarse = circles(p), circles(plain)
+    assert len(fine) == parts * (len(coarse) - 1) + 1
+    np.testing.assert_allclose(fine[::parts], coarse, rtol=1e-9)
+    if parts > 1:
+        ratio = fine[1:] / fine[:-1]
+        np.testing.assert_allclose(ratio.reshape(-1, parts), ratio.reshape(-1, parts)[:, :1] * np.ones((1, parts)),
+                                   rtol=1e-9)
+
+
 def test_patch_faces_take_their_corners_values_from_the_triangles_under_them(lut):
     """Corner UVs of patch faces: at each corner, the source's piecewise-linear UV at that point (the
     value in the triangle under it, not one face's triangle extrapolated), except across a seam (here

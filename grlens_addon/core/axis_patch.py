@@ -32,7 +32,8 @@ Where the surface does not cover a whole circle (a mesh boundary, a hole, or the
 surface turns parallel to the axis), the patch goes on with the cells (between two circles and two
 azimuths) whose four corners are on the surface, and replaces only the triangles that lie inside
 such cells; the innermost circle must be complete (the ring's edge needs every azimuth), else there
-is no patch.
+is no patch. Where the surface turns towards the axis' direction (next to such a fold), circles are
+added between those where it is steep (STEEP_RATIO), so that faces stay close to the surface.
 
 Each vertex of a patch lies on one source triangle, whose corner values (UVs, normals) it takes
 (the pipeline falls back to one triangle's values per face across a seam). On a closed surface seen
@@ -52,6 +53,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from . import illumination, mapping, silhouette
+from .mapping import row_norm
 from .culling import (axis_coordinates, axis_crossing, axis_distance, hole_angle, max_ring_span,
                       within_axis_distance)
 
@@ -510,18 +512,62 @@ def _hidden_whole(cr, cand, orders, points, tris, scene, lut, leaving=None) -> b
     return True
 
 
+STEEP_RATIO = 2.0
+"""The circles of a patch are spaced for a surface facing along the axis. Where it turns towards the
+axis' direction (next to its fold, e.g. a sphere whose limb the axis passes close to), the grid
+points of one azimuth on consecutive circles lie farther apart on the surface than across the axis,
+and a patch face, linear between its corners, cuts across several source triangles: its UVs and its
+outline then stray from the surface's (benchmarks/bench_accuracy.py --angles 170.5,171,189,189.5:
+texture up to 0.9 px off, 0.8% of the pixels differ). An interval between circles where that ratio
+exceeds STEEP_RATIO at some azimuth is cut (geometrically) into ceil(ratio / STEEP_RATIO) intervals,
+at most STEEP_SPLIT_MAX, within MAX_GRID. 0 turns this off."""
+
+STEEP_SPLIT_MAX = 8
+
+
+def _refined_radii(radii, n_az, hit, lam, points, cand_tris) -> tuple[np.ndarray, np.ndarray]:
+    """(radii, new): the circles ``radii`` (BU, increasing) with those STEEP_RATIO adds, and a mask of
+    the added ones. ``hit``, ``lam``: :func:`_locate`'s result for ``radii`` on ``cand_tris``."""
+    n_c = len(radii)
+    if n_c < 2 or not STEEP_RATIO:
+        return radii, np.zeros(n_c, bool)
+    ok = hit >= 0
+    pos = np.full((len(hit), 3), np.nan)
+    pos[ok] = np.einsum("mk,mkx->mx", lam[ok], points[cand_tris[hit[ok]]])
+    pos = pos.reshape(n_c, n_az, 3)
+    with np.errstate(invalid="ignore"):
+        ratio = row_norm((pos[1:] - pos[:-1]).reshape(-1, 3)).reshape(n_c - 1, n_az) / np.diff(radii)[:, None]
+    worst = np.max(np.where(np.isfinite(ratio), ratio, 0.0), axis=1)
+    parts = np.clip(np.ceil(worst / STEEP_RATIO), 1, STEEP_SPLIT_MAX).astype(np.int64)
+    parts = np.where(np.cumsum(parts - 1) <= MAX_GRID // n_az - n_c, parts, 1)
+    if parts.max() <= 1:
+        return radii, np.zeros(n_c, bool)
+    out, new = [radii[:1]], [np.zeros(1, bool)]
+    for i, k in enumerate(parts):  # a few dozen intervals
+        out.append(radii[i] * (radii[i + 1] / radii[i]) ** (np.arange(1, k + 1) / k))
+        new.append(np.arange(1, k + 1) < k)
+    return np.concatenate(out), np.concatenate(new)
+
+
 def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orders, closed, crossing):
     """The patch of ``crossing``: a ring of limit vertices at the crossing point, then the grid of
     circles ``radii`` (BU, increasing) x ``n_az`` azimuths on the surface of the triangles ``cand``
     (one sheet: wound alike in projection; hits nearest the crossing along the axis), with faces wound
     counter-clockwise seen from the camera's side of the axis (clockwise with ``flip``). None when the
     innermost circle is not complete."""
+    old_hit, old_lam = hit, lam = _locate(radii, n_az, tris[cand], x, y, z, crossing.along)
+    radii, new = _refined_radii(radii, n_az, hit, lam, points, tris[cand])
+    if new.any():  # the added circles' points; the others' stay
+        h, l = _locate(radii[new], n_az, tris[cand], x, y, z, crossing.along)
+        at_new = np.repeat(new, n_az)
+        hit, lam = np.empty(at_new.size, np.int64), np.empty((at_new.size, 3))
+        hit[at_new], lam[at_new] = h, l
+        hit[~at_new], lam[~at_new] = old_hit, old_lam
     n_circles = len(radii)
     n_lim = n_az  # the limit vertices
     psi = 2.0 * np.pi * np.arange(n_az) / n_az
     qx = (radii[:, None] * np.cos(psi)[None, :]).ravel()
     qy = (radii[:, None] * np.sin(psi)[None, :]).ravel()
-    hit, lam = _locate(radii, n_az, tris[cand], x, y, z, crossing.along)
     # vertex rings: 0 the limit vertices, r >= 1 circle r - 1; a cell (r, j) lies between rings r and
     # r + 1 and azimuths j and j + 1, and is drawn when the surface is under its four corners
     on = np.concatenate([np.ones((1, n_az), bool), (hit >= 0).reshape(n_circles, n_az)])

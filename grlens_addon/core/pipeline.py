@@ -546,9 +546,10 @@ patch (Patch.complete False).
   (benchmarks/bench_accuracy.py --orbit 5).
 - First order: its ring is wide where the patch is complete, and the rule would only double its
   pieces (180 deg: 26k -> 53k). Where the axis crosses the surface next to its fold (the sphere at
-  171-172 and 188 deg), the patch stops short and kept pieces draw the ring's edge: 2.0% -> 0.4% of
-  the pixels differ at 171 deg, and the UV error falls from 1.3 to 0.8 px, at a quarter more time in
-  those frames."""
+  171-172 and 188 deg), the patch stops short and kept pieces draw the ring's edge: 0.70% -> 0.41% of
+  the pixels differ at 171 deg, and the UV error falls from 0.29 to 0.22 px (2.0% -> 0.4% and 1.3 ->
+  0.8 px before the patch's circles followed the steep surface there, axis_patch.STEEP_RATIO), at a
+  quarter more time in those frames."""
 
 RING_LEVEL_MARGIN = 0.75
 """Fraction of the largest allowed azimuth per piece that :func:`_ring_levels` aims at: pieces
