@@ -522,7 +522,7 @@ texture up to 0.9 px off, 0.8% of the pixels differ). An interval between circle
 exceeds STEEP_RATIO at some azimuth is cut (geometrically) into ceil(ratio / STEEP_RATIO) intervals,
 at most STEEP_SPLIT_MAX, within MAX_GRID. 0 turns this off."""
 
-STEEP_SPLIT_MAX = 8
+STEEP_SPLIT_MAX = 4
 
 
 def _refined_radii(radii, n_az, hit, lam, points, cand_tris) -> tuple[np.ndarray, np.ndarray]:
