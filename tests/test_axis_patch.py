@@ -241,6 +241,24 @@ def test_patch_stops_at_the_mesh(lut):
     assert _patches(pts, tris[keep], lut) == []
 
 
+def test_touches_gap_finds_the_triangles_beside_undrawn_cells(lut):
+    """A small plane: its patch is incomplete (the corners' cells beyond the plane are not drawn).
+    touches_gap is True for the triangles whose projection meets such a cell, which are exactly those
+    with a point beyond the largest full circle, and False for all of them on a complete patch."""
+    pts, tris = _grid(-4.0, 0.04, 2)
+    (p,) = _patches(pts, tris, lut)
+    assert not p.complete
+    x, y, _ = culling.axis_coordinates(pts, CAMERA, HOLE)
+    got = axis_patch.touches_gap(p, tris, x, y)
+    full = p.ring_radii[np.flatnonzero(~p.cell.all(axis=1))[0]]  # the inner circle of the first gap
+    reach = np.hypot(x, y)[tris].max(axis=1)
+    np.testing.assert_array_equal(got, reach > full)
+    assert got.any() and not got.all()
+    pts, tris = _grid(-4.0, 1.0, 10)
+    (p,) = _patches(pts, tris, lut)
+    assert p.complete and not axis_patch.touches_gap(p, tris, *culling.axis_coordinates(pts, CAMERA, HOLE)[:2]).any()
+
+
 def test_first_smallest_is_lexsorts_first_of_each_key():
     """axis_patch._first_smallest picks, per key, the element np.lexsort((value, key)) puts first: the
     smallest value, the earliest among equal ones, NaN last (ties, NaN and all-NaN keys included)."""

@@ -133,6 +133,8 @@ class Patch:
     complete: bool = True
     images: dict = field(default_factory=dict, repr=False)
     facing: dict = field(default_factory=dict, repr=False)
+    cell: np.ndarray = field(default=None, repr=False)
+    ring_radii: np.ndarray = field(default=None, repr=False)
 
 
 def find_crossings(points, tris, camera, hole, candidates=None) -> list[Crossing]:
@@ -343,6 +345,30 @@ def _spread(img: mapping.Images, rows, n) -> mapping.Images:
         return out
     return mapping.Images(position=put(img.position), direction=put(img.direction), distance=put(img.distance),
                           valid=put(img.valid, False), plane=None, xi=put(img.xi), dt=put(img.dt), ux=None, uy=None)
+
+
+def touches_gap(patch: Patch, tris, x, y) -> np.ndarray:
+    """(T,) bool: the triangles ``tris`` (T, 3) (axis coordinates x, y of their vertices, BU) whose
+    projection along the axis may meet a cell of the patch that is not drawn (inside its outer
+    circle; tested on the triangle's box in distance and azimuth). False for every triangle when the
+    patch is complete."""
+    if patch.cell is None or patch.cell.all() or len(tris) == 0:
+        return np.zeros(len(tris), bool)
+    gap = ~patch.cell
+    n_rows, n_az = gap.shape
+    step = 2.0 * np.pi / n_az
+    d_lo, d_hi, a_lo, a_hi = _polar_box(tris, x, y)
+    j0 = np.floor(a_lo / step).astype(np.int64)
+    j1 = np.ceil(a_hi / step).astype(np.int64)
+    count = np.where(d_lo == 0.0, n_az, np.minimum(j1 - j0, n_az))
+    j0 = np.where(d_lo == 0.0, 0, j0 % n_az)
+    r0 = np.clip(np.searchsorted(patch.ring_radii, d_lo, side="right") - 1, 0, n_rows)
+    r1 = np.clip(np.searchsorted(patch.ring_radii, d_hi, side="left"), 0, n_rows)
+    total = np.zeros((n_rows + 1, 2 * n_az + 1), np.int64)
+    total[1:, 1:] = np.cumsum(np.cumsum(np.concatenate([gap, gap], axis=1), axis=0), axis=1)
+    c1 = j0 + count
+    got = total[r1, c1] - total[r0, c1] - total[r1, j0] + total[r0, j0]
+    return (r0 < r1) & (got > 0)
 
 
 def _projected_area(x, y, tris) -> np.ndarray:
@@ -620,7 +646,8 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
         bary[f_o, c_o] = _projected_bary(vx[v_o], vy[v_o], tris[face_src[f_o]], x, y)
     patch = Patch(crossing=crossing, n_azimuths=n_az, source_position=src_pos, tris=faces.astype(np.int64),
                   face_src=face_src, bary=bary, replaced=replaced, radius=float(ring_radii[-1]),
-                  orders=tuple(orders), vertex_tri=vertex_tri, vertex_bary=vertex_bary, complete=bool(cell.all()))
+                  orders=tuple(orders), vertex_tri=vertex_tri, vertex_bary=vertex_bary, complete=bool(cell.all()),
+                  cell=cell, ring_radii=ring_radii)
     plane = mapping.plane_coordinates(grid_pos, scene)
     if closed:
         # which faces face the camera along each order's rays: from the rays' tangents alone (the

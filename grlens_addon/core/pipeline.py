@@ -282,6 +282,11 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                 reach = RING_EDGE_REACH * max(p.radius for p in order_patches)
                 xy = axis_xy()
                 near = culling.within_axis_distance(xy[:, 0], xy[:, 1], src.tris.take(cand, axis=0), reach)
+                if order not in RING_EDGE_ORDERS:  # only where an incomplete patch leaves a gap
+                    gap = np.zeros(cand.size, bool)
+                    for p in order_patches:
+                        gap |= axis_patch.touches_gap(p, src.tris.take(cand, axis=0), xy[:, 0], xy[:, 1])
+                    near &= gap
                 want = np.where(near, np.maximum(want, sharp), want)
             strip = np.zeros(cand.size, bool)
             if STRIP_BAND_PX and cand.size:
@@ -537,8 +542,8 @@ RING_EDGE_REACH = 2.0
 RING_EDGE_ORDERS = (2,)
 """Magnified source triangles within RING_EDGE_REACH patch radii of the axis (axis_patch.Patch.radius)
 get the ring levels of the silhouette's tolerance (SILHOUETTE_FACTOR), without the cap of
-SILHOUETTE_RING_LEVEL_MAX, in the orders RING_EDGE_ORDERS, and in every order next to an incomplete
-patch (Patch.complete False).
+SILHOUETTE_RING_LEVEL_MAX, in the orders RING_EDGE_ORDERS, and in every order where they may meet
+a cell that an incomplete patch (Patch.complete False) does not draw (axis_patch.touches_gap).
 - Second order: its pieces draw the ring next to the patch, which is less than a pixel wide, so the
   straight sides of a piece that fall a quarter of a pixel inside it flip a pixel at its edge. With
   the sphere grazing the axis in front of the hole, 1-2% of the pixels differed (355 and 5 deg of its
