@@ -173,14 +173,15 @@ def ring_orders(crossing: Crossing, orders) -> tuple:
     return tuple(o for o in orders if crossing.along < 0 or o == 2)
 
 
-def limit_images(crossing: Crossing, psi, scene: mapping.Scene, lut, order) -> mapping.Images:
+def limit_images(crossing: Crossing, psi, scene: mapping.Scene, lut, order, look=None) -> mapping.Images:
     """Images of order ``order`` of the crossing point approached from azimuth ``psi`` (K,) radians
     about the axis (measured in the frame of culling.axis_coordinates): the points of its Einstein
     ring, at the LUT's angle xi for phi = pi (behind the hole) or 0 (in front), at position angle psi
-    (order 1) or psi + pi (order 2)."""
+    (order 1) or psi + pi (order 2). ``look``: the LUT's (xi, dt) there (lutgen.Lookup of one point),
+    when the caller has it (see :func:`_limit_look`)."""
     plane = _limit_plane(crossing, psi, scene)
-    # one point: the same (r, phi) at every azimuth
-    look = lut.lookup(plane.r[:1], plane.phi[:1], order, quantities=("xi", "dt"))
+    if look is None:  # one point: the same (r, phi) at every azimuth
+        look = _limit_look(crossing, scene, lut, (order,))[order]
     xi, dt = np.broadcast_to(look.xi, plane.r.shape), np.broadcast_to(look.dt, plane.r.shape)
     sign = 1.0 if order == 1 else -1.0
     c, s = np.cos(xi), np.sin(xi)
@@ -191,6 +192,13 @@ def limit_images(crossing: Crossing, psi, scene: mapping.Scene, lut, order) -> m
     position[~valid] = np.nan
     return mapping.Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
                           xi=xi.copy(), dt=dt.copy(), ux=None, uy=None)
+
+
+def _limit_look(crossing: Crossing, scene: mapping.Scene, lut, orders) -> dict:
+    """{order: lutgen.Lookup} of (xi, dt) of one point for the rays that reach the crossing point along
+    the axis (the same at every azimuth)."""
+    plane = _limit_plane(crossing, np.zeros(1), scene)
+    return lut.lookup_orders(plane.r, plane.phi, tuple(orders), quantities=("xi", "dt"))
 
 
 def _limit_plane(crossing: Crossing, psi, scene: mapping.Scene) -> mapping.PlaneCoordinates:
@@ -463,7 +471,8 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
                          vertex_tri=np.zeros(0, np.int64), vertex_bary=np.zeros((0, 3)),
                          facing={o: np.zeros(0, bool) for o in orders})
     # the ring's radius on screen, per order
-    ring = {o: limit_images(cr, np.zeros(1), scene, lut, o) for o in orders}
+    look = _limit_look(cr, scene, lut, orders)
+    ring = {o: limit_images(cr, np.zeros(1), scene, lut, o, look[o]) for o in orders}
     if not all(bool(im.valid[0]) for im in ring.values()):
         return None
     theta_e = {o: float(hole_angle(im.direction, scene.camera, scene.hole)[0]) for o, im in ring.items()}
@@ -495,7 +504,7 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     if cand is None or radius != first_radius:
         cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
     return _grid_patch(radii, n_az, cand, _projected_area(x, y, t0[None])[0] < 0, points, tris, x, y, z,
-                       scene, lut, orders, closed, cr)
+                       scene, lut, orders, closed, cr, look)
 
 
 def _sheet(cr, radius, tris, of_tri, n_edges, x, y) -> np.ndarray:
@@ -575,7 +584,8 @@ def _refined_radii(radii, n_az, hit, lam, points, cand_tris) -> tuple[np.ndarray
     return np.concatenate(out), np.concatenate(new)
 
 
-def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orders, closed, crossing):
+def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orders, closed, crossing,
+                limit_look=None):
     """The patch of ``crossing``: a ring of limit vertices at the crossing point, then the grid of
     circles ``radii`` (BU, increasing) x ``n_az`` azimuths on the surface of the triangles ``cand``
     (one sheet: wound alike in projection; hits nearest the crossing along the axis), with faces wound
@@ -687,7 +697,7 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
         regs = {o: _spread(reg, rows, len(grid_pos)) for o, reg in mapping.map_vertices_orders(
             grid_pos.take(rows, axis=0), scene, lut, shown, plane.take(rows)).items()}
     for o, reg in regs.items():
-        lim = limit_images(crossing, psi, scene, lut, o)
+        lim = limit_images(crossing, psi, scene, lut, o, limit_look and limit_look[o])
         patch.images[o] = mapping.Images(
             position=np.concatenate([lim.position, reg.position]),
             direction=np.concatenate([lim.direction, reg.direction]),
