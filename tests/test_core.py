@@ -128,6 +128,24 @@ def test_subdivision_is_watertight_for_any_levels(seed):
     assert len(S.row_bary) < 0.75 * 3 * len(S.tris)  # corners are shared: fewer rows than face corners
 
 
+def test_corner_values_of_unsplit_triangles_are_taken_as_they_are():
+    """Subdivided.n_unit_rows: the rows of the triangles left whole come first, with unit barycentrics;
+    their corner values are the source's to the bit (no interpolation), the split ones' interpolated."""
+    P, T = _octahedron()
+    E = subdivision.mesh_edges(T)
+    levels = np.ones(len(E.verts), np.int64)
+    levels[E.of_tri[:2].ravel()] = 7  # triangles 0 and 1 split, those sharing no edge with them whole
+    S = subdivision.subdivide(P, T, E, levels)
+    whole = np.flatnonzero(levels[E.of_tri].max(axis=1) == 1)
+    assert whole.size > 0 and S.n_unit_rows == 3 * whole.size
+    np.testing.assert_array_equal(S.row_bary[:S.n_unit_rows], np.tile(np.eye(3), (whole.size, 1)))
+    values = np.random.default_rng(2).normal(size=(len(T), 3, 2)) * 1e3
+    got = S.corner_values(values)
+    np.testing.assert_array_equal(got[:S.n_pass], values[S.source_tri[:S.n_pass]])
+    expect = np.einsum("fck,fkx->fcx", S.bary, values[S.source_tri])
+    np.testing.assert_allclose(got, expect, rtol=1e-12, atol=1e-9)
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_subdivision_strips_are_watertight_and_linear_in_the_levels(seed):
     """Strips (subdivide(..., strips=)) on some triangles, the uniform grid on the others: still

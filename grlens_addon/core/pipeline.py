@@ -355,11 +355,11 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             image_tris = remap.take(tris)
         src_tri = face_src if everything else face_src.take(kept)
         # the faces' corners in their source triangles: None (whole source triangles src_tri) or rows
-        # (row barycentrics, row source triangle, face corner rows; see subdivision.Subdivided)
+        # (row barycentrics, row source triangle, face corner rows, unit rows; see subdivision.Subdivided)
         rows = None
         if not sub.identity:
             rows = (sub.row_bary, tri_sel.take(sub.row_src),
-                    sub.corner_row if everything else sub.corner_row.take(kept, axis=0))
+                    sub.corner_row if everything else sub.corner_row.take(kept, axis=0), sub.n_unit_rows)
         v_pos, v_dir = img.position.take(used, axis=0), img.direction.take(used, axis=0)
         v_dist, v_src = img.distance[used], sub.positions.take(used, axis=0)
         patch_corners = None
@@ -511,11 +511,12 @@ def _patch_corner_values(values, face_src, bary, vertex_tri, vertex_bary, corner
 def _carry(corner_values, src_tri, rows):
     """Corner values (F, 3, K) of the image faces from the source triangles' corner values (T, 3, K):
     the faces' own source triangles' (``src_tri``) when ``rows`` is None, else interpolated at the
-    rows (row_bary, row_src, corner_row) of subdivision.carry_rows."""
+    rows (row_bary, row_src, corner_row, n_unit) of subdivision.carry_rows."""
     corner_values = np.asarray(corner_values, dtype=np.float64)
     if rows is None:
         return corner_values.take(src_tri, axis=0)
-    return subdivision.carry_rows(*rows, corner_values)
+    row_bary, row_src, corner_row, n_unit = rows
+    return subdivision.carry_rows(row_bary, row_src, corner_row, corner_values, n_unit)
 
 
 RING_MAGNIFICATION = 2.0

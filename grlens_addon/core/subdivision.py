@@ -159,7 +159,9 @@ class Subdivided:
     vertex_key: (V,) the welding keys (stable for unchanged topology and levels);
     identity: True when nothing was split (all levels 1): positions and tris are the source's;
     n_pass: the first n_pass faces are source triangles passed through unsplit (level 1 on all edges),
-    so their corners are source vertices and per-triangle values of the source apply to them.
+    so their corners are source vertices and per-triangle values of the source apply to them;
+    n_unit_rows: the first n_unit_rows rows are the corners of the unsplit triangles, in order
+    (barycentrics (1, 0, 0), (0, 1, 0), (0, 0, 1) in turn).
     """
 
     positions: np.ndarray
@@ -171,6 +173,7 @@ class Subdivided:
     vertex_key: np.ndarray
     identity: bool = False
     n_pass: int = 0
+    n_unit_rows: int = 0
 
     @property
     def bary(self) -> np.ndarray:
@@ -185,14 +188,20 @@ class Subdivided:
         values = np.asarray(values, dtype=np.float64)
         if self.identity:
             return values.take(self.source_tri, axis=0)
-        return carry_rows(self.row_bary, self.row_src, self.corner_row, values)
+        return carry_rows(self.row_bary, self.row_src, self.corner_row, values, self.n_unit_rows)
 
 
-def carry_rows(row_bary, row_src, corner_row, values) -> np.ndarray:
+def carry_rows(row_bary, row_src, corner_row, values, n_unit=0) -> np.ndarray:
     """(F, 3, K) corner values of faces whose corners are rows ``corner_row`` (F, 3) of barycentric
     coordinates ``row_bary`` (R, 3) in the source triangles ``row_src`` (R,), from those triangles'
-    corner values ``values`` (T, 3, K) (see :class:`Subdivided`)."""
-    per_row = np.matmul(row_bary[:, None, :], values.take(row_src, axis=0))[:, 0, :]  # (R, K)
+    corner values ``values`` (T, 3, K) (see :class:`Subdivided`). The first ``n_unit`` rows are the
+    corners of whole source triangles (barycentrics (1, 0, 0), (0, 1, 0), (0, 0, 1) in turn, as
+    Subdivided.n_unit_rows): their values are taken, not interpolated."""
+    values = np.asarray(values)
+    per_row = np.empty((len(row_bary), values.shape[2]))
+    if n_unit:
+        per_row[:n_unit] = values[row_src[:n_unit], np.arange(n_unit) % 3]
+    per_row[n_unit:] = np.einsum("rj,rjk->rk", row_bary[n_unit:], values.take(row_src[n_unit:], axis=0))
     return per_row.take(corner_row, axis=0)
 
 
@@ -448,4 +457,4 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     return Subdivided(positions=np.concatenate([points.take(corners, axis=0), other_pos]), tris=faces,
                       source_tri=source_tri, row_bary=np.concatenate(row_bary_parts),
                       row_src=np.concatenate(row_src_parts), corner_row=corner_row,
-                      vertex_key=np.concatenate([corners, uniq]), n_pass=n_pass)
+                      vertex_key=np.concatenate([corners, uniq]), n_pass=n_pass, n_unit_rows=3 * n_unsplit)
