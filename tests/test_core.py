@@ -379,6 +379,23 @@ def test_axis_geometry_straddling_and_span():
     np.testing.assert_allclose(span, [np.pi, np.pi, np.pi / 2])
 
 
+def test_side_azimuths_are_the_angles_between_the_corners_about_the_axis():
+    """culling.side_azimuths (from each corner point's azimuth, once): the unsigned angle about the
+    axis between consecutive corners, as atan2(|a x b|, a . b) of the projected corners gives it, also
+    across the -pi / pi cut; NaN for a corner without coordinates."""
+    rng = np.random.default_rng(5)
+    x, y = rng.normal(size=(2, 200))
+    tris = rng.integers(0, 200, (500, 3))
+    got = culling.side_azimuths(x, y, tris)
+    px, py = x[tris], y[tris]
+    qx, qy = px[:, [1, 2, 0]], py[:, [1, 2, 0]]
+    np.testing.assert_allclose(got, np.abs(np.arctan2(px * qy - py * qx, px * qx + py * qy)), atol=1e-12)
+    across = culling.side_azimuths(np.array([-1.0, -1.0, 1.0]), np.array([0.1, -0.1, 0.0]), np.array([[0, 1, 2]]))
+    np.testing.assert_allclose(across[0, 0], 2 * np.arctan(0.1), rtol=1e-12)
+    x[3] = np.nan
+    assert np.isnan(culling.side_azimuths(x, y, np.array([[3, 4, 5]]))[0, [0, 2]]).all()
+
+
 def test_fine_mesh_behind_the_hole_keeps_its_ring(lut):
     """Behind the hole a fine mesh is magnified everywhere: the triangles at the axis are replaced by
     the axis patch (axis_patch.py), few or none are culled, the ring stays closed, and no kept triangle

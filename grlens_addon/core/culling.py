@@ -165,10 +165,20 @@ def within_axis_distance(x, y, tris, limit) -> np.ndarray:
 def side_azimuths(x, y, tris) -> np.ndarray:
     """(T, 3) the angle (radians, <= pi) about the axis between the projected corners k and k + 1 of
     the triangles ``tris`` (T, 3): the azimuth side k covers; x, y from :func:`axis_coordinates`."""
-    px, py = x[tris], y[tris]
-    qx, qy = np.roll(px, -1, axis=1), np.roll(py, -1, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.abs(np.arctan2(px * qy - py * qx, px * qx + py * qy))
+    tris = np.asarray(tris, dtype=np.int64)
+    at = _used(len(x), tris)
+    psi = np.full(len(x), np.nan)
+    psi[at] = np.arctan2(np.asarray(y).take(at), np.asarray(x).take(at))  # once per corner point
+    a = psi.take(tris)
+    d = a[:, [1, 2, 0]] - a
+    return np.abs(np.mod(d + np.pi, 2.0 * np.pi) - np.pi)
+
+
+def _used(n, tris) -> np.ndarray:
+    """Sorted indices, among ``n`` points, of the corners of ``tris``."""
+    mask = np.zeros(n, bool)
+    mask[np.asarray(tris).ravel()] = True
+    return np.flatnonzero(mask)
 
 
 def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
@@ -284,14 +294,18 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
         sel = np.arange(len(tris)) if axis_candidates is None else np.flatnonzero(ring | axis_candidates)
         straddles = np.zeros(len(tris), dtype=bool)
         span = np.full(len(tris), np.nan)
-        straddles[sel], span[sel] = axis_geometry(source_points, tris[sel], np.asarray(camera, np.float64),
+        t_sel = tris.take(sel, axis=0)
+        straddles[sel], span[sel] = axis_geometry(source_points, t_sel, np.asarray(camera, np.float64),
                                                   np.asarray(hole, np.float64), order,
                                                   span_of=np.flatnonzero(ring[sel]))
         wide = np.zeros(len(tris), dtype=bool)
         with np.errstate(invalid="ignore"):
             if pixel_angle and max_error_px:
-                r_px = hole_angle(image_dirs.take(tris[sel].ravel(), axis=0), camera, hole).reshape(-1, 3)
-                r_px = r_px.max(axis=1) / pixel_angle
+                at = _used(len(image_dirs), t_sel)  # once per corner point
+                angle = np.full(len(image_dirs), np.nan)
+                angle[at] = hole_angle(image_dirs.take(at, axis=0), camera, hole)
+                r_px = angle.take(t_sel)
+                r_px = np.maximum(np.maximum(r_px[:, 0], r_px[:, 1]), r_px[:, 2]) / pixel_angle
                 wide[sel] = ring_sagitta(r_px, span[sel]) > SAGITTA_CULL_FACTOR * max_error_px
             else:
                 wide[sel] = span[sel] > AZIMUTH_SPAN_MAX
