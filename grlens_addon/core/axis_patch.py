@@ -317,23 +317,37 @@ def _inside_cells(cell, ring_radii, cand_tris, x, y) -> np.ndarray:
     ``cell`` (R - 1, N): drawn cells between rings of radii ``ring_radii`` (R,) (BU, increasing, the
     first 0) and azimuths 2 pi j / N. Tested on the triangle's box in distance from the axis and
     azimuth (its corners' range; all azimuths when the axis passes through it), which contains it."""
-    n_rows, n_az = cell.shape
+    n_rows = cell.shape[0]
+    r0, r1, j0, count, d_hi = _cell_box(cell.shape, ring_radii, cand_tris, x, y)
+    r1 = np.clip(r1, r0 + 1, n_rows)
+    return (d_hi <= ring_radii[-1]) & (_cells_in(cell, r0, r1, j0, count) == (r1 - r0) * count)
+
+
+def _cell_box(shape, ring_radii, tris, x, y):
+    """The box of cells (rows between rings of ``ring_radii``, azimuths 2 pi j / N; ``shape`` (R - 1, N))
+    that holds each of the triangles ``tris`` (T, 3) projected along the axis (:func:`_polar_box`):
+    (r0, r1, j0, count, d_hi): rows r0 to r1 (exclusive, unclipped above), ``count`` azimuths from j0
+    (all of them when the axis passes through the triangle), and its largest distance (BU)."""
+    n_rows, n_az = shape
     step = 2.0 * np.pi / n_az
-    d_lo, d_hi, a_lo, a_hi = _polar_box(cand_tris, x, y)
+    d_lo, d_hi, a_lo, a_hi = _polar_box(tris, x, y)
     j0 = np.floor(a_lo / step).astype(np.int64)
     j1 = np.ceil(a_hi / step).astype(np.int64)  # exclusive
     count = np.where(d_lo == 0.0, n_az, np.minimum(j1 - j0, n_az))
     j0 = np.where(d_lo == 0.0, 0, j0 % n_az)
     r0 = np.clip(np.searchsorted(ring_radii, d_lo, side="right") - 1, 0, n_rows)
-    r1 = np.searchsorted(ring_radii, d_hi, side="left")  # exclusive row bound
-    inside = d_hi <= ring_radii[-1]
-    r1 = np.clip(r1, r0 + 1, n_rows)
-    # drawn cells in the box by a 2-D prefix sum (azimuths doubled for the wrap-around)
+    r1 = np.searchsorted(ring_radii, d_hi, side="left")
+    return r0, r1, j0, count, d_hi
+
+
+def _cells_in(mask, r0, r1, j0, count) -> np.ndarray:
+    """How many cells of ``mask`` (R - 1, N) bool each box (rows r0 .. r1 - 1, ``count`` azimuths from
+    j0, wrapping around) holds: by a 2-D prefix sum, the azimuths doubled for the wrap-around."""
+    n_rows, n_az = mask.shape
     total = np.zeros((n_rows + 1, 2 * n_az + 1), np.int64)
-    total[1:, 1:] = np.cumsum(np.cumsum(np.concatenate([cell, cell], axis=1), axis=0), axis=1)
+    total[1:, 1:] = np.cumsum(np.cumsum(np.concatenate([mask, mask], axis=1), axis=0), axis=1)
     c1 = j0 + count
-    got = total[r1, c1] - total[r0, c1] - total[r1, j0] + total[r0, j0]
-    return inside & (got == (r1 - r0) * count)
+    return total[r1, c1] - total[r0, c1] - total[r1, j0] + total[r0, j0]
 
 
 def _used_grid(faces, n_lim, n_grid) -> np.ndarray:
@@ -362,21 +376,9 @@ def touches_gap(patch: Patch, tris, x, y) -> np.ndarray:
     patch is complete."""
     if patch.cell is None or patch.cell.all() or len(tris) == 0:
         return np.zeros(len(tris), bool)
-    gap = ~patch.cell
-    n_rows, n_az = gap.shape
-    step = 2.0 * np.pi / n_az
-    d_lo, d_hi, a_lo, a_hi = _polar_box(tris, x, y)
-    j0 = np.floor(a_lo / step).astype(np.int64)
-    j1 = np.ceil(a_hi / step).astype(np.int64)
-    count = np.where(d_lo == 0.0, n_az, np.minimum(j1 - j0, n_az))
-    j0 = np.where(d_lo == 0.0, 0, j0 % n_az)
-    r0 = np.clip(np.searchsorted(patch.ring_radii, d_lo, side="right") - 1, 0, n_rows)
-    r1 = np.clip(np.searchsorted(patch.ring_radii, d_hi, side="left"), 0, n_rows)
-    total = np.zeros((n_rows + 1, 2 * n_az + 1), np.int64)
-    total[1:, 1:] = np.cumsum(np.cumsum(np.concatenate([gap, gap], axis=1), axis=0), axis=1)
-    c1 = j0 + count
-    got = total[r1, c1] - total[r0, c1] - total[r1, j0] + total[r0, j0]
-    return (r0 < r1) & (got > 0)
+    r0, r1, j0, count, _ = _cell_box(patch.cell.shape, patch.ring_radii, tris, x, y)
+    r1 = np.clip(r1, 0, patch.cell.shape[0])
+    return (r0 < r1) & (_cells_in(~patch.cell, r0, r1, j0, count) > 0)
 
 
 def _projected_area(x, y, tris) -> np.ndarray:
