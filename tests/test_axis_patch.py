@@ -259,6 +259,29 @@ def test_touches_gap_finds_the_triangles_beside_undrawn_cells(lut):
     assert p.complete and not axis_patch.touches_gap(p, tris, *culling.axis_coordinates(pts, CAMERA, HOLE)[:2]).any()
 
 
+def test_open_distance_is_where_a_patch_stops_drawing(lut):
+    """axis_patch.open_distance: on a complete patch, the outer circle for the triangles reaching
+    inside it and inf for the others; on an incomplete one, the inner circle of the first row with an
+    undrawn cell in the triangle's box (never beyond the outer circle)."""
+    pts, tris = _grid(-4.0, 1.0, 10)
+    (p,) = _patches(pts, tris, lut)
+    x, y, _ = culling.axis_coordinates(pts, CAMERA, HOLE)
+    got = axis_patch.open_distance(p, tris, x, y)
+    reach_in = culling.axis_distance(x, y, tris) < p.radius
+    assert p.complete and reach_in.any() and (~reach_in).any()
+    np.testing.assert_array_equal(got[reach_in], p.radius)
+    assert np.isinf(got[~reach_in]).all()
+    pts, tris = _grid(-4.0, 0.04, 2)
+    (p,) = _patches(pts, tris, lut)
+    x, y, _ = culling.axis_coordinates(pts, CAMERA, HOLE)
+    got = axis_patch.open_distance(p, tris, x, y)
+    first_gap = p.ring_radii[np.flatnonzero(~p.cell.all(axis=1))[0]]
+    gap_near = axis_patch.touches_gap(p, tris, x, y)
+    assert not p.complete and gap_near.any()
+    assert np.all(got[gap_near] >= first_gap) and np.all(got[gap_near] <= p.radius)
+    assert np.all(got[gap_near] < p.radius) and np.all(np.isin(got[gap_near], p.ring_radii))
+
+
 def test_first_smallest_is_lexsorts_first_of_each_key():
     """axis_patch._first_smallest picks, per key, the element np.lexsort((value, key)) puts first: the
     smallest value, the earliest among equal ones, NaN last (ties, NaN and all-NaN keys included)."""

@@ -552,6 +552,29 @@ def test_patch_circles_follow_a_steep_surface(lut, monkeypatch):
     assert mismatch > 0.006 and uv > 0.7
 
 
+def test_ring_levels_stop_where_the_patch_draws(lut, monkeypatch):
+    """The sphere at 172 deg of its orbit, at 640x360: the crossed triangles of the two patches (which
+    stop short of the fold) are kept and cover the whole turn about the axis, but their pieces need to
+    be narrow only beyond the patches' drawn cells (pipeline._span_cap): 100k image triangles instead
+    of 129k, and 0.39% of the covered pixels differ either way."""
+    _, _, ref, render = _ring_view(lut, 172, (640, 360))
+    counts = {}
+    build = pipeline.build_images
+
+    def counting(*args, **kwargs):
+        out = build(*args, **kwargs)
+        counts["tris"] = sum(len(m.tris) for m in out.values())
+        return out
+
+    monkeypatch.setattr(pipeline, "build_images", counting)
+    capped = image_metrics.compare(ref, render())["orders"]["all"]["mismatch_frac"]
+    n_capped = counts["tris"]
+    monkeypatch.setattr(pipeline, "_span_cap", lambda patches, tris, xy: np.full(len(tris), np.inf))
+    plain = image_metrics.compare(ref, render())["orders"]["all"]["mismatch_frac"]
+    assert capped < 0.005 and plain < 0.005
+    assert n_capped < 0.85 * counts["tris"]
+
+
 def _annulus(r_in, r_out, n_r, n_a, z=0.0):
     r = np.linspace(r_in, r_out, n_r + 1)
     a = np.linspace(0, 2 * np.pi, n_a, endpoint=False)

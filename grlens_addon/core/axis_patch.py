@@ -381,6 +381,32 @@ def touches_gap(patch: Patch, tris, x, y) -> np.ndarray:
     return (r0 < r1) & (_cells_in(~patch.cell, r0, r1, j0, count) > 0)
 
 
+def open_distance(patch: Patch, tris, x, y) -> np.ndarray:
+    """(T,) for the triangles ``tris`` (T, 3) (axis coordinates x, y of their vertices, BU): the
+    smallest distance from the axis (BU) at which the patch may leave part of each undrawn, within
+    the triangle's box of cells: the inner circle of the first row holding a cell it does not draw
+    there, else its outer circle; inf for a triangle that does not reach inside the outer circle (or
+    a patch without a grid)."""
+    out = np.full(len(tris), np.inf)
+    if patch.cell is None or len(tris) == 0:
+        return out
+    n_rows, n_az = patch.cell.shape
+    r0, r1, j0, count, _ = _cell_box(patch.cell.shape, patch.ring_radii, tris, x, y)
+    inside = r0 < n_rows  # reaches inside the outer circle
+    gap = ~patch.cell
+    if gap.any():
+        per_row = np.zeros((n_rows, 2 * n_az + 1), np.int64)  # gap cells per row, by prefix sums
+        per_row[:, 1:] = np.cumsum(np.concatenate([gap, gap], axis=1), axis=1)
+        c1 = j0 + count
+        rows = np.arange(n_rows)
+        hit = (per_row[:, c1] - per_row[:, j0] > 0) & (rows[:, None] >= r0) & (rows[:, None] < r1)  # (R, T)
+        first = np.where(hit.any(axis=0), hit.argmax(axis=0), n_rows)
+    else:
+        first = np.full(len(tris), n_rows)
+    out[inside] = patch.ring_radii[np.minimum(first, n_rows)[inside]]
+    return out
+
+
 def _projected_area(x, y, tris) -> np.ndarray:
     """(T,) twice the signed area of the triangles ``tris`` (T, 3) projected along the axis (BU^2;
     positive: counter-clockwise seen from the camera's side)."""

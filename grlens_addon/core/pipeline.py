@@ -265,7 +265,8 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                                             chord[probe], fit.pixel_angle,
                                             fit.max_error_px * SILHOUETTE_FACTOR)
             raise_edges = tight != levels[probe]
-            cand, want, sharp, r_px = _ring_levels(src, src_circ, img_circ, scene, hole_r, order, fit, replaced)
+            cap = (lambda t: _span_cap(order_patches, src.tris.take(t, axis=0), axis_xy())) if order_patches else None
+            cand, want, sharp, r_px = _ring_levels(src, src_circ, img_circ, scene, hole_r, order, fit, replaced, cap)
             want0 = want
             maybe = sharp != want
             if raise_edges.any() or maybe.any():
@@ -636,7 +637,7 @@ def _ring_candidates(src_circ, img_circ) -> np.ndarray:
         return np.flatnonzero(img_circ > RING_MAGNIFICATION * src_circ)
 
 
-def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settings, skip=None):
+def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settings, skip=None, cap=None):
     """The levels that strongly magnified source triangles near the axis need so that their
     sub-triangles are narrow enough on screen (see culling.ring_sagitta: a piece covering an azimuth d
     at an angular radius R from the hole's direction has straight sides R (1 - cos(d/2)) inside the
@@ -645,7 +646,9 @@ def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settin
     neighbours stay crack-free), capped at max_tess_level. ``src_circ``, ``img_circ``: the source
     triangles' circumferences (culling.circumference) undistorted and of this order's image;
     ``hole_r`` (N,): the angles (radians) of the source vertices' images of this order from the hole's
-    direction (culling.hole_angle); ``skip`` (T,) bool: triangles left alone (replaced by an axis patch).
+    direction (culling.hole_angle); ``skip`` (T,) bool: triangles left alone (replaced by an axis patch);
+    ``cap``: None, or a function of the candidates' indices giving the most azimuth (radians) each
+    must be cut into pieces narrow in (:func:`_span_cap`), where that is less than the azimuth it covers.
 
     Returns (cand, want, sharp, corner_px): the candidate triangles (indices), their levels for
     ``max_error_px`` and for SILHOUETTE_FACTOR * max_error_px (the silhouette's tolerance), and the
@@ -658,6 +661,8 @@ def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settin
     if cand.size == 0:
         return cand, np.ones(0, np.int64), np.ones(0, np.int64), np.zeros((0, 3))
     _, span = culling.axis_geometry(src.positions, tris[cand], scene.camera, scene.hole, order)
+    if cap is not None:
+        span = np.fmin(span, cap(cand))
     with np.errstate(invalid="ignore", divide="ignore"):
         radius = hole_r / settings.pixel_angle  # px
         corner_px = radius.take(tris.take(cand, axis=0))
@@ -668,6 +673,28 @@ def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settin
             n = np.ceil(span / (RING_LEVEL_MARGIN * culling.max_ring_span(r_px, tol)))
             out.append(np.clip(np.nan_to_num(n, nan=1.0), 1, top).astype(np.int64))
     return cand, out[0], out[1], corner_px
+
+
+def _span_cap(patches, tris, xy) -> np.ndarray:
+    """(T,) radians: how much azimuth about the axis the pieces of the triangles ``tris`` (T, 3) (source
+    vertices' axis coordinates ``xy`` (N, 2), BU) need to be narrow in, at most, next to the axis
+    ``patches``: h / delta, h the triangle's longest side across the axis and delta the distance
+    from the axis beyond which a patch may leave part of it undrawn (axis_patch.open_distance); inf
+    where no patch draws any of it. Nearer the axis the patch draws the surface, and a piece there
+    that covers too wide an azimuth is culled (culling.cull, the ring's sagitta), so the ring levels
+    (_ring_levels) need only make the pieces narrow enough from delta outwards, not around the whole
+    turn that a triangle containing the axis covers (the crossed triangles of a patch that stops
+    short of the surface's fold: the sphere at 172 deg, 129k -> 100k pieces)."""
+    x, y = xy[:, 0], xy[:, 1]
+    delta = np.full(len(tris), np.inf)
+    for p in patches:
+        delta = np.minimum(delta, axis_patch.open_distance(p, tris, x, y))
+    px, py = x.take(tris), y.take(tris)
+    side = np.maximum(np.maximum(np.hypot(px[:, 1] - px[:, 0], py[:, 1] - py[:, 0]),
+                                 np.hypot(px[:, 2] - px[:, 1], py[:, 2] - py[:, 1])),
+                      np.hypot(px[:, 0] - px[:, 2], py[:, 0] - py[:, 2]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(np.isfinite(delta), side / delta, np.inf)
 
 
 THIN_PX = 2.0
