@@ -390,8 +390,11 @@ def open_distance(patch: Patch, tris, x, y) -> np.ndarray:
     out = np.full(len(tris), np.inf)
     if patch.cell is None or len(tris) == 0:
         return out
+    reach = np.flatnonzero(within_axis_distance(x, y, tris, patch.radius))  # the others stay inf
+    if reach.size == 0:
+        return out
     n_rows, n_az = patch.cell.shape
-    r0, r1, j0, count, _ = _cell_box(patch.cell.shape, patch.ring_radii, tris, x, y)
+    r0, r1, j0, count, _ = _cell_box(patch.cell.shape, patch.ring_radii, np.asarray(tris)[reach], x, y)
     inside = r0 < n_rows  # reaches inside the outer circle
     gap = ~patch.cell
     if gap.any():
@@ -402,8 +405,8 @@ def open_distance(patch: Patch, tris, x, y) -> np.ndarray:
         hit = (per_row[:, c1] - per_row[:, j0] > 0) & (rows[:, None] >= r0) & (rows[:, None] < r1)  # (R, T)
         first = np.where(hit.any(axis=0), hit.argmax(axis=0), n_rows)
     else:
-        first = np.full(len(tris), n_rows)
-    out[inside] = patch.ring_radii[np.minimum(first, n_rows)[inside]]
+        first = np.full(reach.size, n_rows)
+    out[reach[inside]] = patch.ring_radii[np.minimum(first, n_rows)[inside]]
     return out
 
 

@@ -686,15 +686,21 @@ def _span_cap(patches, tris, xy) -> np.ndarray:
     turn that a triangle containing the axis covers (the crossed triangles of a patch that stops
     short of the surface's fold: the sphere at 172 deg, 129k -> 100k pieces)."""
     x, y = xy[:, 0], xy[:, 1]
-    delta = np.full(len(tris), np.inf)
+    out = np.full(len(tris), np.inf)
+    near = np.flatnonzero(culling.within_axis_distance(x, y, tris, max(p.radius for p in patches)))
+    if near.size == 0:
+        return out
+    t = tris.take(near, axis=0)
+    delta = np.full(len(t), np.inf)
     for p in patches:
-        delta = np.minimum(delta, axis_patch.open_distance(p, tris, x, y))
-    px, py = x.take(tris), y.take(tris)
+        delta = np.minimum(delta, axis_patch.open_distance(p, t, x, y))
+    px, py = x.take(t), y.take(t)
     side = np.maximum(np.maximum(np.hypot(px[:, 1] - px[:, 0], py[:, 1] - py[:, 0]),
                                  np.hypot(px[:, 2] - px[:, 1], py[:, 2] - py[:, 1])),
                       np.hypot(px[:, 0] - px[:, 2], py[:, 0] - py[:, 2]))
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(np.isfinite(delta), side / delta, np.inf)
+        out[near] = np.where(np.isfinite(delta), side / delta, np.inf)
+    return out
 
 
 THIN_PX = 2.0
