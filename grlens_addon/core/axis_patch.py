@@ -610,7 +610,7 @@ def _refined_radii(radii, n_az, hit, lam, points, cand_tris) -> tuple[np.ndarray
         return radii, np.zeros(n_c, bool)
     out, new = [radii[:1]], [np.zeros(1, bool)]
     for i, k in enumerate(parts):  # a few dozen intervals
-        out.append(radii[i] * (radii[i + 1] / radii[i]) ** (np.arange(1, k + 1) / k))
+        out.append(np.append(radii[i] * (radii[i + 1] / radii[i]) ** (np.arange(1, k) / k), radii[i + 1]))
         new.append(np.arange(1, k + 1) < k)
     return np.concatenate(out), np.concatenate(new)
 
