@@ -394,6 +394,8 @@ def test_side_azimuths_are_the_angles_between_the_corners_about_the_axis():
     np.testing.assert_allclose(across[0, 0], 2 * np.arctan(0.1), rtol=1e-12)
     x[3] = np.nan
     assert np.isnan(culling.side_azimuths(x, y, np.array([[3, 4, 5]]))[0, [0, 2]]).all()
+    x[3] = y[3] = 0.0  # a corner on the axis
+    np.testing.assert_array_equal(culling.side_azimuths(x, y, np.array([[3, 4, 5]]))[0, [0, 2]], 0.0)
 
 
 def test_fine_mesh_behind_the_hole_keeps_its_ring(lut):

@@ -164,14 +164,18 @@ def within_axis_distance(x, y, tris, limit) -> np.ndarray:
 
 def side_azimuths(x, y, tris) -> np.ndarray:
     """(T, 3) the angle (radians, <= pi) about the axis between the projected corners k and k + 1 of
-    the triangles ``tris`` (T, 3): the azimuth side k covers; x, y from :func:`axis_coordinates`."""
+    the triangles ``tris`` (T, 3): the azimuth side k covers (0 for a side with a corner on the axis,
+    NaN with a corner without coordinates); x, y from :func:`axis_coordinates`."""
     tris = np.asarray(tris, dtype=np.int64)
     at = _used(len(x), tris)
     psi = np.full(len(x), np.nan)
     psi[at] = np.arctan2(np.asarray(y).take(at), np.asarray(x).take(at))  # once per corner point
+    psi[at[(np.asarray(x).take(at) == 0) & (np.asarray(y).take(at) == 0)]] = np.inf  # on the axis: no azimuth
     a = psi.take(tris)
     d = a[:, [1, 2, 0]] - a
-    return np.abs(np.mod(d + np.pi, 2.0 * np.pi) - np.pi)
+    with np.errstate(invalid="ignore"):
+        out = np.abs(np.mod(d + np.pi, 2.0 * np.pi) - np.pi)
+    return np.where(np.isinf(a) | np.isinf(a[:, [1, 2, 0]]), 0.0, out)  # a side from the axis covers none
 
 
 def _used(n, tris) -> np.ndarray:
