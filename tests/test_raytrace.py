@@ -511,10 +511,10 @@ def test_second_order_ring_edge_next_to_a_patch(lut, monkeypatch, angle):
 
 def test_first_order_ring_edge_next_to_an_incomplete_patch(lut, monkeypatch):
     """The sphere at 171 deg of its orbit, at 640x360: the axis crosses it next to its fold, so the
-    patch stops short (Patch.complete False) and kept pieces draw the first-order ring's edge, to the
-    silhouette's tolerance (pipeline.RING_EDGE_REACH): 0.41% of the covered pixels differ. Treating
-    the patch as complete leaves 0.70% different (2.05% before the patch's circles followed the steep
-    surface there, axis_patch.STEEP_RATIO)."""
+    patch stops short (Patch.complete False) and kept pieces draw the first-order ring's edge, to
+    pipeline.GAP_FACTOR of the tolerance (pipeline.RING_EDGE_REACH): 0.44% of the covered pixels
+    differ. Treating the patch as complete leaves 0.70% different (2.05% before the patch's circles
+    followed the steep surface there, axis_patch.STEEP_RATIO)."""
     _, _, ref, render = _ring_view(lut, 171, (640, 360))
 
     def mismatch():

@@ -266,7 +266,8 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                                             fit.max_error_px * SILHOUETTE_FACTOR)
             raise_edges = tight != levels[probe]
             cap = (lambda t: _span_cap(order_patches, src.tris.take(t, axis=0), axis_xy())) if order_patches else None
-            cand, want, sharp, r_px = _ring_levels(src, src_circ, img_circ, scene, hole_r, order, fit, replaced, cap)
+            cand, want, sharp, gap_want, r_px = _ring_levels(src, src_circ, img_circ, scene, hole_r, order, fit,
+                                                             replaced, cap)
             want0 = want
             maybe = sharp != want
             if raise_edges.any() or maybe.any():
@@ -283,12 +284,14 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                 reach = RING_EDGE_REACH * max(p.radius for p in order_patches)
                 xy = axis_xy()
                 near = culling.within_axis_distance(xy[:, 0], xy[:, 1], src.tris.take(cand, axis=0), reach)
+                raised = sharp
                 if order not in RING_EDGE_ORDERS:  # only where an incomplete patch leaves a gap
                     gap = np.zeros(cand.size, bool)
                     for p in order_patches:
                         gap |= axis_patch.touches_gap(p, src.tris.take(cand, axis=0), xy[:, 0], xy[:, 1])
                     near &= gap
-                want = np.where(near, np.maximum(want, sharp), want)
+                    raised = gap_want
+                want = np.where(near, np.maximum(want, raised), want)
             strip = np.zeros(cand.size, bool)
             if STRIP_BAND_PX and cand.size:
                 strip = _strip_candidates(src, cand, want, r_px, leaving, order)
@@ -542,10 +545,13 @@ brings the 180-degree view's second-order ring to the target (benchmarks/bench_a
 
 RING_EDGE_REACH = 2.0
 RING_EDGE_ORDERS = (2,)
+GAP_FACTOR = 0.5
 """Magnified source triangles within RING_EDGE_REACH patch radii of the axis (axis_patch.Patch.radius)
 get the ring levels of the silhouette's tolerance (SILHOUETTE_FACTOR), without the cap of
-SILHOUETTE_RING_LEVEL_MAX, in the orders RING_EDGE_ORDERS, and in every order where they may meet
-a cell that an incomplete patch (Patch.complete False) does not draw (axis_patch.touches_gap).
+SILHOUETTE_RING_LEVEL_MAX, in the orders RING_EDGE_ORDERS; in the other orders those that may meet
+a cell that an incomplete patch (Patch.complete False) does not draw (axis_patch.touches_gap) get
+the levels of GAP_FACTOR times the tolerance (0.25 instead of 0.5 adds a third of the first-order
+pieces at 171 and 189 deg for 0.41 / 0.37% instead of 0.44 / 0.41% of the pixels differing).
 - Second order: its pieces draw the ring next to the patch, which is less than a pixel wide, so the
   straight sides of a piece that fall a quarter of a pixel inside it flip a pixel at its edge. With
   the sphere grazing the axis in front of the hole, 1-2% of the pixels differed (355 and 5 deg of its
@@ -553,10 +559,9 @@ a cell that an incomplete patch (Patch.complete False) does not draw (axis_patch
   (benchmarks/bench_accuracy.py --orbit 5).
 - First order: its ring is wide where the patch is complete, and the rule would only double its
   pieces (180 deg: 26k -> 53k). Where the axis crosses the surface next to its fold (the sphere at
-  171-172 and 188 deg), the patch stops short and kept pieces draw the ring's edge: 0.70% -> 0.41% of
-  the pixels differ at 171 deg, and the UV error falls from 0.29 to 0.22 px (2.0% -> 0.4% and 1.3 ->
-  0.8 px before the patch's circles followed the steep surface there, axis_patch.STEEP_RATIO), at a
-  quarter more time in those frames."""
+  171-172 and 188 deg), the patch stops short and kept pieces draw the ring's edge: 0.70% -> 0.44% of
+  the pixels differ at 171 deg (2.0% -> 0.4% before the patch's circles followed the steep surface
+  there, axis_patch.STEEP_RATIO), at a quarter more time in those frames."""
 
 RING_LEVEL_MARGIN = 0.75
 """Fraction of the largest allowed azimuth per piece that :func:`_ring_levels` aims at: pieces
@@ -650,16 +655,17 @@ def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settin
     ``cap``: None, or a function of the candidates' indices giving the most azimuth (radians) each
     must be cut into pieces narrow in (:func:`_span_cap`), where that is less than the azimuth it covers.
 
-    Returns (cand, want, sharp, corner_px): the candidate triangles (indices), their levels for
-    ``max_error_px`` and for SILHOUETTE_FACTOR * max_error_px (the silhouette's tolerance), and the
-    angular radii (pixels) of their corners' images (len(cand), 3)."""
+    Returns (cand, want, sharp, gap, corner_px): the candidate triangles (indices), their levels for
+    ``max_error_px``, for SILHOUETTE_FACTOR * max_error_px (the silhouette's tolerance) and for
+    GAP_FACTOR * max_error_px (see RING_EDGE_REACH), and the angular radii (pixels) of their corners'
+    images (len(cand), 3)."""
     top = int(np.clip(settings.max_tess_level, 1, subdivision.GRID))
     tris = src.tris
     cand = _ring_candidates(src_circ, img_circ)
     if skip is not None:
         cand = cand[~skip[cand]]
     if cand.size == 0:
-        return cand, np.ones(0, np.int64), np.ones(0, np.int64), np.zeros((0, 3))
+        return cand, np.ones(0, np.int64), np.ones(0, np.int64), np.ones(0, np.int64), np.zeros((0, 3))
     _, span = culling.axis_geometry(src.positions, tris[cand], scene.camera, scene.hole, order)
     if cap is not None:
         span = np.fmin(span, cap(cand))
@@ -668,11 +674,11 @@ def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settin
         corner_px = radius.take(tris.take(cand, axis=0))
         r_px = np.maximum(np.maximum(corner_px[:, 0], corner_px[:, 1]), corner_px[:, 2])
         out = []
-        for tol in (settings.max_error_px, settings.max_error_px * SILHOUETTE_FACTOR):
+        for tol in (settings.max_error_px, settings.max_error_px * SILHOUETTE_FACTOR, settings.max_error_px * GAP_FACTOR):
             # the subdivision is uniform in space, not in azimuth: aim at RING_LEVEL_MARGIN of d_max
             n = np.ceil(span / (RING_LEVEL_MARGIN * culling.max_ring_span(r_px, tol)))
             out.append(np.clip(np.nan_to_num(n, nan=1.0), 1, top).astype(np.int64))
-    return cand, out[0], out[1], corner_px
+    return cand, out[0], out[1], out[2], corner_px
 
 
 def _span_cap(patches, tris, xy) -> np.ndarray:
