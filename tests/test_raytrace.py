@@ -453,6 +453,22 @@ def _ring_view(lut, angle, size=(320, 180)):
     return cam, src, ref, render
 
 
+def test_orbit_summary_lists_the_misses_or_the_closest():
+    """bench_accuracy.orbit_summary: the counts per target, the angles that miss one (worst mismatch
+    first), or, when none does, the five closest to a target."""
+    bench = _bench_accuracy()
+    rows = [(a, 0.001, 0.1, 200.0, 5.0) for a in range(0, 360, 30)]
+    rows[3] = (90, 0.006, 0.1, 200.0, 5.0)
+    rows[5] = (150, 0.002, 0.1, 90.0, 30.0)
+    text = "\n".join(bench.orbit_summary(30, rows))
+    assert "the mismatch target is met at 11, the UV target at 12, the speed-up target at 11, all three at 10" in text
+    assert text.index("| 90 |") < text.index("| 150 |") and text.count("\n| ") == 3  # header + 2 rows
+    rows[3], rows[5] = (90, 0.004, 0.1, 200.0, 5.0), (150, 0.002, 0.45, 105.0, 30.0)
+    text = "\n".join(bench.orbit_summary(30, rows))
+    assert "all three at 12" in text and "No angle misses one" in text and text.count("\n| ") == 6
+    assert text.index("| 150 |") < text.index("| 90 |")  # 0.45 px is closer to its target than 0.4%
+
+
 @pytest.mark.parametrize("angle, bound", [(0, 0.05), (170, 0.008), (180, 0.006)])
 def test_sphere_ring_views_vs_reference(lut, angle, bound):
     """The paper's sphere next to and on the observer-hole axis at 320x180, where the second-order
