@@ -55,7 +55,7 @@ from scipy.sparse.csgraph import connected_components
 
 from . import illumination, mapping, silhouette
 from .mapping import row_norm
-from .culling import (axis_coordinates, axis_crossing, axis_distance, hole_angle, max_ring_span,
+from .culling import (axis_coordinates, axis_crossing, axis_distance, hole_angle, longest_side, max_ring_span,
                       within_axis_distance)
 
 EDGE_FACTOR = 1.0 / 16.0
@@ -154,9 +154,7 @@ def find_crossings(points, tris, camera, hole, candidates=None) -> list[Crossing
         return []
     # one crossing per point: crossings closer along the axis than a millionth of their triangle's size
     # are the same point seen from the triangles around a shared edge or vertex
-    xa, xb, xc = x[t[:, 0]], x[t[:, 1]], x[t[:, 2]]
-    ya, yb, yc = y[t[:, 0]], y[t[:, 1]], y[t[:, 2]]
-    size = np.maximum(np.maximum(np.hypot(xa - xb, ya - yb), np.hypot(xb - xc, yb - yc)), np.hypot(xc - xa, yc - ya))
+    size = longest_side(x, y, t)
     sel = sel[np.argsort(along[sel], kind="stable")]
     e1 = np.asarray(camera, np.float64) - hole
     e1 = e1 / np.linalg.norm(e1)
@@ -349,14 +347,6 @@ def _cells_in(mask, r0, r1, j0, count) -> np.ndarray:
     total[1:, 1:] = np.cumsum(np.cumsum(np.concatenate([mask, mask], axis=1), axis=0), axis=1)
     c1 = j0 + count
     return total[r1, c1] - total[r0, c1] - total[r1, j0] + total[r0, j0]
-
-
-def _used_grid(faces, n_lim, n_grid) -> np.ndarray:
-    """Sorted indices, among the ``n_grid`` grid vertices of a patch, of those that are corners of
-    ``faces`` (F, 3) (vertex indices: the ``n_lim`` limit vertices first, then the grid)."""
-    used = np.zeros(n_lim + n_grid, bool)
-    used[faces.ravel()] = True
-    return np.flatnonzero(used[n_lim:])
 
 
 def _spread(img: mapping.Images, rows, n) -> mapping.Images:
@@ -737,7 +727,8 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
     drawn = np.zeros(len(faces), bool)
     for o in shown:
         drawn |= patch.facing[o]
-    rows = _used_grid(faces[drawn], n_lim, len(grid_pos))
+    rows = mapping.used_vertices(faces[drawn], n_lim + len(grid_pos))
+    rows = rows[rows >= n_lim] - n_lim  # among the grid vertices (the limit vertices come first)
     if rows.size == len(grid_pos):
         regs = mapping.map_vertices_orders(grid_pos, scene, lut, shown, plane)
     else:

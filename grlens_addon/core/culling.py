@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .mapping import any_perpendicular, row_norm
+from .mapping import any_perpendicular, row_norm, used_vertices
 
 
 @dataclass
@@ -167,7 +167,7 @@ def side_azimuths(x, y, tris) -> np.ndarray:
     the triangles ``tris`` (T, 3): the azimuth side k covers (0 for a side with a corner on the axis,
     NaN with a corner without coordinates); x, y from :func:`axis_coordinates`."""
     tris = np.asarray(tris, dtype=np.int64)
-    at = _used(len(x), tris)
+    at = used_vertices(tris, len(x))
     psi = np.full(len(x), np.nan)
     psi[at] = np.arctan2(np.asarray(y).take(at), np.asarray(x).take(at))  # once per corner point
     psi[at[(np.asarray(x).take(at) == 0) & (np.asarray(y).take(at) == 0)]] = np.inf  # on the axis: no azimuth
@@ -178,11 +178,13 @@ def side_azimuths(x, y, tris) -> np.ndarray:
     return np.where(np.isinf(a) | np.isinf(a[:, [1, 2, 0]]), 0.0, out)  # a side from the axis covers none
 
 
-def _used(n, tris) -> np.ndarray:
-    """Sorted indices, among ``n`` points, of the corners of ``tris``."""
-    mask = np.zeros(n, bool)
-    mask[np.asarray(tris).ravel()] = True
-    return np.flatnonzero(mask)
+def longest_side(x, y, tris) -> np.ndarray:
+    """(T,) the longest side (BU) of the triangles ``tris`` (T, 3) projected along the axis; x, y from
+    :func:`axis_coordinates`."""
+    px, py = x.take(tris), y.take(tris)
+    return np.maximum(np.maximum(np.hypot(px[:, 1] - px[:, 0], py[:, 1] - py[:, 0]),
+                                 np.hypot(px[:, 2] - px[:, 1], py[:, 2] - py[:, 1])),
+                      np.hypot(px[:, 0] - px[:, 2], py[:, 0] - py[:, 2]))
 
 
 def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
@@ -305,7 +307,7 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
         wide = np.zeros(len(tris), dtype=bool)
         with np.errstate(invalid="ignore"):
             if pixel_angle and max_error_px:
-                at = _used(len(image_dirs), t_sel)  # once per corner point
+                at = used_vertices(t_sel, len(image_dirs))  # once per corner point
                 angle = np.full(len(image_dirs), np.nan)
                 angle[at] = hole_angle(image_dirs.take(at, axis=0), camera, hole)
                 r_px = angle.take(t_sel)

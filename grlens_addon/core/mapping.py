@@ -99,6 +99,14 @@ def row_norm(v) -> np.ndarray:
     return np.sqrt(np.einsum("ij,ij->i", v, v))
 
 
+def used_vertices(tris, n_vertices) -> np.ndarray:
+    """Sorted indices, among ``n_vertices`` points, of those the triangles ``tris`` (T, 3) use (like
+    np.unique of their indices, without sorting)."""
+    mask = np.zeros(n_vertices, dtype=bool)
+    mask[np.asarray(tris).ravel()] = True
+    return np.flatnonzero(mask)
+
+
 def any_perpendicular(e1):
     """A unit vector perpendicular to the unit vector ``e1`` (3,), chosen deterministically (from the z
     axis, or the x axis when e1 is close to z)."""

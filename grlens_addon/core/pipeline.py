@@ -350,7 +350,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         everything = bool(keep.all())
         kept = None if everything else np.flatnonzero(keep)
         tris = sub.tris if everything else sub.tris.take(kept, axis=0)
-        used = _used_vertices(tris, len(sub.positions))
+        used = mapping.used_vertices(tris, len(sub.positions))
         if used.size == len(sub.positions):  # every vertex is used: indices stay as they are
             image_tris = tris
         else:
@@ -486,13 +486,6 @@ def _face_values(sub: subdivision.Subdivided, face_src, per_source, compute) -> 
     out[:n] = per_source[face_src[:n]]
     out[n:] = compute(sub.tris[n:])
     return out
-
-
-def _used_vertices(tris, n_vertices) -> np.ndarray:
-    """Sorted indices of the vertices referenced by ``tris`` (like np.unique, without sorting)."""
-    mask = np.zeros(n_vertices, dtype=bool)
-    mask[tris.ravel()] = True
-    return np.flatnonzero(mask)
 
 
 PATCH_SEAM_JUMP = 0.1
@@ -674,11 +667,19 @@ def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settin
         corner_px = radius.take(tris.take(cand, axis=0))
         r_px = np.maximum(np.maximum(corner_px[:, 0], corner_px[:, 1]), corner_px[:, 2])
         out = []
-        for tol in (settings.max_error_px, settings.max_error_px * SILHOUETTE_FACTOR, settings.max_error_px * GAP_FACTOR):
-            # the subdivision is uniform in space, not in azimuth: aim at RING_LEVEL_MARGIN of d_max
-            n = np.ceil(span / (RING_LEVEL_MARGIN * culling.max_ring_span(r_px, tol)))
-            out.append(np.clip(np.nan_to_num(n, nan=1.0), 1, top).astype(np.int64))
+        out = [_azimuth_levels(span, culling.max_ring_span(r_px, tol), top)
+               for tol in (settings.max_error_px, settings.max_error_px * SILHOUETTE_FACTOR,
+                           settings.max_error_px * GAP_FACTOR)]
     return cand, out[0], out[1], out[2], corner_px
+
+
+def _azimuth_levels(span, d_max, top) -> np.ndarray:
+    """Levels (integers 1 .. ``top``) that cut an azimuth ``span`` (radians) about the axis into pieces
+    of at most RING_LEVEL_MARGIN * ``d_max`` each (the subdivision is uniform in space, not in
+    azimuth, so it aims below the bound); 1 where either is NaN."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = np.ceil(span / (RING_LEVEL_MARGIN * d_max))
+    return np.clip(np.nan_to_num(n, nan=1.0), 1, top).astype(np.int64)
 
 
 def _span_cap(patches, tris, xy) -> np.ndarray:
@@ -700,12 +701,8 @@ def _span_cap(patches, tris, xy) -> np.ndarray:
     delta = np.full(len(t), np.inf)
     for p in patches:
         delta = np.minimum(delta, axis_patch.open_distance(p, t, x, y))
-    px, py = x.take(t), y.take(t)
-    side = np.maximum(np.maximum(np.hypot(px[:, 1] - px[:, 0], py[:, 1] - py[:, 0]),
-                                 np.hypot(px[:, 2] - px[:, 1], py[:, 2] - py[:, 1])),
-                      np.hypot(px[:, 0] - px[:, 2], py[:, 0] - py[:, 2]))
     with np.errstate(divide="ignore", invalid="ignore"):
-        out[near] = np.where(np.isfinite(delta), side / delta, np.inf)
+        out[near] = np.where(np.isfinite(delta), culling.longest_side(x, y, t) / delta, np.inf)
     return out
 
 
@@ -767,8 +764,7 @@ def _side_levels(xy, tris, corner_px, tolerance, settings) -> np.ndarray:
     span = culling.side_azimuths(xy[:, 0], xy[:, 1], tris)
     with np.errstate(invalid="ignore", divide="ignore"):
         d_max = culling.max_ring_span(corner_px.max(axis=1), tolerance)
-        n = np.ceil(span / (RING_LEVEL_MARGIN * d_max[:, None]))
-    return np.clip(np.nan_to_num(n, nan=1.0), 1, top).astype(np.int64)
+    return _azimuth_levels(span, d_max[:, None], top)
 
 
 PRESPLIT_MIN = 12
@@ -850,7 +846,7 @@ def _patch_parts(patches, order, planes, offset):
         faces = faces[ok]
         if len(faces) == 0:
             continue
-        used = _used_vertices(faces, len(p.source_position))
+        used = mapping.used_vertices(faces, len(p.source_position))
         remap = np.full(len(p.source_position), -1, dtype=np.int64)
         remap[used] = np.arange(used.size)
         out[0].append(remap.take(faces) + offset)
