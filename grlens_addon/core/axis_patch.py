@@ -397,7 +397,7 @@ def open_distance(patch: Patch, tris, x, y) -> np.ndarray:
         first = np.where(hit.any(axis=0), hit.argmax(axis=0), n_rows)
     else:
         first = np.full(reach.size, n_rows)
-    out[reach[inside]] = patch.ring_radii[np.minimum(first, n_rows)[inside]]
+    out[reach[inside]] = patch.ring_radii[first[inside]]  # first <= n_rows: the outer circle
     return out
 
 
@@ -572,16 +572,15 @@ def _hidden_sheet(cr, cand, orders, points, tris, scene, lut, leaving=None):
     normal = normal / np.linalg.norm(normal)
     plane = _limit_plane(cr, 2.0 * np.pi * np.arange(HIDDEN_AZIMUTHS) / HIDDEN_AZIMUTHS, scene)
     looks = lut.lookup_orders(plane.r[:1], plane.phi[:1], tuple(orders), quantities=("ux", "uy"))  # alike at every azimuth
-    cone, away = True, np.ones(len(cand), bool)
+    away = np.ones(len(cand), bool)
     for o in orders:
         ux, uy = (np.broadcast_to(v, plane.r.shape) for v in (looks[o].ux, looks[o].uy))
         d = illumination.leaving_direction(plane, scene, ux, uy)
         with np.errstate(invalid="ignore"):
-            cone = cone and bool((d @ normal < 0).all())
-        if not cone:
-            return False, np.zeros(len(cand), bool)
+            if not (d @ normal < 0).all():
+                return False, np.zeros(len(cand), bool)
         away &= silhouette.turned_away(pts, local, leaving(corners, o), 0.0)
-    return cone, away
+    return True, away
 
 
 STEEP_RATIO = 2.0

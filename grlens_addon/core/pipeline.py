@@ -282,13 +282,13 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                 # short of the surface's fold: the ring's edge there needs the silhouette's tolerance,
                 # whatever the level (see RING_EDGE_REACH)
                 reach = RING_EDGE_REACH * max(p.radius for p in order_patches)
-                xy = axis_xy()
-                near = culling.within_axis_distance(xy[:, 0], xy[:, 1], src.tris.take(cand, axis=0), reach)
+                xy, cand_tris = axis_xy(), src.tris.take(cand, axis=0)
+                near = culling.within_axis_distance(xy[:, 0], xy[:, 1], cand_tris, reach)
                 raised = sharp
                 if order not in RING_EDGE_ORDERS:  # only where an incomplete patch leaves a gap
                     gap = np.zeros(cand.size, bool)
                     for p in order_patches:
-                        gap |= axis_patch.touches_gap(p, src.tris.take(cand, axis=0), xy[:, 0], xy[:, 1])
+                        gap |= axis_patch.touches_gap(p, cand_tris, xy[:, 0], xy[:, 1])
                     near &= gap
                     raised = gap_want
                 want = np.where(near, np.maximum(want, raised), want)
