@@ -217,11 +217,12 @@ def test_patch_faces_take_their_corners_values_from_the_triangles_under_them(lut
     np.testing.assert_allclose(corner_uv[~crosses], pl[~crosses], atol=1e-9)
 
 
-def test_patch_stops_at_the_mesh(lut):
-    """A small plane: the patch's cells stay on the plane (full circles inside it, then the cells
-    whose four corners are on it, into its corners); it replaces only triangles inside drawn cells. A
-    plane with a hole around the axis (nothing crosses it) and a plane whose hole reaches the
-    crossing's circles give no patch."""
+def test_patch_stops_at_the_mesh(lut, monkeypatch):
+    """A small plane, with the plain grid (CLIP_TO_TRIANGLES off): the patch's cells stay on the plane
+    (full circles inside it, then the cells whose four corners are on it, into its corners); it
+    replaces only triangles inside drawn cells. A plane with a hole around the axis (nothing crosses
+    it) and a plane whose hole reaches the crossing's circles give no patch."""
+    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
     pts, tris = _grid(-4.0, 0.04, 2)
     (p,) = _patches(pts, tris, lut)
     assert 0.04 < p.radius <= 0.04 * math.sqrt(2) and not p.complete
@@ -241,10 +242,88 @@ def test_patch_stops_at_the_mesh(lut):
     assert _patches(pts, tris[keep], lut) == []
 
 
-def test_touches_gap_finds_the_triangles_beside_undrawn_cells(lut):
-    """A small plane: its patch is incomplete (the corners' cells beyond the plane are not drawn).
-    touches_gap is True for the triangles whose projection meets such a cell, which are exactly those
-    with a point beyond the largest full circle, and False for all of them on a complete patch."""
+def _clip_check(p, pts, tris):
+    """Faces of a clipped patch: each inside its source triangle (projected along the axis), and the
+    patch's own edges used twice, except on its outer circle and the sheet's edge (no cracks)."""
+    x, y, _ = culling.axis_coordinates(pts, CAMERA, HOLE)
+    n = p.n_azimuths
+    assert np.all(p.bary.sum(axis=2) == pytest.approx(1.0)) and p.bary.min() > -1e-9
+    # the corners' positions are their barycentrics in the face's source triangle
+    corner = np.einsum("fck,fkx->fcx", p.bary, pts[tris[p.face_src]])
+    grid = p.tris >= n
+    np.testing.assert_allclose(corner[grid], p.source_position[p.tris[grid]], atol=1e-12)
+    e = np.sort(np.concatenate([p.tris[:, [0, 1]], p.tris[:, [1, 2]], p.tris[:, [2, 0]]]), axis=1)
+    e = e[e[:, 0] >= n]  # the limit vertices are one point with a turn of images: the ring's band
+    key, count = np.unique(e, axis=0, return_counts=True)
+    assert count.max() == 2
+    px, py, _ = culling.axis_coordinates(p.source_position, CAMERA, HOLE)
+    once = key[count == 1]
+    outer = (np.hypot(px, py)[once] >= p.radius * math.cos(math.pi / n) * (1 - 1e-12)).all(axis=1)
+    return once[~outer], px, py, x, y
+
+
+def test_clipped_patch_covers_the_mesh_up_to_its_edge(lut, monkeypatch):
+    """A small plane with the patch clipped to its triangles (CLIP_TO_TRIANGLES; CLIP_REACH raised so
+    that a plain grid reaching 87% of the way out is clipped too): the patch is complete, every face
+    lies on one source triangle with that triangle's barycentrics, the faces' projected area is the
+    plane's inside the outer circle (its corners beyond it), its inner edges are shared by two faces
+    (the only edges used once lie on the outer circle or the plane's border), and it replaces the
+    triangles inside the outer circle. The crossing is a vertex of the plane, so edges of it run
+    through the limit vertices."""
+    assert axis_patch.CLIP_TO_TRIANGLES
+    monkeypatch.setattr(axis_patch, "CLIP_REACH", 1.0)
+    pts, tris = _grid(-4.0, 0.04, 2)
+    (p,) = _patches(pts, tris, lut)
+    assert p.complete
+    rim, px, py, x, y = _clip_check(p, pts, tris)
+    assert len(rim) > 0
+    on_x = np.isclose(np.abs(px[rim]), 0.04, rtol=0, atol=1e-12).all(axis=1)  # both ends on one side
+    on_y = np.isclose(np.abs(py[rim]), 0.04, rtol=0, atol=1e-12).all(axis=1)
+    assert (on_x | on_y).all()
+    # the area of the square inside the outer circle (chords of it, N per turn), against Monte Carlo
+    area = np.abs(axis_patch._projected_area(px, py, p.tris)).sum() / 2
+    rng = np.random.default_rng(1)
+    q = rng.uniform(-0.04, 0.04, (400000, 2))
+    inside = np.hypot(q[:, 0], q[:, 1]) <= p.radius * math.cos(math.pi / p.n_azimuths)
+    assert area == pytest.approx(0.08 ** 2 * inside.mean(), rel=0.01)
+    d_hi = np.hypot(x, y)[tris].max(axis=1)
+    np.testing.assert_array_equal(np.sort(p.replaced), np.flatnonzero(d_hi <= p.radius))
+
+
+def test_clipped_patch_on_a_sphere_next_to_its_limb(lut):
+    """The benchmark's sphere with the axis just inside its limb (170.5 deg of its orbit): the clipped
+    patches are complete, inside their source triangles and crack-free, and replace the crossed
+    triangles, which the plain grid left to be cut at ring levels."""
+    a = math.radians(170.5)
+    pts, tris = _sphere([3 * math.cos(a), 3 * math.sin(a), 0.01])
+    patches = _patches(pts, tris, lut, closed=True)
+    grids = [p for p in patches if len(p.tris)]
+    assert grids and all(p.complete for p in grids)
+    for p in grids:
+        assert p.crossing.tri in p.replaced
+        rim, px, py, x, y = _clip_check(p, pts, tris)
+        # edges used once off the outer circle lie on the sheet's edge: the fold, between triangles of
+        # opposite winding in projection
+        assert len(rim) > 0
+        # the fold: edges between triangles wound oppositely in projection
+        e = subdivision.mesh_edges(tris)
+        sign = np.sign(axis_patch._projected_area(x, y, tris))
+        pos, neg = (np.bincount(e.of_tri.ravel(), weights=np.repeat(sign == k, 3), minlength=len(e.verts))
+                    for k in (1, -1))
+        fold = e.verts[(pos > 0) & (neg > 0)]
+        ax_, ay_ = x[fold[:, 0]], y[fold[:, 0]]
+        fx, fy = x[fold[:, 1]] - ax_, y[fold[:, 1]] - ay_
+        for v in np.unique(rim):  # every vertex of the patch's other edge lies on the fold
+            t = np.clip(((px[v] - ax_) * fx + (py[v] - ay_) * fy) / (fx * fx + fy * fy), 0, 1)
+            assert np.hypot(ax_ + t * fx - px[v], ay_ + t * fy - py[v]).min() < 1e-12
+
+
+def test_touches_gap_finds_the_triangles_beside_undrawn_cells(lut, monkeypatch):
+    """A small plane, with the plain grid: its patch is incomplete (the corners' cells beyond the plane
+    are not drawn). touches_gap is True for the triangles whose projection meets such a cell, which
+    are exactly those with a point beyond the largest full circle, and False for all of them on a
+    complete patch."""
+    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
     pts, tris = _grid(-4.0, 0.04, 2)
     (p,) = _patches(pts, tris, lut)
     assert not p.complete
@@ -259,10 +338,12 @@ def test_touches_gap_finds_the_triangles_beside_undrawn_cells(lut):
     assert p.complete and not axis_patch.touches_gap(p, tris, *culling.axis_coordinates(pts, CAMERA, HOLE)[:2]).any()
 
 
-def test_open_distance_is_where_a_patch_stops_drawing(lut):
+def test_open_distance_is_where_a_patch_stops_drawing(lut, monkeypatch):
     """axis_patch.open_distance: on a complete patch, the outer circle for the triangles reaching
-    inside it and inf for the others; on an incomplete one, the inner circle of the first row with an
-    undrawn cell in the triangle's box (never beyond the outer circle)."""
+    inside it and inf for the others; on an incomplete one (the plain grid on a small plane), the
+    inner circle of the first row with an undrawn cell in the triangle's box (never beyond the outer
+    circle)."""
+    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
     pts, tris = _grid(-4.0, 1.0, 10)
     (p,) = _patches(pts, tris, lut)
     x, y, _ = culling.axis_coordinates(pts, CAMERA, HOLE)

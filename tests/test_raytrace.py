@@ -526,11 +526,13 @@ def test_second_order_ring_edge_next_to_a_patch(lut, monkeypatch, angle):
 
 
 def test_first_order_ring_edge_next_to_an_incomplete_patch(lut, monkeypatch):
-    """The sphere at 171 deg of its orbit, at 640x360: the axis crosses it next to its fold, so the
-    patch stops short (Patch.complete False) and kept pieces draw the first-order ring's edge, to
-    pipeline.GAP_FACTOR of the tolerance (pipeline.RING_EDGE_REACH): 0.44% of the covered pixels
-    differ. Treating the patch as complete leaves 0.70% different (2.05% before the patch's circles
-    followed the steep surface there, axis_patch.STEEP_RATIO)."""
+    """The sphere at 171 deg of its orbit, at 640x360, with the plain grid (axis_patch.CLIP_TO_TRIANGLES
+    off): the axis crosses it next to its fold, so the patch stops short (Patch.complete False) and
+    kept pieces draw the first-order ring's edge, to pipeline.GAP_FACTOR of the tolerance
+    (pipeline.RING_EDGE_REACH): 0.44% of the covered pixels differ. Treating the patch as complete
+    leaves 0.70% different (2.05% before the patch's circles followed the steep surface there,
+    axis_patch.STEEP_RATIO)."""
+    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
     _, _, ref, render = _ring_view(lut, 171, (640, 360))
 
     def mismatch():
@@ -550,10 +552,11 @@ def test_first_order_ring_edge_next_to_an_incomplete_patch(lut, monkeypatch):
 
 
 def test_patch_circles_follow_a_steep_surface(lut, monkeypatch):
-    """The sphere at 170.5 deg of its orbit, at 640x360: the axis passes just inside its limb, where the
-    surface turns towards the axis' direction. With the circles axis_patch.STEEP_RATIO adds there,
-    0.42% of the covered pixels differ and the texture is within 0.43 px (p99 of the screen error);
-    without them 0.78% and 0.88 px."""
+    """The sphere at 170.5 deg of its orbit, at 640x360, with the plain grid (axis_patch.CLIP_TO_TRIANGLES
+    off): the axis passes just inside its limb, where the surface turns towards the axis' direction.
+    With the circles axis_patch.STEEP_RATIO adds there, 0.42% of the covered pixels differ and the
+    texture is within 0.43 px (p99 of the screen error); without them 0.78% and 0.88 px."""
+    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
     bench = _bench_accuracy()
     cam, src, ref, render = _ring_view(lut, 170.5, (640, 360))
 
@@ -568,12 +571,9 @@ def test_patch_circles_follow_a_steep_surface(lut, monkeypatch):
     assert mismatch > 0.006 and uv > 0.7
 
 
-def test_ring_levels_stop_where_the_patch_draws(lut, monkeypatch):
-    """The sphere at 172 deg of its orbit, at 640x360: the crossed triangles of the two patches (which
-    stop short of the fold) are kept and cover the whole turn about the axis, but their pieces need to
-    be narrow only beyond the patches' drawn cells (pipeline._span_cap): 100k image triangles instead
-    of 129k, and 0.39% of the covered pixels differ either way."""
-    _, _, ref, render = _ring_view(lut, 172, (640, 360))
+def _count_triangles(monkeypatch) -> dict:
+    """Wraps pipeline.build_images so that the returned dict's "tris" is the number of image triangles
+    (all orders) of the latest call."""
     counts = {}
     build = pipeline.build_images
 
@@ -583,6 +583,41 @@ def test_ring_levels_stop_where_the_patch_draws(lut, monkeypatch):
         return out
 
     monkeypatch.setattr(pipeline, "build_images", counting)
+    return counts
+
+
+@pytest.mark.parametrize("angle", [170.5, 172.0])
+def test_patches_clipped_to_the_triangles_next_to_the_limb(lut, monkeypatch, angle):
+    """The sphere with the axis next to its limb, at 640x360: patches clipped to the source triangles
+    under them (axis_patch.CLIP_TO_TRIANGLES, the default) draw their sheets up to the fold and
+    replace the crossed triangles. Against the plain grid (with its steep circles, the incomplete-patch
+    rule and the span cap): at 170.5 deg 0.31% of the covered pixels differ instead of 0.46%, the
+    texture is within 0.23 px (p99 of the screen error) instead of 0.43, with 43k image triangles
+    instead of 135k; at 172 deg 0.24% instead of 0.39%, 0.23 px instead of 0.31, 44k instead of 88k."""
+    bench = _bench_accuracy()
+    cam, src, ref, render = _ring_view(lut, angle, (640, 360))
+    counts = _count_triangles(monkeypatch)
+
+    def errors():
+        m = bench.compare(ref, render(), cam, src, other_surface=bench.OTHER_SURFACE)["orders"]["all"]
+        return m["mismatch_frac"], m["screen_px"]["p99"], counts["tris"]
+
+    clipped = errors()
+    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
+    plain = errors()
+    assert clipped[0] < 0.0035 and clipped[1] < 0.3
+    assert clipped[0] < plain[0] and clipped[1] < plain[1] and clipped[2] < 0.6 * plain[2]
+
+
+def test_ring_levels_stop_where_the_patch_draws(lut, monkeypatch):
+    """The sphere at 172 deg of its orbit, at 640x360, with the plain grid (axis_patch.CLIP_TO_TRIANGLES
+    off): the crossed triangles of the two patches (which stop short of the fold) are kept and cover
+    the whole turn about the axis, but their pieces need to be narrow only beyond the patches' drawn
+    cells (pipeline._span_cap): 100k image triangles instead of 129k, and 0.39% of the covered pixels
+    differ either way."""
+    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
+    _, _, ref, render = _ring_view(lut, 172, (640, 360))
+    counts = _count_triangles(monkeypatch)
     capped = image_metrics.compare(ref, render())["orders"]["all"]["mismatch_frac"]
     n_capped = counts["tris"]
     monkeypatch.setattr(pipeline, "_span_cap", lambda patches, tris, xy: np.full(len(tris), np.inf))

@@ -551,10 +551,11 @@ pieces at 171 and 189 deg for 0.41 / 0.37% instead of 0.44 / 0.41% of the pixels
   orbit), 0.3-0.5% with the rule, at twice the second-order pieces
   (benchmarks/bench_accuracy.py --orbit 5).
 - First order: its ring is wide where the patch is complete, and the rule would only double its
-  pieces (180 deg: 26k -> 53k). Where the axis crosses the surface next to its fold (the sphere at
-  171-172 and 188 deg), the patch stops short and kept pieces draw the ring's edge: 0.70% -> 0.44% of
-  the pixels differ at 171 deg (2.0% -> 0.4% before the patch's circles followed the steep surface
-  there, axis_patch.STEEP_RATIO), at a quarter more time in those frames."""
+  pieces (180 deg: 26k -> 53k). Where the axis crosses the surface near its fold and the patch is
+  not clipped to it (axis_patch.CLIP_REACH; with the plain grid at 171-172 and 188 deg), the patch
+  stops short and kept pieces draw the ring's edge: with the plain grid 0.70% -> 0.44% of the pixels
+  differ at 171 deg (2.0% -> 0.4% before the patch's circles followed the steep surface there,
+  axis_patch.STEEP_RATIO), at a quarter more time in those frames."""
 
 RING_LEVEL_MARGIN = 0.75
 """Fraction of the largest allowed azimuth per piece that :func:`_ring_levels` aims at: pieces
