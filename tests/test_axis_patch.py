@@ -290,12 +290,18 @@ def test_clipped_patch_covers_the_mesh_up_to_its_edge(lut, monkeypatch):
     np.testing.assert_array_equal(np.sort(p.replaced), np.flatnonzero(d_hi <= p.radius))
 
 
-def test_clipped_patch_on_a_sphere_next_to_its_limb(lut):
+def test_clipped_patch_on_a_sphere_next_to_its_limb(lut, monkeypatch):
     """The benchmark's sphere with the axis just inside its limb (170.5 deg of its orbit): the clipped
     patches are complete, inside their source triangles and crack-free, and replace the crossed
-    triangles, which the plain grid left to be cut at ring levels."""
+    triangles, which the plain grid left to be cut at ring levels. With more (cell, triangle) pairs
+    to clip than MAX_CLIP_PAIRS, the plain grid is built instead."""
     a = math.radians(170.5)
     pts, tris = _sphere([3 * math.cos(a), 3 * math.sin(a), 0.01])
+    with monkeypatch.context() as m:
+        m.setattr(axis_patch, "MAX_CLIP_PAIRS", 10)
+        plain = [p for p in _patches(pts, tris, lut, closed=True) if len(p.tris)]
+    assert plain and not any(p.complete for p in plain)
+    assert not any(p.crossing.tri in p.replaced for p in plain)
     patches = _patches(pts, tris, lut, closed=True)
     grids = [p for p in patches if len(p.tris)]
     assert grids and all(p.complete for p in grids)

@@ -644,6 +644,10 @@ fraction of its outer circle (next to the limb: the benchmark sphere at 170.5-17
 where the kept crossed triangles cost most); a plain grid that goes all round farther out is cheaper
 (there its kept triangles are cut only a little) and about as accurate."""
 
+MAX_CLIP_PAIRS = 4 * MAX_GRID
+"""At most this many (cell, triangle) pairs are clipped per patch (a mesh much finer than the cells
+next to the fold makes many); beyond, the plain grid is used."""
+
 _MAXV = 8  # vertices of a clipped cell: a quad cut by a triangle's three edges has at most 7
 
 
@@ -745,7 +749,8 @@ def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
     (found from the side's and the edge's end points, the same numbers in every cell). Returns None
     when the innermost circle is not complete, else a dict with faces (F, 3) (counter-clockwise in
     the axis projection), face_src (F,) (indices into tris), bary (F, 3, 3), vertex_tri (V,),
-    vertex_bary (V, 3), position (V, 3) BU, ring_radii, replaced (indices into tris)."""
+    vertex_bary (V, 3), position (V, 3) BU, ring_radii, replaced (indices into tris); False when there
+    would be more than MAX_CLIP_PAIRS pairs to clip."""
     n_lim = n_az
     n_c = len(radii)
     on = (hit >= 0).reshape(n_c, n_az)
@@ -781,6 +786,8 @@ def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
     pt, prow, pcol = _wedge_cells(ct, x, y, n_az, ring_radii)
     sel = ~whole[prow, pcol]
     pt, prow, pcol = pt[sel], prow[sel], pcol[sel]
+    if len(pt) > MAX_CLIP_PAIRS:  # a mesh much finer than the cells: the plain grid instead
+        return False
     # the source edges of the sheet's triangles (local numbering), per triangle side k (corner k -> k + 1)
     side = np.stack([ct[:, [0, 1]], ct[:, [1, 2]], ct[:, [2, 0]]], axis=1).reshape(-1, 2)
     e_verts, tri_edge = np.unique(np.sort(side, axis=1), axis=0, return_inverse=True)
@@ -803,11 +810,14 @@ def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
     scale = max(float(ring_radii[-1]), 1e-300)
     slot = np.arange(_MAXV)[None, :]
 
+    # the sides of the triangles as half-planes: inside where a x + b y >= c (with a tolerance)
+    sx, sy = x[ct], y[ct]  # (C, 3) corners
+    ex, ey = np.roll(sx, -1, axis=1) - sx, np.roll(sy, -1, axis=1) - sy  # side k: corner k -> k + 1
+    ha, hb = -sign * ey, sign * ex
+    hc = ha * sx + hb * sy - 1e-12 * scale * np.hypot(ex, ey)
+
     def inside_of(kk, px_, py_, pt):  # (P, K) bool: points on the inner side of side kk of each pair's triangle
-        p_v, q_v = ct[pt, kk], ct[pt, (kk + 1) % 3]
-        ex, ey = (x[q_v] - x[p_v])[:, None], (y[q_v] - y[p_v])[:, None]
-        tol = 1e-12 * scale * np.hypot(ex, ey)
-        return sign * (ex * (py_ - y[p_v][:, None]) - ey * (px_ - x[p_v][:, None])) >= -tol
+        return ha[pt, kk][:, None] * px_ + hb[pt, kk][:, None] * py_ >= hc[pt, kk][:, None]
 
     # cells outside a side of the triangle meet nothing of it; cells inside all three are not cut
     ins = [inside_of(kk, vx[:, :4], vy[:, :4], pt) for kk in range(3)]
@@ -974,6 +984,9 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
         cut = _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing)
         if cut is None:
             return None
+    else:
+        cut = False
+    if cut is not False:
         faces, bary = cut["faces"], cut["bary"]
         if flip:  # to the source's winding
             faces, bary = faces[:, ::-1], bary[:, ::-1]
