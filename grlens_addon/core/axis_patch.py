@@ -991,7 +991,8 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
         if flip:  # to the source's winding
             faces, bary = faces[:, ::-1], bary[:, ::-1]
         ring_radii = cut["ring_radii"]
-        patch = Patch(crossing=crossing, n_azimuths=n_az, source_position=cut["position"], tris=faces,
+        patch = Patch(crossing=crossing, n_azimuths=n_az, source_position=cut["position"],
+                      tris=np.ascontiguousarray(faces),
                       face_src=cut["face_src"], bary=np.ascontiguousarray(bary), replaced=cut["replaced"],
                       radius=float(ring_radii[-1]), orders=tuple(orders), vertex_tri=cut["vertex_tri"],
                       vertex_bary=cut["vertex_bary"], complete=True,
