@@ -740,9 +740,9 @@ def _plain_reach(hit, radii, n_az) -> float:
 def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
     """The faces of a patch whose cells are cut along the source triangles ``cand`` under them (see
     CLIP_TO_TRIANGLES): cells whose four corners lie on one triangle stay quads (two faces); the others
-    are clipped against each triangle whose box in distance and azimuth meets them (Sutherland-Hodgman,
-    vectorised over (cell, triangle) pairs) and fanned. ``hit``, ``lam``: :func:`_locate`'s result for
-    the circles ``radii`` (BU).
+    are clipped by the sides of each triangle that may meet them (:func:`_wedge_cells`; Sutherland-
+    Hodgman, vectorised over (cell, triangle) pairs, only by the sides that cut the cell) and fanned.
+    ``hit``, ``lam``: :func:`_locate`'s result for the circles ``radii`` (BU).
 
     Vertices are numbered by what they are, so that neighbouring cells and triangles share them: grid
     points (limit vertices first), source vertices, and crossings of a grid side with a source edge
