@@ -119,8 +119,7 @@ class Patch:
     surface folds over or ends inside it, so that kept triangles draw part of the ring near the axis);
     replaced: source triangles the patch stands
     in for; radius (BU): its outer circle's distance from the axis; orders: the image orders whose
-    Einstein ring it is; images: {order: mapping.Images} of its vertices (no image, NaN, for the
-    grid vertices of faces drawn in no order); facing: {order: (F,) bool}
+    Einstein ring it is; images: {order: mapping.Images} of its vertices; facing: {order: (F,) bool}
     the faces to draw (all, unless back faces of a closed surface are left out, see
     :func:`build_patches`).
     """
@@ -352,17 +351,6 @@ def _cells_in(mask, r0, r1, j0, count) -> np.ndarray:
     total[1:, 1:] = np.cumsum(np.cumsum(np.concatenate([mask, mask], axis=1), axis=0), axis=1)
     c1 = j0 + count
     return total[r1, c1] - total[r0, c1] - total[r1, j0] + total[r0, j0]
-
-
-def _spread(img: mapping.Images, rows, n) -> mapping.Images:
-    """Images of ``n`` points of which ``img`` holds those at ``rows`` (indices); the others have none
-    (NaN, not valid)."""
-    def put(values, fill=np.nan):
-        out = np.full((n,) + values.shape[1:], fill, values.dtype)
-        out[rows] = values
-        return out
-    return mapping.Images(position=put(img.position), direction=put(img.direction), distance=put(img.distance),
-                          valid=put(img.valid, False), plane=None, xi=put(img.xi), dt=put(img.dt), ux=None, uy=None)
 
 
 def touches_gap(patch: Patch, tris, x, y) -> np.ndarray:
@@ -1076,10 +1064,11 @@ def _shade(patch: Patch, points, tris, scene, lut, orders, closed, limit_look=No
     grid_pos = patch.source_position[n_lim:]
     psi = 2.0 * np.pi * np.arange(n_lim) / n_lim
     plane = mapping.plane_coordinates(grid_pos, scene)
+    looked = None
     if closed:
-        # which faces face the camera along each order's rays: from the rays' tangents alone (the
-        # images are then looked up only for the grid vertices of faces that are drawn)
-        tangent = lut.lookup_orders(plane.r, plane.phi, tuple(orders), quantities=("ux", "uy"))
+        # which faces face the camera along each order's rays, from the rays' tangents; looked up
+        # with the images (one interpolation stencil: most vertices of a patch are drawn)
+        looked = mapping.map_vertices_orders(grid_pos, scene, lut, orders, plane, tangents=True)
         grid_corner = faces >= n_lim  # limit vertices have no direction of their own
         at = np.maximum(faces - n_lim, 0)  # each corner's grid vertex
         # n . d at each corner with the normal of the face's source triangle (the leaving direction
@@ -1088,7 +1077,7 @@ def _shade(patch: Patch, points, tris, scene, lut, orders, closed, limit_look=No
         n1 = f_normal @ scene.e1
         n2 = np.einsum("fx,fcx->fc", f_normal, plane.e2[at])
         for o in orders:
-            a, b = illumination.leaving_in_plane(plane, tangent[o].ux, tangent[o].uy)
+            a, b = illumination.leaving_in_plane(plane, looked[o].ux, looked[o].uy)
             with np.errstate(invalid="ignore"):
                 dots = a[at] * n1[:, None] + b[at] * n2
             away = np.where(grid_corner, dots < 0, True)  # NaN (no ray) counts as facing
@@ -1098,17 +1087,10 @@ def _shade(patch: Patch, points, tris, scene, lut, orders, closed, limit_look=No
         patch.facing.setdefault(o, np.ones(len(faces), bool))
     if not shown:
         return patch
-    # the grid vertices of the faces drawn in some order (all of them on an open surface)
-    drawn = np.zeros(len(faces), bool)
-    for o in shown:
-        drawn |= patch.facing[o]
-    rows = mapping.used_vertices(faces[drawn], n_lim + len(grid_pos))
-    rows = rows[rows >= n_lim] - n_lim  # among the grid vertices (the limit vertices come first)
-    if rows.size == len(grid_pos):
-        regs = mapping.map_vertices_orders(grid_pos, scene, lut, shown, plane)
+    if looked is not None:
+        regs = {o: looked[o] for o in shown}
     else:
-        regs = {o: _spread(reg, rows, len(grid_pos)) for o, reg in mapping.map_vertices_orders(
-            grid_pos.take(rows, axis=0), scene, lut, shown, plane.take(rows)).items()}
+        regs = mapping.map_vertices_orders(grid_pos, scene, lut, shown, plane)
     for o, reg in regs.items():
         lim = limit_images(patch.crossing, psi, scene, lut, o, limit_look and limit_look[o])
         patch.images[o] = mapping.Images(
