@@ -290,6 +290,35 @@ def test_clipped_patch_covers_the_mesh_up_to_its_edge(lut, monkeypatch):
     np.testing.assert_array_equal(np.sort(p.replaced), np.flatnonzero(d_hi <= p.radius))
 
 
+def test_clipped_patch_leaves_out_a_hole_in_the_mesh(lut, monkeypatch):
+    """A plane with a hole (two triangles missing) beside the axis, inside the patch: the clipped patch
+    covers the plane but not the hole (its projected area is the plane's inside the outer circle less
+    the hole's), and its edges used once lie on the outer circle, the plane's border or the hole's."""
+    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", True)
+    monkeypatch.setattr(axis_patch, "CLIP_REACH", 1.0)
+    pts, tris = _grid(-4.0, 0.04, 4)  # 0.01 quads
+    centre = pts[tris].mean(axis=1)
+    hole = (np.abs(centre[:, 1] - 0.015) < 0.005) & (np.abs(centre[:, 2] - 0.005) < 0.005)
+    assert hole.sum() == 2  # the quad [0.01, 0.02] x [0, 0.01]
+    (p,) = _patches(pts, tris[~hole], lut)
+    assert p.complete and p.radius > math.hypot(0.02, 0.01)
+    rim, px, py, x, y = _clip_check(p, pts, tris[~hole])
+    on_border = (np.isclose(np.abs(px[rim]), 0.04, rtol=0, atol=1e-12).all(axis=1)
+                 | np.isclose(np.abs(py[rim]), 0.04, rtol=0, atol=1e-12).all(axis=1))
+    hxy = np.stack(culling.axis_coordinates(pts[tris[hole]].reshape(-1, 3), CAMERA, HOLE)[:2], -1)
+    h_centre = 0.5 * (hxy.min(axis=0) + hxy.max(axis=0))  # the hole's square, half-side 0.005
+    hx, hy = px[rim] - h_centre[0], py[rim] - h_centre[1]
+    on_hole = ((np.abs(hx) <= 0.005 + 1e-12) & (np.abs(hy) <= 0.005 + 1e-12)
+               & np.isclose(np.maximum(np.abs(hx), np.abs(hy)), 0.005, rtol=0, atol=1e-12)).all(axis=1)
+    assert (on_border | on_hole).all() and on_hole.sum() >= 4
+    area = np.abs(axis_patch._projected_area(px, py, p.tris)).sum() / 2
+    rng = np.random.default_rng(2)
+    q = rng.uniform(-0.04, 0.04, (400000, 2))
+    inside = np.hypot(q[:, 0], q[:, 1]) <= p.radius * math.cos(math.pi / p.n_azimuths)
+    in_hole = (np.abs(q[:, 0] - h_centre[0]) < 0.005) & (np.abs(q[:, 1] - h_centre[1]) < 0.005)
+    assert area == pytest.approx(0.08 ** 2 * (inside & ~in_hole).mean(), rel=0.01)
+
+
 def test_clipped_patch_on_a_sphere_next_to_its_limb(lut, monkeypatch):
     """The benchmark's sphere with the axis just inside its limb (170.5 deg of its orbit): the clipped
     patches are complete, inside their source triangles and crack-free, and replace the crossed
