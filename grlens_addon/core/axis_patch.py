@@ -906,8 +906,9 @@ def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
             k2, x2, y2 = np.zeros_like(keys), np.zeros_like(vx), np.zeros_like(vy)
             k2.ravel()[at], x2.ravel()[at], y2.ravel()[at] = keys[row, c], vx[row, c], vy[row, c]
             keys, vx, vy, cnt = k2, x2, y2, keep_slot.sum(axis=1)
-    # the crossing point itself (a source vertex or edge on the axis): in a cell of the first row it is
-    # the cell's two limit vertices, d then a (walking round the cell), whose images are its ring's
+    # a polygon vertex at the crossing point itself (a source vertex or edge on the axis) stands, in a
+    # first-row cell, for the cell's two limit vertices, d then a (walking round the cell), whose
+    # images are points of the Einstein ring
     if n_p:
         apex = (np.hypot(vx, vy) <= 1e-12 * scale) & (slot < cnt[:, None]) & (pr == 0)[:, None]
         if apex.any():
