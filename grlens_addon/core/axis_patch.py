@@ -261,7 +261,7 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     reps = count[ti]
     pc = np.repeat(ci, reps)
     pt = np.repeat(ti, reps)
-    offs = np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps)
+    offs = _offsets(reps)
     pj = (np.repeat(j_lo[ti], reps) + offs) % n_az
     psi = 2.0 * np.pi * pj / n_az  # as _grid_patch's azimuths, to the bit
     qx = radii[pc] * np.cos(psi)
@@ -284,6 +284,12 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     best[pts] = pt[k]
     bary[pts] = lam[k]
     return best, bary
+
+
+def _offsets(counts) -> np.ndarray:
+    """0 .. counts[i] - 1 for each i in turn (the place of each element within its group when groups of
+    ``counts`` elements follow one another)."""
+    return np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
 
 
 def _first_smallest(key, value) -> np.ndarray:
@@ -332,15 +338,21 @@ def _cell_box(shape, ring_radii, tris, x, y):
     (r0, r1, j0, count, d_hi): rows r0 to r1 (exclusive, unclipped above), ``count`` azimuths from j0
     (all of them when the axis passes through the triangle), and its largest distance (BU)."""
     n_rows, n_az = shape
-    step = 2.0 * np.pi / n_az
     d_lo, d_hi, a_lo, a_hi = _polar_box(tris, x, y)
-    j0 = np.floor(a_lo / step).astype(np.int64)
-    j1 = np.ceil(a_hi / step).astype(np.int64)  # exclusive
-    count = np.where(d_lo == 0.0, n_az, np.minimum(j1 - j0, n_az))
-    j0 = np.where(d_lo == 0.0, 0, j0 % n_az)
+    j0, count = _azimuth_span(d_lo, a_lo, a_hi, n_az)
     r0 = np.clip(np.searchsorted(ring_radii, d_lo, side="right") - 1, 0, n_rows)
     r1 = np.searchsorted(ring_radii, d_hi, side="left")
     return r0, r1, j0, count, d_hi
+
+
+def _azimuth_span(d_lo, a_lo, a_hi, n_az):
+    """(j0, count): the first of the azimuths 2 pi j / n_az (j0 in 0 .. n_az - 1) and how many of them
+    hold each of :func:`_polar_box`'s boxes (all of them, from 0, when the axis passes through it)."""
+    step = 2.0 * np.pi / n_az
+    j0 = np.floor(a_lo / step).astype(np.int64)
+    j1 = np.ceil(a_hi / step).astype(np.int64)  # exclusive
+    full = d_lo == 0.0
+    return np.where(full, 0, j0 % n_az), np.where(full, n_az, np.minimum(j1 - j0, n_az))
 
 
 def _cells_in(mask, r0, r1, j0, count) -> np.ndarray:
@@ -649,10 +661,9 @@ def _wedge_cells(tris, x, y, n_az, ring_radii):
     step = 2.0 * np.pi / n_az
     d_lo, _, a_lo, a_hi = _polar_box(tris, x, y)
     full = d_lo == 0.0
-    j0 = np.where(full, 0, np.floor(a_lo / step).astype(np.int64))
-    count = np.where(full, n_az, np.minimum(np.ceil(a_hi / step).astype(np.int64) - j0, n_az))
+    j0, count = _azimuth_span(d_lo, a_lo, a_hi, n_az)
     t = np.repeat(np.arange(len(tris)), count)
-    col = (np.repeat(j0, count) + np.arange(t.size) - np.repeat(np.cumsum(count) - count, count)) % n_az
+    col = (np.repeat(j0, count) + _offsets(count)) % n_az
     px, py = x[tris[t]], y[tris[t]]  # (W, 3) corners
     ex, ey = np.roll(px, -1, axis=1) - px, np.roll(py, -1, axis=1) - py  # side k: corner k -> k + 1
     sign = np.sign(ex[:, :1] * ey[:, 1:2] - ey[:, :1] * ex[:, 1:2])  # the triangle's winding
@@ -685,8 +696,22 @@ def _wedge_cells(tris, x, y, n_az, ring_radii):
     r1 = np.minimum(np.searchsorted(ring_radii, hi, side="left"), n_rows)
     n = np.maximum(r1 - r0, 0)
     pt = np.repeat(t, n)
-    prow = np.repeat(r0, n) + np.arange(pt.size) - np.repeat(np.cumsum(n) - n, n)
+    prow = np.repeat(r0, n) + _offsets(n)
     return pt, prow, np.repeat(col, n)
+
+
+def _pack(emit, *columns):
+    """The polygons' slots where ``emit`` (P, S) is True, moved to the front of each row in order: each
+    of ``columns`` (P, S) as (P, _MAXV) (zero beyond the row's count), then the counts (P,)."""
+    n_p = emit.shape[0]
+    row, col = np.nonzero(emit)  # row by row, in order
+    at = row * _MAXV + (np.cumsum(emit, axis=1) - 1)[row, col]
+    out = []
+    for c in columns:
+        packed = np.zeros((n_p, _MAXV), c.dtype)
+        packed.ravel()[at] = c[row, col]
+        out.append(packed)
+    return (*out, emit.sum(axis=1))
 
 
 def _apex_to_limits(keys, vx, vy, cnt, apex, col, n_az):
@@ -705,19 +730,24 @@ def _apex_to_limits(keys, vx, vy, cnt, apex, col, n_az):
     out_x = np.stack([np.zeros(keys.shape), np.where(start, 0.0, vx)], axis=2).reshape(n_p, -1)
     out_y = np.stack([np.zeros(keys.shape), np.where(start, 0.0, vy)], axis=2).reshape(n_p, -1)
     emit = np.stack([start, start | (valid & ~apex)], axis=2).reshape(n_p, -1)
-    row, c = np.nonzero(emit)
-    at = row * n_s + (np.cumsum(emit, axis=1) - 1)[row, c]
-    keys, vx, vy = np.zeros((n_p, n_s), np.int64), np.zeros((n_p, n_s)), np.zeros((n_p, n_s))
-    keys.ravel()[at], vx.ravel()[at], vy.ravel()[at] = out_k[row, c], out_x[row, c], out_y[row, c]
-    return keys, vx, vy, np.minimum(emit.sum(axis=1), n_s)
+    keys, vx, vy, cnt = _pack(emit, out_k, out_x, out_y)
+    return keys, vx, vy, np.minimum(cnt, n_s)
+
+
+def _full_cells(hit, n_circles, n_az):
+    """(on, cell): which grid points have the sheet under them ((R, N), vertex rings: 0 the limit
+    vertices, r >= 1 circle r - 1), and which cells (between rings r and r + 1, azimuths j and j + 1)
+    have it under their four corners ((R - 1, N)); ``hit``: :func:`_locate`'s triangle per point."""
+    on = np.concatenate([np.ones((1, n_az), bool), (hit >= 0).reshape(n_circles, n_az)])
+    cell = on[:-1] & on[1:]
+    cell &= np.roll(cell, -1, axis=1)
+    return on, cell
 
 
 def _plain_reach(hit, radii, n_az) -> float:
     """How far out the plain grid's cells (four corners on the sheet) go all round, as a fraction of
     the last circle that has any (1: it draws its whole sheet inside that circle)."""
-    on = np.concatenate([np.ones((1, n_az), bool), (hit >= 0).reshape(len(radii), n_az)])
-    cell = on[:-1] & on[1:]
-    cell &= np.roll(cell, -1, axis=1)
+    _, cell = _full_cells(hit, len(radii), n_az)
     last = np.flatnonzero(cell.any(axis=1))
     if last.size == 0:
         return 0.0
@@ -850,20 +880,12 @@ def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
             # the source edge): that grid point
             v_end = np.where(np.abs(u) <= 1e-9, m0, np.where(np.abs(u - 1) <= 1e-9, m1, -1))
             snap = np.where(t <= 1e-9, g0, np.where(t >= 1 - 1e-9, g1, -1))
-            on_v = (v_end >= 0) & (snap < 0)
-            if on_v.any():
-                gk = xk[gsel]
-                gk[on_v] = key_v + v_end[on_v]
-                xk[gsel] = gk
-                xx[gsel] = np.where(on_v, x[np.maximum(v_end, 0)], xx[gsel])
-                xy_[gsel] = np.where(on_v, y[np.maximum(v_end, 0)], xy_[gsel])
-            at_end = snap >= 0
-            if at_end.any():
-                gk = xk[gsel]
-                gk[at_end] = snap[at_end]
-                xk[gsel] = gk
-                xx[gsel] = np.where(at_end, gx[np.maximum(snap, 0)], xx[gsel])
-                xy_[gsel] = np.where(at_end, gy[np.maximum(snap, 0)], xy_[gsel])
+            on_v, at_end = (v_end >= 0) & (snap < 0), snap >= 0
+            if on_v.any() or at_end.any():
+                v, g = np.maximum(v_end, 0), np.maximum(snap, 0)
+                xk[gsel] = np.where(at_end, snap, np.where(on_v, key_v + v_end, xk[gsel]))
+                xx[gsel] = np.where(at_end, gx[g], np.where(on_v, x[v], xx[gsel]))
+                xy_[gsel] = np.where(at_end, gy[g], np.where(on_v, y[v], xy_[gsel]))
         vsel = emit_x & ~on_grid
         if vsel.any():  # two sides of the triangle meet at its corner
             a_e, b_e = e_verts[lines[vsel] - line_e], e_verts[e_here[vsel]]
@@ -877,14 +899,7 @@ def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
         out_x = np.stack([xx, np.take_along_axis(vx, nxt, axis=1)], axis=2).reshape(n_p, -1)
         out_y = np.stack([xy_, np.take_along_axis(vy, nxt, axis=1)], axis=2).reshape(n_p, -1)
         emit = np.stack([emit_x, emit_e], axis=2).reshape(n_p, -1)
-        row, col = np.nonzero(emit)  # row by row, in order
-        at = row * _MAXV + (np.cumsum(emit, axis=1) - 1)[row, col]
-        keys, lines = np.zeros((n_p, _MAXV), np.int64), np.zeros((n_p, _MAXV), np.int64)
-        vx, vy = np.zeros((n_p, _MAXV)), np.zeros((n_p, _MAXV))
-        keys.ravel()[at], lines.ravel()[at] = out_k[row, col], out_l[row, col]
-        vx.ravel()[at], vy.ravel()[at] = out_x[row, col], out_y[row, col]
-        cnt = emit.sum(axis=1)
-        return keys, lines, vx, vy, cnt
+        return _pack(emit, out_k, out_l, out_x, out_y)
 
     for kk in range(3):
         sub = np.flatnonzero(need[kk])
@@ -900,12 +915,7 @@ def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
         prev = np.take_along_axis(keys, (slot - 1) % np.maximum(cnt, 1)[:, None], axis=1)
         dup = valid & (keys == prev)
         if dup.any():
-            keep_slot = valid & ~dup
-            row, c = np.nonzero(keep_slot)
-            at = row * _MAXV + (np.cumsum(keep_slot, axis=1) - 1)[row, c]
-            k2, x2, y2 = np.zeros_like(keys), np.zeros_like(vx), np.zeros_like(vy)
-            k2.ravel()[at], x2.ravel()[at], y2.ravel()[at] = keys[row, c], vx[row, c], vy[row, c]
-            keys, vx, vy, cnt = k2, x2, y2, keep_slot.sum(axis=1)
+            keys, vx, vy, cnt = _pack(valid & ~dup, keys, vx, vy)
     # a polygon vertex at the crossing point itself (a source vertex or edge on the axis) stands, in a
     # first-row cell, for the cell's two limit vertices, d then a (walking round the cell), whose
     # images are points of the Einstein ring
@@ -1001,10 +1011,8 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
     qy = (radii[:, None] * np.sin(psi)[None, :]).ravel()
     # vertex rings: 0 the limit vertices, r >= 1 circle r - 1; a cell (r, j) lies between rings r and
     # r + 1 and azimuths j and j + 1, and is drawn when the surface is under its four corners
-    on = np.concatenate([np.ones((1, n_az), bool), (hit >= 0).reshape(n_circles, n_az)])
+    on, cell = _full_cells(hit, n_circles, n_az)
     ring_radii = np.concatenate([[0.0], radii])
-    cell = on[:-1] & on[1:]
-    cell &= np.roll(cell, -1, axis=1)
     if not cell[0].all():  # the innermost circle must go all round: the ring's edge needs every azimuth
         return None
     rows = np.flatnonzero(cell.any(axis=1))
