@@ -60,6 +60,7 @@ from scipy.sparse.csgraph import connected_components
 
 from . import illumination, mapping, silhouette
 from .mapping import row_norm
+from .ragged import group_offsets
 from .culling import (axis_coordinates, axis_crossing, axis_distance, hole_angle, longest_side, max_ring_span,
                       within_axis_distance)
 
@@ -261,7 +262,7 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     reps = count[ti]
     pc = np.repeat(ci, reps)
     pt = np.repeat(ti, reps)
-    offs = _offsets(reps)
+    offs = group_offsets(reps)
     pj = (np.repeat(j_lo[ti], reps) + offs) % n_az
     psi = 2.0 * np.pi * pj / n_az  # as _grid_patch's azimuths, to the bit
     qx = radii[pc] * np.cos(psi)
@@ -284,12 +285,6 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     best[pts] = pt[k]
     bary[pts] = lam[k]
     return best, bary
-
-
-def _offsets(counts) -> np.ndarray:
-    """0 .. counts[i] - 1 for each i in turn (the place of each element within its group when groups of
-    ``counts`` elements follow one another)."""
-    return np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
 
 
 def _first_smallest(key, value) -> np.ndarray:
@@ -663,7 +658,7 @@ def _wedge_cells(tris, x, y, n_az, ring_radii):
     full = d_lo == 0.0
     j0, count = _azimuth_span(d_lo, a_lo, a_hi, n_az)
     t = np.repeat(np.arange(len(tris)), count)
-    col = (np.repeat(j0, count) + _offsets(count)) % n_az
+    col = (np.repeat(j0, count) + group_offsets(count)) % n_az
     px, py = x[tris[t]], y[tris[t]]  # (W, 3) corners
     ex, ey = np.roll(px, -1, axis=1) - px, np.roll(py, -1, axis=1) - py  # side k: corner k -> k + 1
     sign = np.sign(ex[:, :1] * ey[:, 1:2] - ey[:, :1] * ex[:, 1:2])  # the triangle's winding
@@ -696,7 +691,7 @@ def _wedge_cells(tris, x, y, n_az, ring_radii):
     r1 = np.minimum(np.searchsorted(ring_radii, hi, side="left"), n_rows)
     n = np.maximum(r1 - r0, 0)
     pt = np.repeat(t, n)
-    prow = np.repeat(r0, n) + _offsets(n)
+    prow = np.repeat(r0, n) + group_offsets(n)
     return pt, prow, np.repeat(col, n)
 
 

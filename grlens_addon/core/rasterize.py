@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .ragged import group_offsets
 from .raytrace import Camera, PixelBuffers
 
 
@@ -119,7 +120,7 @@ def rasterize(meshes, camera: Camera, *, near: float = 1e-6, chunk: int = 1_000_
             tot = int(cnt.sum())
             tests += tot
             fi = np.repeat(f, cnt)
-            k = np.arange(tot) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+            k = group_offsets(cnt)
             px = c0[fi] + k % nx[fi]
             py = r0[fi] + k // nx[fi]
             pix = py * W + px

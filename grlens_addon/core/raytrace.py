@@ -75,6 +75,7 @@ from lutgen import orbit as _orb
 from lutgen.solver import check_observer_radius, connect
 from .culling import side_planes
 from .mapping import Scene, any_perpendicular, plane_coordinates
+from .ragged import group_offsets
 
 TWO_PI = 2.0 * np.pi
 _B_MIN = 1e-12  # impact parameters (r_s) below this are clamped (the ray is radial to rounding)
@@ -518,9 +519,7 @@ def _pairs(order_beta, beta_sorted, lo, hi, surround, tri_ids, chunk):
         i1 = int(np.searchsorted(cum, base + chunk, side="right"))
         i1 = max(i1, i0 + 1)
         c = counts[i0:i1]
-        tot = int(c.sum())
-        off = np.repeat(np.cumsum(c) - c, c)
-        pos = np.arange(tot) - off + np.repeat(starts[i0:i1], c)
+        pos = group_offsets(c) + np.repeat(starts[i0:i1], c)
         yield order_beta[pos], np.repeat(tris[i0:i1], c)
         i0 = i1
 
@@ -613,7 +612,7 @@ def _expand_turns(ok, kmin, kmax):
     sel = np.flatnonzero(nk)
     c = nk[sel]
     idx = np.repeat(sel, c)
-    k = np.repeat(kmin[sel], c) + (np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c))
+    k = np.repeat(kmin[sel], c) + group_offsets(c)
     return idx, k
 
 

@@ -16,7 +16,8 @@ l <= L are snapped along that edge to the nearest point of the edge's own l-grid
 point is hit because L >= l), so both triangles of an edge put exactly the same vertices on it.
 Vertices are then welded by integer keys (source corner / edge and l-grid index / triangle
 interior), so the result is watertight whenever the source is; triangles that collapse under
-snapping are dropped. All of this is vectorised per level.
+snapping are dropped. All of this is vectorised over all split triangles at once (each on its own
+level's template; the templates of all levels are laid end to end).
 
 Strips (optional, per triangle): around an Einstein ring a triangle's image is long in azimuth and
 can be a fraction of a pixel across. The uniform grid then makes L^2 pieces where about 2 L thin ones
@@ -36,6 +37,7 @@ from functools import lru_cache
 import numpy as np
 
 from .mapping import row_norm
+from .ragged import group_offsets
 
 GRID = 64  # largest level (GPU tessellators' usual maximum, as in seed 000)
 
@@ -117,16 +119,19 @@ def _template(level: int):
     (barycentrics ((L-i-j), i, j)/L), the small triangles (index triples, counter-clockwise like the
     source), and for each vertex its edge (0, 1, 2 or -1) and parameter numerator along it."""
     L = level
-    ij = np.array([(i, j) for j in range(L + 1) for i in range(L + 1 - j)], dtype=np.int64)
-    index = {tuple(v): n for n, v in enumerate(ij)}
-    tris = []
-    for j in range(L):
-        for i in range(L - j):
-            a, b, c = index[(i, j)], index[(i + 1, j)], index[(i, j + 1)]
-            tris.append((a, b, c))
-            if i + j + 2 <= L:
-                tris.append((b, index[(i + 1, j + 1)], c))
-    i, j = ij[:, 0], ij[:, 1]
+    j = np.repeat(np.arange(L + 1), np.arange(L + 1, 0, -1))  # rows j = 0 .. L of L + 1 - j vertices
+    i = group_offsets(np.arange(L + 1, 0, -1))
+    ij = np.stack([i, j], axis=1)
+
+    def index(i, j):  # of vertex (i, j)
+        return j * (L + 1) - j * (j - 1) // 2 + i
+
+    # per cell (i, j), i + j < L, row by row: the triangle pointing up, then (if any) the one pointing down
+    ci, cj = i[i + j < L], j[i + j < L]
+    a, b, c = index(ci, cj), index(ci + 1, cj), index(ci, cj + 1)
+    up = np.stack([a, b, c], axis=1)
+    down = np.stack([b, index(ci + 1, cj + 1), c], axis=1)
+    tris = np.stack([up, down], axis=1).reshape(-1, 3)[np.stack([np.ones(ci.size, bool), ci + cj + 2 <= L], 1).ravel()]
     # edge 0: corner0 -> corner1 (j == 0, t = i/L); edge 1: corner1 -> corner2 (i + j == L, t = j/L);
     # edge 2: corner2 -> corner0 (i == 0, t = (L - j)/L). Corners belong to no edge here.
     edge = np.full(len(ij), -1)
@@ -142,7 +147,35 @@ def _template(level: int):
     edge[m0], t[m0] = 0, i[m0]
     edge[m1], t[m1] = 1, j[m1]
     edge[m2], t[m2] = 2, L - j[m2]
-    return ij, np.array(tris, dtype=np.int64).reshape(-1, 3), edge, t, corner
+    return ij, tris.astype(np.int64), edge, t, corner
+
+
+@dataclass(frozen=True)
+class _Templates:
+    """The templates of levels 1 .. GRID one after another (for all split triangles at once): per level
+    L, vertices vert_start[L] .. + n_verts[L] of ij / edge / t / corner (as :func:`_template`) and
+    triangles tri_start[L] .. + n_tris[L] of tris (template-local vertex indices)."""
+
+    ij: np.ndarray
+    edge: np.ndarray
+    t: np.ndarray
+    corner: np.ndarray
+    tris: np.ndarray
+    vert_start: np.ndarray
+    n_verts: np.ndarray
+    tri_start: np.ndarray
+    n_tris: np.ndarray
+
+
+@lru_cache(maxsize=None)
+def _templates() -> _Templates:
+    parts = [_template(L) for L in range(1, GRID + 1)]
+    n_verts = np.array([0] + [len(p[0]) for p in parts], dtype=np.int64)  # index: the level
+    n_tris = np.array([0] + [len(p[1]) for p in parts], dtype=np.int64)
+    return _Templates(ij=np.concatenate([p[0] for p in parts]), edge=np.concatenate([p[2] for p in parts]),
+                      t=np.concatenate([p[3] for p in parts]), corner=np.concatenate([p[4] for p in parts]),
+                      tris=np.concatenate([p[1] for p in parts]), vert_start=np.cumsum(n_verts) - n_verts,
+                      n_verts=n_verts, tri_start=np.cumsum(n_tris) - n_tris, n_tris=n_tris)
 
 
 @dataclass
@@ -231,8 +264,7 @@ def _chain(src, of_tri, verts, levels, n_pts, x, y, xy):
     lev = levels.take(e)
     count = lev - 1
     tri = np.repeat(rows, count)
-    start = np.cumsum(count) - count
-    m = np.arange(int(count.sum())) - np.repeat(start, count) + 1  # 1 .. lev - 1 from corner x
+    m = group_offsets(count) + 1  # 1 .. lev - 1 from corner x
     lev_p, e_p = lev.take(tri), e.take(tri)
     t = m / lev_p
     vx, vy = src[tri, x.take(tri)], src[tri, y.take(tri)]
@@ -351,62 +383,68 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     n_rows = 0
     unsplit_faces = None
     interior_base = n_pts + n_edges * (GRID + 1)
-    for L in np.unique(tri_level):
-        if L == 0:
-            continue
-        sel = np.flatnonzero(tri_level == L)
+    unit = np.flatnonzero(tri_level == 1)
+    if unit.size:  # unsplit triangles: their corners are source vertices, keyed by their indices
+        unsplit_faces = tris[unit]
+        src_parts.append(unit)
+        row_bary_parts.append(np.tile(np.eye(3), (unit.size, 1)))
+        row_src_parts.append(np.repeat(unit, 3))
+        corner_row_parts.append(np.arange(3 * unit.size).reshape(-1, 3))
+        n_rows += 3 * unit.size
+    split = np.flatnonzero(tri_level > 1)
+    if split.size:  # all split triangles at once, by level, then by index (each on its level's template)
+        sel = split[np.argsort(tri_level[split], kind="stable")]
+        level = tri_level[sel]  # (S,)
         src = tris[sel]  # (S, 3)
-        if L == 1:  # unsplit triangles: their corners are source vertices, keyed by their indices
-            unsplit_faces = src
-            src_parts.append(sel)
-            row_bary_parts.append(np.tile(np.eye(3), (sel.size, 1)))
-            row_src_parts.append(np.repeat(sel, 3))
-            corner_row_parts.append(n_rows + np.arange(3 * sel.size).reshape(-1, 3))
-            n_rows += 3 * sel.size
-            continue
-        ij, ttris, tedge, tt, tcorner = _template(int(L))
-        nv = len(ij)
+        tpl = _templates()
+        nv = tpl.n_verts[level]
+        row_start = np.cumsum(nv) - nv  # each triangle's first row (template vertex)
+        vt = np.repeat(np.arange(sel.size), nv)  # the triangle of each row
+        local = group_offsets(nv)  # the row's template vertex
+        at = tpl.vert_start[level].take(vt) + local  # into the concatenated templates
+        lv = level.take(vt)
+        tedge, tcorner = tpl.edge.take(at), tpl.corner.take(at)
         # barycentrics of the template vertices, then snapped along low-level edges
-        bary = np.empty((sel.size, nv, 3))
-        bary[:, :, 1] = ij[:, 0] / L
-        bary[:, :, 2] = ij[:, 1] / L
-        key = np.empty((sel.size, nv), dtype=np.int64)
-        for k in range(3):  # corners
-            m = tcorner == k
-            key[:, m] = src[:, k][:, None]
+        bary = np.empty((vt.size, 3))
+        bary[:, 1] = tpl.ij[at, 0] / lv
+        bary[:, 2] = tpl.ij[at, 1] / lv
+        key = np.empty(vt.size, dtype=np.int64)
+        corner = np.flatnonzero(tcorner >= 0)
+        key[corner] = src[vt[corner], tcorner[corner]]
         # interior vertices: unique per triangle
-        m_in = (tcorner < 0) & (tedge < 0)
-        key[:, m_in] = interior_base + (sel[:, None] * (GRID + 1) ** 2 + np.flatnonzero(m_in)[None, :])
-        for k in range(3):
-            m = np.flatnonzero(tedge == k)
-            if m.size == 0:
-                continue
-            e = edges.of_tri[sel, k]  # (S,)
-            lev = levels[e][:, None]
-            t_tri = tt[m][None, :] / L  # along corner k -> corner k+1
-            t_snap = np.floor(t_tri * lev + 0.5) / lev
-            a_corner, b_corner = src[:, k], src[:, (k + 1) % 3]
-            forward = (a_corner < b_corner)[:, None]
-            t_canon = np.where(forward, t_snap, 1.0 - t_snap)  # along the edge from its lower vertex
-            num = np.rint(t_canon * lev).astype(np.int64)  # index on the edge's own grid
-            lo_v, hi_v = edges.verts[e, 0][:, None], edges.verts[e, 1][:, None]
-            key[:, m] = np.where(num == 0, lo_v, np.where(num == lev, hi_v, n_pts + e[:, None] * (GRID + 1) + num))
-            b = np.zeros((sel.size, m.size, 3))
-            b[:, :, k] = 1.0 - t_snap
-            b[:, :, (k + 1) % 3] = t_snap
-            bary[:, m, :] = b
-        bary[:, :, 0] = 1.0 - bary[:, :, 1] - bary[:, :, 2]
+        inner = np.flatnonzero((tcorner < 0) & (tedge < 0))
+        key[inner] = interior_base + (sel[vt[inner]] * (GRID + 1) ** 2 + local[inner])
+        on_edge = np.flatnonzero(tedge >= 0)
+        t, k = vt[on_edge], tedge[on_edge]
+        k1 = (k + 1) % 3
+        e = edges.of_tri[sel[t], k]
+        lev = levels[e]
+        t_tri = tpl.t[at[on_edge]] / lv[on_edge]  # along corner k -> corner k+1
+        t_snap = np.floor(t_tri * lev + 0.5) / lev
+        forward = src[t, k] < src[t, k1]
+        t_canon = np.where(forward, t_snap, 1.0 - t_snap)  # along the edge from its lower vertex
+        num = np.rint(t_canon * lev).astype(np.int64)  # index on the edge's own grid
+        key[on_edge] = np.where(num == 0, edges.verts[e, 0],
+                                np.where(num == lev, edges.verts[e, 1], n_pts + e * (GRID + 1) + num))
+        b = np.zeros((on_edge.size, 3))
+        b[np.arange(on_edge.size), k] = 1.0 - t_snap
+        b[np.arange(on_edge.size), k1] = t_snap
+        bary[on_edge] = b
+        bary[:, 0] = 1.0 - bary[:, 1] - bary[:, 2]
         # positions are needed only for the new vertices (corners are the source's own points)
         other = key >= n_pts
-        rows = np.nonzero(other)[0]
         other_key_parts.append(key[other])
-        other_pos_parts.append((bary[other], src[rows]))
-        level_parts.append((key, other, ttris))
-        src_parts.append(np.repeat(sel, len(ttris)))
-        row_bary_parts.append(bary.reshape(-1, 3))
-        row_src_parts.append(np.repeat(sel, nv))
-        corner_row_parts.append((n_rows + nv * np.arange(sel.size)[:, None, None] + ttris[None]).reshape(-1, 3))
-        n_rows += sel.size * nv
+        other_pos_parts.append((bary[other], src[vt[other]]))
+        # the pieces: each triangle's template triangles, on its rows
+        nt = tpl.n_tris[level]
+        ft = np.repeat(np.arange(sel.size), nt)
+        pieces = tpl.tris[tpl.tri_start[level].take(ft) + group_offsets(nt)] + row_start.take(ft)[:, None]
+        level_parts.append((key[None, :], other[None, :], pieces))
+        src_parts.append(sel.take(ft))
+        row_bary_parts.append(bary)
+        row_src_parts.append(sel.take(vt))
+        corner_row_parts.append(n_rows + pieces)
+        n_rows += vt.size
     if strip_sel is not None:
         keys, sbary, row_tri, sfaces, face_tri = _strip_faces(tris[strip_sel], edges.of_tri[strip_sel],
                                                               edges.verts, levels, n_pts, xy, order)
