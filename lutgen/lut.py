@@ -107,6 +107,11 @@ class LUT:
         return np.linspace(0.0, np.pi, self.n_phi)
 
     @property
+    def _stencil_offsets(self) -> np.ndarray:
+        """(16,) flat offsets of a 4x4 interpolation stencil's nodes from its first node, row by row."""
+        return (np.arange(4)[:, None] * self.n_phi + np.arange(4)[None, :]).ravel()
+
+    @property
     def data32(self) -> np.ndarray:
         """The table in float32, (2, 4, n_r, n_phi), C-contiguous (for rendering/upload)."""
         if self._data32 is None:
@@ -166,8 +171,10 @@ class LUT:
         gp = np.where(inside, np.clip(gp, 0.0, self.n_phi - 1), 0.0)
         ix, wx = _cubic_stencil(gx, self.n_r)
         ip, wp = _cubic_stencil(gp, self.n_phi)
-        idx = ix[:, :, None] * self.n_phi + ip[:, None, :]  # (N, 4, 4) flat indices into a channel
-        w = wx[:, :, None] * wp[:, None, :]
+        # (N, 4, 4) flat indices into a channel, and weights (built along N: numpy is slow on short
+        # inner axes)
+        idx = ((ix * self.n_phi + ip)[:, None] + self._stencil_offsets).reshape(-1, 4, 4)
+        w = np.ascontiguousarray((wx[:, None, :] * wp[None, :, :]).transpose(2, 0, 1))
         outside = ~inside
         for order, k in ks.items():
             for q, i in zip(quantities, qi):
@@ -189,19 +196,20 @@ def _order_index(order) -> int:
 
 
 def _cubic_stencil(g, n):
-    """Indices (N, 4) and cubic Lagrange weights (N, 4) for fractional grid coordinates g in [0, n-1].
+    """First node (N,) and cubic Lagrange weights (4, N) of the nodes first .. first + 3, for fractional
+    grid coordinates g (N,) in [0, n-1].
 
     The 4-node stencil is shifted inwards at the edges (one-sided), so no node outside the table is
     ever used and the weights reproduce cubics exactly everywhere.
     """
     i0 = np.clip(np.floor(g).astype(np.int64) - 1, 0, n - 4)
     t = g - i0  # position inside the stencil, nodes at 0, 1, 2, 3
-    w = np.empty((g.size, 4))
-    w[:, 0] = -(t - 1.0) * (t - 2.0) * (t - 3.0) / 6.0
-    w[:, 1] = t * (t - 2.0) * (t - 3.0) / 2.0
-    w[:, 2] = -t * (t - 1.0) * (t - 3.0) / 2.0
-    w[:, 3] = t * (t - 1.0) * (t - 2.0) / 6.0
-    return i0[:, None] + np.arange(4), w
+    w = np.empty((4, g.size))
+    w[0] = -(t - 1.0) * (t - 2.0) * (t - 3.0) / 6.0
+    w[1] = t * (t - 2.0) * (t - 3.0) / 2.0
+    w[2] = -t * (t - 1.0) * (t - 3.0) / 2.0
+    w[3] = t * (t - 1.0) * (t - 2.0) / 6.0
+    return i0, w
 
 
 def build_lut(r_obs, r_min, r_max, n_r, n_phi, *, progress: Callable[[int, int], None] | None = None,
