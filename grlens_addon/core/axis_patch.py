@@ -1077,7 +1077,8 @@ def _shade(patch: Patch, points, tris, scene, lut, orders, closed, limit_look=No
         at = np.maximum(faces - n_lim, 0)  # each corner's grid vertex
         # n . d at each corner with the normal of the face's source triangle (the leaving direction
         # d = (a e1 + b e2) / |.|, so n . d has the sign of a n.e1 + b n.e2)
-        f_normal = silhouette.normals(points, tris[patch.face_src])
+        src_tri, face_at = np.unique(patch.face_src, return_inverse=True)  # a patch lies on few triangles
+        f_normal = silhouette.normals(points, tris[src_tri]).take(face_at.ravel(), axis=0)
         n1 = f_normal @ scene.e1
         n2 = np.einsum("fx,fcx->fc", f_normal, plane.e2[at])
         for o in orders:
