@@ -5,6 +5,8 @@ Scenes (seed 000, section 4.2, built by ``bpy.ops.grlens.demo_scene``; r_s = 2 B
 vertical fov 19 deg, MaxTessLevel 64, a = 5, b = 0.75, default tess_max_error):
 * ``sphere``: the paper's sphere (36 x 18 UV sphere, 1224 triangles) over its 360-frame orbit;
 * ``sphere100k``: the same orbit with a 320 x 160 UV sphere (101,760 triangles), every 10th frame;
+* ``sphere, viewport preview``: the same orbit built as the viewport's automatic updates build it in
+  the UI (``tess_max_error_viewport``, default 1 px; renders use the default ``tess_max_error``);
 * ``memory``: the 1224-triangle orbit played for 1000 frames (frame_set, i.e. the persistent handler
   as during an animation render), resident memory and data-block counts sampled along the way.
 
@@ -75,7 +77,7 @@ class _CoreTimer:
         rebuild.pipeline.build_images = self._orig
 
 
-def time_orbit(scene, frames):
+def time_orbit(scene, frames, preview=False):
     scene.grlens.auto_update = False
     rows = []
     for f in frames:
@@ -83,7 +85,7 @@ def time_orbit(scene, frames):
         dg = bpy.context.evaluated_depsgraph_get()
         with _CoreTimer() as core:
             t0 = time.perf_counter()
-            rep = rebuild.rebuild_scene(scene, dg)
+            rep = rebuild.rebuild_scene(scene, dg, preview=preview)
             t = time.perf_counter() - t0
         n = rep["objects"].get("OrbitingSphere", {})
         tris = sum(v[1] for v in n.values()) if isinstance(n, dict) else 0
@@ -137,6 +139,11 @@ def main(argv=None):
     scene = _scene(res)
     time_orbit(scene, [1])  # LUT build and first upload, not timed
     summarise("sphere", 1224, time_orbit(scene, range(1, 361)))
+    # the same orbit as the viewport's automatic updates build it while scrubbing (UI only; renders
+    # use the render tolerance above)
+    time_orbit(scene, [1], preview=True)
+    summarise(f"sphere, viewport preview ({scene.grlens.tess_max_error_viewport:g} px)", 1224,
+              time_orbit(scene, range(1, 361), preview=True))
     scene = _scene(res, 320, 160)
     time_orbit(scene, [1])
     summarise("sphere100k", 320 * 158 * 2 + 2 * 320, time_orbit(scene, range(1, 361, 10)))

@@ -278,6 +278,70 @@ def test_no_data_block_growth_over_frames():
         assert (len(bpy.data.meshes), len(bpy.data.materials), len(bpy.data.objects)) == counts
 
 
+def test_viewport_preview_uses_its_own_tolerance_and_renders_the_render_one():
+    """Automatic viewport updates are built to tess_max_error_viewport (the larger of the two), renders
+    and explicit rebuilds to tess_max_error; switching between them rebuilds, and the render-quality
+    images come back exactly."""
+    from grlens_addon.blender import rebuild
+
+    scene, sphere = _small_demo()
+    scene.render.resolution_x, scene.render.resolution_y = 640, 360
+    scene.grlens.auto_update = False
+    _place(sphere, 180)  # the Einstein-ring frame: most of its pieces come from the tolerance
+    g = scene.grlens
+    assert (g.tess_max_error, g.tess_max_error_viewport) == (0.25, 1.0)
+
+    def faces():
+        return len(bpy.data.objects["OrbitingSphere.GR1"].data.polygons)
+
+    def positions():
+        me = bpy.data.objects["OrbitingSphere.GR1"].data
+        co = np.empty(3 * len(me.vertices), np.float32)
+        me.attributes["position"].data.foreach_get("vector", co)
+        return co
+
+    final = rebuild.rebuild_scene(scene)
+    assert "preview" not in final["status"]
+    n_final, co_final = faces(), positions()
+    preview = rebuild.rebuild_scene(scene, preview=True)
+    assert isinstance(preview["objects"]["OrbitingSphere"], dict)  # rebuilt, not "unchanged"
+    assert "viewport preview: 1 px" in preview["status"] and scene.grlens.status == preview["status"]
+    assert faces() < 0.7 * n_final
+    again = rebuild.rebuild_scene(scene)  # a render after scrubbing: rebuilt at the render tolerance
+    assert isinstance(again["objects"]["OrbitingSphere"], dict)
+    assert faces() == n_final and np.array_equal(positions(), co_final)
+    # the rule for the tolerance: the larger of the two; 0 for the viewport: the render's
+    assert rebuild.max_error_px(g, preview=True) == 1.0 and rebuild.max_error_px(g) == 0.25
+    g.tess_max_error = 2.0
+    assert rebuild.max_error_px(g, preview=True) == 2.0
+    g.tess_max_error = 0.0  # eq. 19 alone for renders; the viewport stays capped
+    assert rebuild.max_error_px(g) is None and rebuild.max_error_px(g, preview=True) == 1.0
+    g.tess_max_error, g.tess_max_error_viewport = 0.25, 0.0
+    assert rebuild.max_error_px(g, preview=True) == 0.25
+    rebuild.rebuild_scene(scene)
+    assert rebuild.rebuild_scene(scene, preview=True)["objects"]["OrbitingSphere"] == "unchanged"
+
+
+def test_only_interactive_viewport_updates_are_previews():
+    """handlers.wants_preview: the viewport's depsgraph in the UI is a preview; a render's depsgraph (F12
+    and animation renders fire the frame handlers with it) and background mode never are. In this
+    (background) process the frame handler rebuilds at the render tolerance."""
+    from types import SimpleNamespace
+
+    from grlens_addon.blender import handlers
+
+    viewport = bpy.context.evaluated_depsgraph_get()
+    assert viewport.mode == "VIEWPORT"
+    assert handlers.wants_preview(viewport, background=False)
+    assert handlers.wants_preview(None, background=False)  # property updates from the UI
+    assert not handlers.wants_preview(SimpleNamespace(mode="RENDER"), background=False)
+    assert not handlers.wants_preview(viewport, background=True)
+    assert bpy.app.background and not handlers.wants_preview(viewport)
+    scene, sphere = _small_demo()
+    scene.frame_set(2)
+    assert "preview" not in scene.grlens.status and "lensed" in scene.grlens.status
+
+
 def test_remembered_inputs_and_topologies_stay_bounded():
     """The rebuild-skip and topology-reuse checks keep one entry per image mesh: none accumulate over
     frames or when images are removed, and loading a file forgets them; the skip still works."""

@@ -1,5 +1,6 @@
 """Handlers: rebuild on frame changes (viewport, F12, animation renders, background mode) and after
-interactive edits of lensed objects, the camera or the hole.
+interactive edits of lensed objects, the camera or the hole. Updates of the interactive viewport are
+built to ``scene.grlens.tess_max_error_viewport`` (wants_preview); renders to ``tess_max_error``.
 
 Thin and @persistent (they survive file loads); a re-entrancy flag (reset in finally) keeps our own
 mesh updates from triggering another rebuild. Never calls bpy.ops.
@@ -10,6 +11,14 @@ from bpy.app.handlers import persistent
 _busy = False
 
 
+def wants_preview(depsgraph=None, background=None) -> bool:
+    """Whether an automatic rebuild is for the interactive viewport (built to the viewport's
+    tolerance): not in background mode (scripts, render farms) and not for a render's depsgraph
+    (F12 and animation renders fire the frame handlers with it)."""
+    background = bpy.app.background if background is None else background
+    return not background and (depsgraph is None or depsgraph.mode != "RENDER")
+
+
 def _run(scene, depsgraph=None):
     global _busy
     if _busy or scene is None or not hasattr(scene, "grlens"):
@@ -18,7 +27,7 @@ def _run(scene, depsgraph=None):
     try:
         from .rebuild import rebuild_scene
 
-        report = rebuild_scene(scene, depsgraph)
+        report = rebuild_scene(scene, depsgraph, preview=wants_preview(depsgraph))
         if report["status"].startswith("grlens:") and bpy.app.background:
             print(report["status"])
         for w in report["warnings"]:

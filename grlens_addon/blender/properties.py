@@ -59,6 +59,11 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
         name="Tess Max Error", default=0.25, min=0.0, soft_min=0.01, soft_max=4.0, update=_changed,
         description="Screen-space tolerance in pixels: edges are split no more than needed to keep their straight "
                     "pieces this close to the curved image (0: eq. 19 alone, capped only by the edge's pixel length)")
+    tess_max_error_viewport: FloatProperty(
+        name="Viewport Max Error", default=1.0, min=0.0, soft_max=8.0, update=_changed,
+        description="Screen-space tolerance in pixels of the automatic updates in the viewport (frame changes, "
+                    "edits), for fast scrubbing; the larger of this and Tess Max Error is used. Renders and the "
+                    "Rebuild operator always use Tess Max Error. 0: the viewport uses Tess Max Error too")
     cull_ratio: FloatProperty(
         name="Cull Ratio", default=8.0, min=1.0, soft_max=100.0, update=_changed,
         description="Drop image triangles whose circumference exceeds this many times the undistorted one "

@@ -127,8 +127,18 @@ def frustum_planes(scene, cam):
     return culling.side_planes(mw[:3, 3], corners @ rot.T)
 
 
-def scene_geometry(scene, depsgraph):
-    """(mapping.Scene, core Settings, evaluated observer camera) or RebuildError."""
+def max_error_px(g, preview: bool = False) -> float | None:
+    """The screen-space tolerance (pixels; None: eq. 19 alone) of a rebuild: ``tess_max_error``, or for a
+    viewport preview the larger of it and ``tess_max_error_viewport`` (when that is set)."""
+    tol = g.tess_max_error
+    if preview and g.tess_max_error_viewport > 0:
+        tol = max(tol, g.tess_max_error_viewport) if tol > 0 else g.tess_max_error_viewport
+    return tol or None
+
+
+def scene_geometry(scene, depsgraph, preview: bool = False):
+    """(mapping.Scene, core Settings, evaluated observer camera) or RebuildError; ``preview``: the
+    viewport's tolerance (:func:`max_error_px`)."""
     g = scene.grlens
     cam = observer_camera(scene)
     if cam is None:
@@ -147,7 +157,7 @@ def scene_geometry(scene, depsgraph):
     settings = pipeline.Settings(max_tess_level=g.max_tess_level, tess_a=g.tess_a, tess_b=g.tess_b,
                                  cull_ratio=g.cull_ratio, orders=orders,
                                  pixel_angle=_pixel_angle(scene, cam_eval),
-                                 max_error_px=g.tess_max_error or None)
+                                 max_error_px=max_error_px(g, preview))
     return geo, settings, cam_eval
 
 
@@ -267,9 +277,11 @@ def _remember_inputs(objs, inputs) -> str:
     return token
 
 
-def rebuild_scene(scene, depsgraph=None) -> dict:
+def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
     """Rebuild every image object of ``scene`` for its current frame. Returns a report dict
-    {"status": str, "objects": {name: {order: (vertices, faces, culled)}}, "warnings": [...]}."""
+    {"status": str, "objects": {name: {order: (vertices, faces, culled)}}, "warnings": [...]}.
+    ``preview``: an automatic update of the interactive viewport, built to the viewport's tolerance
+    (see :func:`max_error_px`; renders and explicit rebuilds use the render tolerance)."""
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     report = {"status": "", "objects": {}, "warnings": []}
     srcs = sources(scene)
@@ -277,7 +289,7 @@ def rebuild_scene(scene, depsgraph=None) -> dict:
     try:
         if not srcs:
             raise RebuildError("no object is marked for lensing (obj.grlens.enabled)")
-        geo, settings, cam = scene_geometry(scene, depsgraph)
+        geo, settings, cam = scene_geometry(scene, depsgraph, preview)
         planes = frustum_planes(scene, cam)
         g = scene.grlens
         lut = lutcache.get_lut(geo.r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
@@ -324,6 +336,8 @@ def rebuild_scene(scene, depsgraph=None) -> dict:
                     report["warnings"].append(f"{src.name}: skipped {bad} degenerate or non-finite triangles")
             report["objects"][src.name] = entry
         report["status"] = f"{len(srcs)} object(s) lensed, r_obs = {geo.r_obs:.4g} r_s"
+        if settings.max_error_px != max_error_px(g):
+            report["status"] += f" (viewport preview: {settings.max_error_px:.3g} px)"
     except RebuildError as exc:
         report["status"] = f"grlens: {exc}"
     except ValueError as exc:  # bad numbers from the scene (r_s, NaN transforms, LUT parameters)
