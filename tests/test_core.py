@@ -565,3 +565,14 @@ def test_non_finite_corner_attributes_never_reach_an_image(lut):
         assert np.array_equal(img.positions, clean[order].positions)
         bad = np.isin(img.source_tri, np.arange(0, len(tris), 5))  # faces of triangles with a NaN normal
         assert bad.any() and img.report.kept == len(img.tris)
+
+
+def test_group_offsets_number_each_group_from_zero():
+    from grlens_addon.core.ragged import group_offsets
+
+    rng = np.random.default_rng(3)
+    counts = rng.integers(0, 5, 40)
+    expected = [k for c in counts for k in range(c)]
+    assert group_offsets(counts).tolist() == expected
+    assert group_offsets([2, 0, 3]).tolist() == [0, 1, 0, 1, 2]
+    assert group_offsets(np.zeros(3, np.int64)).size == 0

@@ -486,7 +486,7 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
         face_parts.append(vid[:, ttris].reshape(-1, 3))
     faces = np.concatenate(face_parts)
     keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
-    n_unsplit = int(np.count_nonzero(tri_level == 1))  # np.unique put level 1 first (level 0: strips)
+    n_unsplit = int(np.count_nonzero(tri_level == 1))  # the unsplit triangles come first
     n_pass = n_unsplit if keep[:n_unsplit].all() else 0
     source_tri, corner_row = np.concatenate(src_parts), np.concatenate(corner_row_parts)
     if not keep.all():
