@@ -143,15 +143,16 @@ class Patch:
     ring_radii: np.ndarray = field(default=None, repr=False)
 
 
-def find_crossings(points, tris, camera, hole, candidates=None) -> list[Crossing]:
+def find_crossings(points, tris, camera, hole, candidates=None, axis_xyz=None) -> list[Crossing]:
     """The points where the observer-hole axis crosses the triangles ``tris`` of ``points`` (BU), one
     per point (a crossing through a shared edge or vertex is found once). ``candidates``: indices or a
-    mask of the triangles to test (e.g. culling.near_axis); default all. Ordered along the axis."""
+    mask of the triangles to test (e.g. culling.near_axis); default all. Ordered along the axis.
+    ``axis_xyz``: culling.axis_coordinates of ``points``, when the caller has them."""
     tris = np.asarray(tris, dtype=np.int64)
     idx = np.arange(len(tris)) if candidates is None else np.arange(len(tris))[candidates]
     if idx.size == 0:
         return []
-    x, y, z = axis_coordinates(points, camera, hole)
+    x, y, z = axis_coordinates(points, camera, hole) if axis_xyz is None else axis_xyz
     t = tris[idx]
     _, crossed, along = axis_crossing(x, y, z, t)
     sel = np.flatnonzero(crossed & np.isfinite(along))
@@ -434,7 +435,7 @@ def grid_shape(ring_radius_px, max_error_px) -> tuple[int, float]:
 
 def build_patches(src_positions, src_tris, edges_of_tri, n_edges, scene: mapping.Scene, lut, orders,
                   pixel_angle, max_error_px, candidates=None, closed=False, crossings=None,
-                  leaving=None) -> list[Patch]:
+                  leaving=None, axis_xyz=None) -> list[Patch]:
     """The patches of a source mesh (positions (N, 3) BU, triangles (T, 3), ``edges_of_tri`` (T, 3) edge
     indices of subdivision.Edges) for the image ``orders``, with their images. ``candidates``: the
     triangles the axis may cross (culling.near_axis); ``crossings``: :func:`find_crossings`' result, when
@@ -450,18 +451,19 @@ def build_patches(src_positions, src_tris, edges_of_tri, n_edges, scene: mapping
     HIDDEN_CORE for a sheet hidden but next to its rim).
 
     ``leaving``: a function (vertices (K,) indices, order) -> (K, 3) giving d at source vertices (a
-    cache the caller shares with its own uses); default: looked up here."""
+    cache the caller shares with its own uses); default: looked up here. ``axis_xyz``:
+    culling.axis_coordinates of the source positions, when the caller has them."""
     if not pixel_angle or not max_error_px:
         return []
     points = np.asarray(src_positions, np.float64)
     tris = np.asarray(src_tris, np.int64)
     if crossings is None:
-        crossings = find_crossings(points, tris, scene.camera, scene.hole, candidates)
+        crossings = find_crossings(points, tris, scene.camera, scene.hole, candidates, axis_xyz)
     if not crossings:
         return []
     if callable(closed):
         closed = bool(closed())
-    x, y, z = axis_coordinates(points, scene.camera, scene.hole)
+    x, y, z = axis_coordinates(points, scene.camera, scene.hole) if axis_xyz is None else axis_xyz
     if len(crossings) > MAX_PATCHES:
         size = [np.ptp(x[tris[c.tri]]) + np.ptp(y[tris[c.tri]]) for c in crossings]
         keep = np.sort(np.argsort(size, kind="stable")[::-1][:MAX_PATCHES])

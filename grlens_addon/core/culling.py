@@ -187,7 +187,7 @@ def longest_side(x, y, tris) -> np.ndarray:
                       np.hypot(px[:, 0] - px[:, 2], py[:, 0] - py[:, 2]))
 
 
-def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
+def axis_geometry(source_points, tris, camera, hole, order, span_of=None, axis_xyz=None):
     """Per triangle: (straddles, span).
 
     ``straddles`` (F,) bool: the observer-hole axis passes through the triangle on a half where that
@@ -200,10 +200,11 @@ def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
 
     ``span`` (F,) radians: the angle around the axis the triangle covers (pi for triangles containing
     the axis in projection); with ``span_of`` (a boolean mask or index array) only for those
-    triangles, the others get NaN.
+    triangles, the others get NaN. ``axis_xyz``: :func:`axis_coordinates` of ``source_points``, when the
+    caller has them (the same numbers).
     """
     tris = np.asarray(tris, dtype=np.int64)
-    x, y, z = axis_coordinates(source_points, camera, hole)
+    x, y, z = axis_coordinates(source_points, camera, hole) if axis_xyz is None else axis_xyz
     inside, crossed, along = axis_crossing(x, y, z, tris)
     span = np.full(len(tris), np.nan)
     sel = slice(None) if span_of is None else span_of
@@ -214,14 +215,15 @@ def axis_geometry(source_points, tris, camera, hole, order, span_of=None):
     return straddles, span
 
 
-def near_axis(source_points, tris, camera, hole, margin=1e-9) -> np.ndarray:
+def near_axis(source_points, tris, camera, hole, margin=1e-9, axis_xyz=None) -> np.ndarray:
     """(F,) bool: triangles that may be crossed by the observer-hole axis: False only for those whose
     corners all lie, by more than ``margin`` times their distance from the hole, on one side of one of
     two perpendicular planes through the axis. A superset of the triangles :func:`axis_geometry`
     finds crossed, and of every sub-triangle of theirs (sub-triangles lie inside their source
-    triangle), for ``cull(..., axis_candidates=...)``. Non-finite corners make a candidate."""
+    triangle), for ``cull(..., axis_candidates=...)``. Non-finite corners make a candidate.
+    ``axis_xyz``: :func:`axis_coordinates` of ``source_points``, when the caller has them."""
     tris = np.asarray(tris, dtype=np.int64)
-    x, y, z = axis_coordinates(source_points, camera, hole)
+    x, y, z = axis_coordinates(source_points, camera, hole) if axis_xyz is None else axis_xyz
     tol = margin * np.sqrt(x * x + y * y + z * z)  # margin times the distance from the hole (orthonormal axes)
     return _beside_axis(x, y, tris, tol) == 0
 

@@ -175,7 +175,8 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
     # on the view sphere), and whether the observer-hole axis may pass through it
     src_circ = _circumference_from_edges(
         _chord_lengths(culling.unit_directions(src.positions, scene.camera), edges.verts), edges.of_tri)
-    src_near_axis = culling.near_axis(src.positions, src.tris, scene.camera, scene.hole)
+    axis_xyz = culling.axis_coordinates(src.positions, scene.camera, scene.hole)  # shared by the steps below
+    src_near_axis = culling.near_axis(src.positions, src.tris, scene.camera, scene.hole, axis_xyz=axis_xyz)
     # per order: the image circumferences of the source triangles
     img_chord_lens = {o: _chord_lengths(images_v[o].direction, edges.verts) for o in settings.orders}
     img_circs = {o: _circumference_from_edges(img_chord_lens[o], edges.of_tri) for o in settings.orders}
@@ -190,11 +191,19 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         return closed_memo[0]
 
     crossings = axis_patch.find_crossings(src.positions, src.tris, scene.camera, scene.hole,
-                                          src_near_axis) if patching else []
+                                          src_near_axis, axis_xyz) if patching else []
+    hole_rs = {}
+
+    def hole_r_of(order):  # the angles (radians) of the vertices' images from the hole's direction
+        if order not in hole_rs:
+            with np.errstate(invalid="ignore"):
+                hole_rs[order] = culling.hole_angle(images_v[order].direction, scene.camera, scene.hole)
+        return hole_rs[order]
+
     if _presplit and patching and not crossings:
         pre = _presplit_levels(src, edges, src_circ, img_circs, images_v, scene, settings,
                                hidden=lambda t: _turned_away(src, t, leaving, settings.orders)
-                               if seen_closed() else np.zeros(len(t), bool))
+                               if seen_closed() else np.zeros(len(t), bool), axis_xyz=axis_xyz, hole_r=hole_r_of)
         if pre is not None:
             sub = subdivision.subdivide(src.positions, src.tris, edges, pre)
 
@@ -214,12 +223,12 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
     patches = axis_patch.build_patches(src.positions, src.tris, edges.of_tri, len(edges.verts), scene, lut,
                                        settings.orders, settings.pixel_angle, settings.max_error_px,
                                        crossings=crossings, closed=seen_closed, leaving=leaving.at,
-                                       ) if crossings else []
+                                       axis_xyz=axis_xyz) if crossings else []
     xy_memo = []
 
-    def axis_xy():  # (N, 2) axis coordinates x, y of the source vertices (computed once, when needed)
+    def axis_xy():  # (N, 2) axis coordinates x, y of the source vertices (stacked once, when needed)
         if not xy_memo:
-            xy_memo.append(np.column_stack(culling.axis_coordinates(src.positions, scene.camera, scene.hole)[:2]))
+            xy_memo.append(np.column_stack(axis_xyz[:2]))
         return xy_memo[0]
 
     # edge midpoints are mapped only where a level above 1 is possible: an edge whose image spans at
@@ -249,8 +258,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             continue
         fit = settings  # the settings of this order's levels: a thin image's tighter tolerance (THIN_FACTOR)
         if ring_levels:  # the images' angles from the hole's direction (radians)
-            with np.errstate(invalid="ignore"):
-                hole_r = culling.hole_angle(img_v.direction, scene.camera, scene.hole)
+            hole_r = hole_r_of(order)
         if ring_levels and THIN_FACTOR != 1.0 and _thin_image(hole_r, settings.pixel_angle):
             fit = replace(settings, max_error_px=settings.max_error_px * THIN_FACTOR)
         rho = subdivision.rho(img_v.direction.take(p0, axis=0), img_v.direction.take(p1, axis=0), img_m.direction)
@@ -267,7 +275,7 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
             raise_edges = tight != levels[probe]
             cap = (lambda t: _span_cap(order_patches, src.tris.take(t, axis=0), axis_xy())) if order_patches else None
             cand, want, sharp, gap_want, r_px = _ring_levels(src, src_circ, img_circ, scene, hole_r, order, fit,
-                                                             replaced, cap)
+                                                             replaced, cap, axis_xyz)
             want0 = want
             maybe = sharp != want
             if raise_edges.any() or maybe.any():
@@ -636,7 +644,8 @@ def _ring_candidates(src_circ, img_circ) -> np.ndarray:
         return np.flatnonzero(img_circ > RING_MAGNIFICATION * src_circ)
 
 
-def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settings, skip=None, cap=None):
+def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settings, skip=None, cap=None,
+                 axis_xyz=None):
     """The levels that strongly magnified source triangles near the axis need so that their
     sub-triangles are narrow enough on screen (see culling.ring_sagitta: a piece covering an azimuth d
     at an angular radius R from the hole's direction has straight sides R (1 - cos(d/2)) inside the
@@ -647,7 +656,8 @@ def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settin
     ``hole_r`` (N,): the angles (radians) of the source vertices' images of this order from the hole's
     direction (culling.hole_angle); ``skip`` (T,) bool: triangles left alone (replaced by an axis patch);
     ``cap``: None, or a function of the candidates' indices giving the most azimuth (radians) each
-    must be cut into pieces narrow in (:func:`_span_cap`), where that is less than the azimuth it covers.
+    must be cut into pieces narrow in (:func:`_span_cap`), where that is less than the azimuth it covers;
+    ``axis_xyz``: culling.axis_coordinates of the source positions, when the caller has them.
 
     Returns (cand, want, sharp, gap, corner_px): the candidate triangles (indices), their levels for
     ``max_error_px``, for SILHOUETTE_FACTOR * max_error_px (the silhouette's tolerance) and for
@@ -660,7 +670,7 @@ def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settin
         cand = cand[~skip[cand]]
     if cand.size == 0:
         return cand, np.ones(0, np.int64), np.ones(0, np.int64), np.ones(0, np.int64), np.zeros((0, 3))
-    _, span = culling.axis_geometry(src.positions, tris[cand], scene.camera, scene.hole, order)
+    _, span = culling.axis_geometry(src.positions, tris[cand], scene.camera, scene.hole, order, axis_xyz=axis_xyz)
     if cap is not None:
         span = np.fmin(span, cap(cand))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -780,7 +790,8 @@ at 0.35, with the same coverage. At 0.25 the mismatch rises from 0.21% to 0.36%
 (benchmarks/bench_accuracy.py)."""
 
 
-def _presplit_levels(src, edges, src_circ, img_circs, images_v, scene, settings, hidden=None):
+def _presplit_levels(src, edges, src_circ, img_circs, images_v, scene, settings, hidden=None, axis_xyz=None,
+                     hole_r=None):
     """Per-edge levels of a first, coarse split of the source mesh, or None when none is needed.
 
     A strongly magnified triangle (RING_MAGNIFICATION) of projected size h whose closest point lies at
@@ -794,7 +805,9 @@ def _presplit_levels(src, edges, src_circ, img_circs, images_v, scene, settings,
     again, refine mostly those next to the axis. Only meshes the axis does not cross (axis patches
     handle the crossings). ``img_circs``: {order: image circumferences of the source triangles};
     ``hidden``: a function of triangle indices giving a mask of those hidden in every order (back
-    faces, see BACK_FACE_MARGIN), which are not split."""
+    faces, see BACK_FACE_MARGIN), which are not split. ``axis_xyz``: culling.axis_coordinates of the
+    source positions; ``hole_r``: a function of the order giving culling.hole_angle of that order's
+    vertex images (both computed here when not given)."""
     need = np.ones(len(src.tris))
     x = y = None
     for order, img_v in images_v.items():
@@ -802,13 +815,14 @@ def _presplit_levels(src, edges, src_circ, img_circs, images_v, scene, settings,
         if cand.size == 0:
             continue
         if x is None:
-            x, y, _ = culling.axis_coordinates(src.positions, scene.camera, scene.hole)
+            x, y, _ = culling.axis_coordinates(src.positions, scene.camera, scene.hole) if axis_xyz is None else axis_xyz
         t = src.tris[cand]
         px, py = x[t], y[t]
         h = np.hypot(px - np.roll(px, -1, axis=1), py - np.roll(py, -1, axis=1)).max(axis=1)
         dmin = culling.axis_distance(x, y, t)
         with np.errstate(invalid="ignore", divide="ignore"):
-            radius = culling.hole_angle(img_v.direction, scene.camera, scene.hole) / settings.pixel_angle
+            angle = culling.hole_angle(img_v.direction, scene.camera, scene.hole) if hole_r is None else hole_r(order)
+            radius = angle / settings.pixel_angle
             d_max = culling.max_ring_span(radius[t].max(axis=1), settings.max_error_px)
             n = np.where(dmin > 0, h / (RING_LEVEL_MARGIN * d_max * dmin), 1.0)
         need[cand] = np.maximum(need[cand], np.nan_to_num(n, nan=1.0, posinf=1.0))
