@@ -44,7 +44,8 @@ def _annulus(name, r_in, r_out, rings=72, segments=256):
 
 def _disc_material():
     mat = bpy.data.materials.new("DiscFlux")
-    mat.use_nodes = True
+    if bpy.app.version < (5, 0, 0):  # 5.0: always nodes, use_nodes deprecated
+        mat.use_nodes = True
     nt = mat.node_tree
     for n in list(nt.nodes):
         nt.nodes.remove(n)

@@ -25,7 +25,8 @@ from sample_scenes import luminet as _luminet
 
 def _new_material(name):
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    if bpy.app.version < (5, 0, 0):  # 5.0: always nodes, use_nodes deprecated
+        mat.use_nodes = True
     nt = mat.node_tree
     for n in list(nt.nodes):
         nt.nodes.remove(n)
@@ -83,7 +84,8 @@ def _principled(name, color, roughness=0.6, checker=None):
 def _world(scene, color=(0.0, 0.0, 0.0)):
     world = bpy.data.worlds.new("World")
     world.color = color
-    world.use_nodes = True  # Blender 5.0 worlds always use nodes
+    if bpy.app.version < (5, 0, 0):  # 5.0: always nodes, use_nodes deprecated
+        world.use_nodes = True
     for node in world.node_tree.nodes:
         if node.bl_idname == "ShaderNodeBackground":
             node.inputs["Color"].default_value = (*color, 1.0)

@@ -109,9 +109,23 @@ def ensure_view_layer_aovs(scene):
                 a.type = "VALUE"
 
 
+_NODES_ALWAYS = bpy.app.version >= (5, 0, 0)
+"""From Blender 5.0 every material has a node tree and Material.use_nodes is deprecated (to be removed in
+6.0): it is neither read nor set there."""
+
+
+def _uses_nodes(mat) -> bool:
+    return mat.node_tree is not None and (_NODES_ALWAYS or mat.use_nodes)
+
+
+def _use_nodes(mat) -> None:
+    if not _NODES_ALWAYS:
+        mat.use_nodes = True
+
+
 def _digest(mat) -> str:
     """A cheap fingerprint of a material's node tree (node types, names, links, input defaults)."""
-    if mat is None or not mat.use_nodes or mat.node_tree is None:
+    if mat is None or not _uses_nodes(mat):
         return repr((getattr(mat, "name", None), tuple(getattr(mat, "diffuse_color", ()))))
     parts = []
     for n in mat.node_tree.nodes:
@@ -154,12 +168,8 @@ def image_material(mat):
     old = bpy.data.materials.get(name)
     if old is not None and old.get("grlens_digest") == digest:
         return old
-    if mat is None:
-        copy = bpy.data.materials.new(name + ".new")
-        copy.use_nodes = True
-    else:
-        copy = mat.copy()
-        copy.use_nodes = True
+    copy = bpy.data.materials.new(name + ".new") if mat is None else mat.copy()
+    _use_nodes(copy)
     _add_aov_nodes(copy.node_tree)
     copy["grlens_digest"] = digest
     copy["grlens_material_copy"] = 1

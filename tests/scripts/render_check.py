@@ -24,7 +24,8 @@ import grlens_addon  # noqa: E402
 
 def emission_material():
     mat = bpy.data.materials.new("Emit")
-    mat.use_nodes = True
+    if bpy.app.version < (5, 0, 0):  # 5.0: always nodes, use_nodes deprecated
+        mat.use_nodes = True
     nt = mat.node_tree
     for n in list(nt.nodes):
         nt.nodes.remove(n)
@@ -92,7 +93,8 @@ def main(engine, which, out):
     obj.grlens.enabled = True
     world = bpy.data.worlds.new("Black")
     world.color = (0, 0, 0)
-    world.use_nodes = True  # 5.0 worlds always use nodes: make the background black there too
+    if bpy.app.version < (5, 0, 0):  # 5.0: always nodes, use_nodes deprecated
+        world.use_nodes = True
     for node in world.node_tree.nodes:
         if node.bl_idname == "ShaderNodeBackground":
             node.inputs["Strength"].default_value = 0.0
