@@ -455,7 +455,7 @@ def _ring_view(lut, angle, size=(320, 180)):
 
 def test_orbit_summary_lists_the_misses_or_the_closest():
     """bench_accuracy.orbit_summary: the counts per target, the angles that miss one (worst mismatch
-    first), or, when none does, the five closest to a target."""
+    first), or, when none does, the five closest to a target; the whole sequence's times."""
     bench = _bench_accuracy()
     rows = [(a, 0.001, 0.1, 200.0, 5.0) for a in range(0, 360, 30)]
     rows[3] = (90, 0.006, 0.1, 200.0, 5.0)
@@ -467,6 +467,8 @@ def test_orbit_summary_lists_the_misses_or_the_closest():
     text = "\n".join(bench.orbit_summary(30, rows))
     assert "all three at 12" in text and "No angle misses one" in text and text.count("\n| ") == 6
     assert text.index("| 150 |") < text.index("| 90 |")  # 0.45 px is closer to its target than 0.4%
+    # the whole sequence: 11 frames of 5 ms at 200x (1 s each) and one of 30 ms at 105x (3.15 s)
+    assert "The whole sequence (12 frames): the reference took 14 s, build_images 0.09 s, 166 times less" in text
 
 
 @pytest.mark.parametrize("angle, bound", [(0, 0.05), (170, 0.008), (180, 0.006)])
