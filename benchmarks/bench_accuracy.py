@@ -482,7 +482,9 @@ def main(argv=None):
                 "group's angles (orders 1 and 2), UV and light-travel-time p99 of its worst angle. "
                 "Plot: [accuracy_pareto.png](accuracy_pareto.png).", "", *lines, ""]
     if args.orbit:
-        out += ["## Over the orbit", "", *orbit_table(args.orbit, cam, lut, max(1, args.repeat // 2), refs), ""]
+        orbit = ["## Over the orbit", "", *orbit_table(args.orbit, cam, lut, max(1, args.repeat // 2), refs), ""]
+        print("\n".join(orbit), flush=True)
+        out += orbit
     if args.write:
         path = os.path.join(ROOT, "docs", "accuracy.md")
         with open(path, "w") as f:
