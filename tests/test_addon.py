@@ -655,3 +655,53 @@ def test_extract_matches_blenders_loop_triangles(kind):
         loops = np.empty(3 * len(me.loop_triangles), np.int32)
         me.loop_triangles.foreach_get("loops", loops)
         assert (loops.reshape(-1, 3) != fan).any(axis=1).sum() > 5
+
+
+def test_check_frame_against_ray_tracing(tmp_path):
+    """bpy.ops.grlens.check_frame: both renders of the current frame at a fraction of the render
+    resolution, their comparison in scene.grlens.check_summary and their passes in an OpenEXR file
+    named after the frame; the source is not modified."""
+    from lutgen.exr_io import read_exr
+
+    scene, sphere = _small_demo()  # 160x90
+    _place(sphere, 90)
+    before = np.array([v.co[:] for v in sphere.data.vertices])
+    scene.frame_set(7)
+    out = str(tmp_path / "sub" / "check_###.exr")
+    assert bpy.ops.grlens.check_frame(percentage=100, filepath=out) == {"FINISHED"}
+    path = tmp_path / "sub" / "check_007.exr"
+    assert path.exists()
+    summary = scene.grlens.check_summary
+    assert summary.startswith("frame 7, 160x90: ") and str(path) in summary
+    channels, meta = read_exr(path)
+    assert {"Reference.light_travel_time.V", "Reference.image_order.V", "grlens.light_travel_time.V",
+            "grlens.image_order.V", "Check.mismatch.V"} <= set(channels)
+    assert channels["Reference.image_order.V"].shape == (90, 160)
+    assert meta["mismatch_fraction"] < 0.02 and meta["objects"] == "0: OrbitingSphere"
+    both = (channels["Reference.image_order.V"] == 1) & (channels["grlens.image_order.V"] == 1)
+    assert both.sum() > 50
+    lt_r, lt_p = channels["Reference.light_travel_time.V"][both], channels["grlens.light_travel_time.V"][both]
+    assert np.all(np.abs(lt_p - lt_r) <= 1e-3 * lt_r)  # c*dt in BU in both (r_s = 2 BU here)
+    assert np.array_equal(before, np.array([v.co[:] for v in sphere.data.vertices]))
+    # a lower resolution, no file
+    assert bpy.ops.grlens.check_frame(percentage=50, filepath="") == {"FINISHED"}
+    assert scene.grlens.check_summary.startswith("frame 7, 80x45: ") and "passes in" not in scene.grlens.check_summary
+
+
+def test_check_frame_refuses_what_it_cannot_check():
+    from grlens_addon.blender import check
+
+    scene, sphere = _small_demo()
+    scene.camera.data.type = "ORTHO"
+    with pytest.raises(ValueError, match="perspective"):
+        check.check_scene(scene, percentage=10)
+    with pytest.raises(RuntimeError, match="perspective"):  # the operator's error report
+        bpy.ops.grlens.check_frame(percentage=10, filepath="")
+    scene.camera.data.type = "PERSP"
+    scene.camera.data.shift_x = 0.1
+    with pytest.raises(ValueError, match="lens shift"):
+        check.check_scene(scene, percentage=10)
+    scene.camera.data.shift_x = 0.0
+    sphere.grlens.enabled = False
+    with pytest.raises(RuntimeError, match="no object is marked"):
+        bpy.ops.grlens.check_frame(percentage=10, filepath="")

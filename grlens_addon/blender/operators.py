@@ -1,5 +1,6 @@
 """Operators (public scripting contract): ``bpy.ops.grlens.rebuild()``, ``bpy.ops.grlens.clear()``,
-``bpy.ops.grlens.demo_scene()``, ``bpy.ops.grlens.pack_lut()``, ``bpy.ops.grlens.unpack_luts()``."""
+``bpy.ops.grlens.demo_scene()``, ``bpy.ops.grlens.pack_lut()``, ``bpy.ops.grlens.unpack_luts()``,
+``bpy.ops.grlens.check_frame()``."""
 import math
 
 import bpy
@@ -158,4 +159,41 @@ class GRLENS_OT_unpack_luts(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (GRLENS_OT_rebuild, GRLENS_OT_clear, GRLENS_OT_demo_scene, GRLENS_OT_pack_lut, GRLENS_OT_unpack_luts)
+class GRLENS_OT_check_frame(bpy.types.Operator):
+    """Render the current frame with the exact per-pixel ray tracer and with grlens' image meshes (at a
+    fraction of the render resolution), compare them and write both renders' passes to an OpenEXR
+    file (takes seconds: the ray tracer is slow)"""
+
+    bl_idname = "grlens.check_frame"
+    bl_label = "Check Frame Against Ray Tracing"
+    bl_options = {"REGISTER"}
+
+    percentage: bpy.props.IntProperty(
+        name="Resolution %", default=50, min=1, max=100, subtype="PERCENTAGE",
+        description="Resolution of the check, in percent of the render resolution (the ray tracer takes "
+                    "about a second per 100k pixels, more where an object surrounds the hole's direction)")
+    filepath: bpy.props.StringProperty(
+        name="Output", default="//grlens_check_####.exr", subtype="FILE_PATH",
+        description="OpenEXR file for the passes of both renders and the mismatch (# -> frame number; "
+                    "// -> next to the .blend, or the temporary directory for an unsaved file); empty: none")
+
+    def execute(self, context):
+        from .check import check_scene
+        from .rebuild import RebuildError
+
+        scene = context.scene
+        try:
+            result, path = check_scene(scene, context.evaluated_depsgraph_get(), self.percentage, self.filepath)
+        except (RebuildError, ValueError, OSError) as exc:
+            self.report({"ERROR"}, f"grlens: {exc}")
+            return {"CANCELLED"}
+        text = f"frame {scene.frame_current}, {result.summary()}" + (f"; passes in {path}" if path else "")
+        scene.grlens.check_summary = text
+        self.report({"INFO"}, text)
+        if bpy.app.background:
+            print(f"grlens check: {text}")
+        return {"FINISHED"}
+
+
+CLASSES = (GRLENS_OT_rebuild, GRLENS_OT_clear, GRLENS_OT_demo_scene, GRLENS_OT_pack_lut, GRLENS_OT_unpack_luts,
+           GRLENS_OT_check_frame)

@@ -62,6 +62,9 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         row.operator("grlens.rebuild", icon="FILE_REFRESH")
         row.operator("grlens.clear", icon="X")
         layout.operator("grlens.demo_scene", icon="SPHERE")
+        layout.operator("grlens.check_frame", icon="VIEWZOOM")
+        if g.check_summary:
+            layout.label(text=g.check_summary, icon="INFO")
         if g.status:
             layout.label(text=g.status, icon="ERROR" if g.status.startswith("grlens:") else "INFO")
 

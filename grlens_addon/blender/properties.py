@@ -84,6 +84,10 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
                               description="Rebuild the images on frame changes and edits")
     status: StringProperty(name="Status", default="", options={"SKIP_SAVE"},
                            description="Outcome of the last rebuild (read only)")
+    check_summary: StringProperty(
+        name="Last Check", default="",
+        description="Outcome of the last bpy.ops.grlens.check_frame(): coverage mismatch, errors and times "
+                    "against the reference ray tracer (read only)")
 
 
 class GRLENS_ObjectSettings(bpy.types.PropertyGroup):

@@ -1,7 +1,8 @@
 """Reference renderer: one exact null geodesic per pixel against a triangle scene (numpy only, no bpy).
 
 This is the ground truth the polygon method (mapping + subdivision, see ``pipeline``) is measured
-against; it is slow (seconds per frame) and meant for tests and benchmarks, not for the add-on.
+against; it is slow (seconds per frame): tests, benchmarks and the add-on's frame check
+(``frame_check``, ``bpy.ops.grlens.check_frame``) use it, the per-frame rebuild does not.
 
 Units and conventions
 ---------------------

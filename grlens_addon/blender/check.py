@@ -1,0 +1,74 @@
+"""Check the current frame against the reference ray tracer (``bpy.ops.grlens.check_frame()``).
+
+Renders the lensed sources of the scene twice at a fraction of the render resolution, with the exact
+per-pixel ray tracer and with the polygon method the add-on uses (core.frame_check), compares them
+and writes both renders' passes (light travel time, image order, object index, UV) and the mismatch
+to an OpenEXR file. Geometry only: materials, GR illumination and disc colours are not compared.
+Units: Blender units; times in seconds; errors in pixels of the check's resolution.
+"""
+from __future__ import annotations
+
+import os
+import re
+
+import bpy
+import numpy as np
+
+from ..core import frame_check, raytrace
+from . import lutcache, rebuild
+
+
+def check_camera(scene, cam, percentage) -> raytrace.Camera:
+    """The reference tracer's pinhole camera for the observer camera ``cam`` (evaluated) at
+    ``percentage`` of the scene's render resolution; ValueError for what the tracer cannot model."""
+    if cam.type != "CAMERA" or cam.data.type != "PERSP":
+        raise ValueError("the check needs a perspective observer camera")
+    if cam.data.shift_x or cam.data.shift_y:
+        raise ValueError("the check does not model lens shift (camera shift x/y must be 0)")
+    r = scene.render
+    if abs(r.pixel_aspect_x - r.pixel_aspect_y) > 1e-6 * max(r.pixel_aspect_x, r.pixel_aspect_y):
+        raise ValueError("the check needs square pixels (pixel aspect x = y)")
+    scale = r.resolution_percentage / 100.0 * percentage / 100.0
+    width = max(1, round(r.resolution_x * scale))
+    height = max(1, round(r.resolution_y * scale))
+    frame = np.array([tuple(v) for v in cam.data.view_frame(scene=scene)])  # camera space, z < 0
+    half_y = np.max(np.abs(frame[:, 1])) / np.max(np.abs(frame[:, 2]))
+    mw = np.array(cam.matrix_world, dtype=np.float64)
+    rot = mw[:3, :3] / np.linalg.norm(mw[:3, :3], axis=0)  # without the camera object's scale
+    return raytrace.Camera(mw[:3, 3], rot, 2.0 * np.arctan(half_y), width, height)
+
+
+def output_path(filepath, frame) -> str:
+    """``filepath`` with Blender's conventions: ``//`` relative to the .blend (to the temporary
+    directory for an unsaved file) and a run of ``#`` replaced by the frame number, zero-padded."""
+    if filepath.startswith("//") and not bpy.data.filepath:
+        filepath = os.path.join(bpy.app.tempdir, filepath[2:])
+    path = bpy.path.abspath(filepath)
+    path = re.sub(r"#+", lambda m: f"{frame:0{len(m.group(0))}d}", path)
+    return path
+
+
+def check_scene(scene, depsgraph=None, percentage: int = 50, filepath: str = "") -> tuple:
+    """(core.frame_check.FrameCheck, written path or "") for the current frame of ``scene``: its lensed
+    sources (evaluated as the rebuild does), observer camera, hole and settings (render tolerance),
+    at ``percentage`` of the render resolution. With ``filepath``, the passes are written there (see
+    :func:`output_path`). Raises rebuild.RebuildError or ValueError with a message for the user."""
+    depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+    srcs = rebuild.sources(scene)
+    if not srcs:
+        raise rebuild.RebuildError("no object is marked for lensing (obj.grlens.enabled)")
+    if not 1 <= percentage <= 100:
+        raise ValueError(f"the check's resolution percentage must be 1-100, got {percentage}")
+    geo, settings, cam = rebuild.scene_geometry(scene, depsgraph)
+    camera = check_camera(scene, cam, percentage)
+    g = scene.grlens
+    lut = lutcache.get_lut(geo.r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
+    src_dg = rebuild._source_depsgraph(depsgraph)
+    meshes = [rebuild._extract(s.evaluated_get(src_dg), with_normals=False) for s in srcs]
+    result = frame_check.check_frame(meshes, geo, lut, settings, camera, names=[s.name for s in srcs])
+    path = ""
+    if filepath:
+        path = output_path(filepath, scene.frame_current)
+        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        frame_check.write_passes(path, result)
+    return result, path
