@@ -82,6 +82,61 @@ def sphere_scene(angle_deg, segments=36, rings=18):
     return pipeline.SourceMesh(pts, tris, uv), raytrace.TriangleScene(pts, tris, uv)
 
 
+TRIANGLE_FOV_DEG = 20.0
+TRIANGLE_P2 = np.array([-5.0, 0.5, -0.5]) / 2.0
+TRIANGLE_P1 = np.array([-5.0, 3.0, -0.5]) / 2.0
+TRIANGLE_STEPS = (0.0, 0.25, 0.5, 0.75, 1.0)
+"""Seed 000's triangle (section 4.1; sample_scenes ``triangle``) in units of r_s: the sample scene has
+r_s = 2 BU, the camera at 20 r_s, a 20 deg vertical field of view, legs of 3 BU; here r_s = 1 BU.
+Positions along its way from p2 (frame 1) to p1 (frame 150), as fractions of it."""
+
+
+def triangle_scene(s):
+    """(pipeline.SourceMesh, raytrace.TriangleScene) of the triangle at the fraction ``s`` of its way
+    from p2 to p1: corners p, p + 1.5 y, p + 1.5 z (r_s), UVs (0, 0), (1, 0), (0, 1) as in the sample
+    scene."""
+    p = TRIANGLE_P2 + s * (TRIANGLE_P1 - TRIANGLE_P2)
+    pts = p + np.array([[0.0, 0.0, 0.0], [0.0, 1.5, 0.0], [0.0, 0.0, 1.5]])
+    tris = np.array([[0, 1, 2]])
+    uv = np.array([[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]])
+    return pipeline.SourceMesh(pts, tris, uv), raytrace.TriangleScene(pts, tris, uv)
+
+
+def triangle_camera(width, height):
+    return raytrace.Camera.look_at([R_OBS * R_S, 0.0, 0.0], [0.0, 0.0, 0.0], math.radians(TRIANGLE_FOV_DEG),
+                                   width, height)
+
+
+def triangle_pareto(width, height, repeat):
+    """The Pareto sweep (:func:`sweep_settings`) on the triangle scene at TRIANGLE_STEPS: per setting the
+    mean build_images time, the mismatch summed over the positions, the worst screen-error and
+    light-travel-time p99, and the reference's mean time (markdown lines)."""
+    cam = triangle_camera(width, height)
+    frames = {s: triangle_scene(s) for s in TRIANGLE_STEPS}
+    refs = {s: reference_image(frames[s][1], cam) for s in TRIANGLE_STEPS}
+    t_ref = float(np.mean([t for _, t in refs.values()]))
+    lines = ["| setting | build_images [ms] (mean) | mismatch | screen err p99 [px] | c*dt rel. err p99 | "
+             "speed-up (mean times) |", "|---|---|---|---|---|---|"]
+    luts = {}
+    for label, size, over in sweep_settings():
+        if size not in luts:
+            luts[size] = build_lut(R_OBS, 1.05, 40.0, size[0], size[1])
+        settings = make_settings(cam, **over)
+        times, ms = [], []
+        for s, (src, _) in frames.items():
+            poly, t_poly, _, _ = polygon_image(src, cam, luts[size], settings, repeat)
+            times.append(t_poly)
+            ms.append(image_metrics.compare(
+                refs[s][0], poly, texture_size=TEXTURE, image_pixels=exact_pixels(cam),
+                uv_points=lambda uv, src=src: image_metrics.uv_surface_points(uv, src.positions, src.tris,
+                                                                              src.corner_uv)))
+        mis, uv99, lt99 = aggregate(ms)
+        t = float(np.mean(times))
+        lines.append(f"| {label} | {1000 * t:.1f} | {_fmt_pct(mis)} | {uv99:.3f} | {lt99:.1e} | {t_ref / t:.0f}x |")
+        print(lines[-1], flush=True)
+    return lines, t_ref
+
+
 def camera(width, height):
     return raytrace.Camera.look_at([R_OBS * R_S, 0.0, 0.0], [0.0, 0.0, 0.0], math.radians(FOV_DEG), width, height)
 
@@ -481,6 +536,15 @@ def main(argv=None):
                 f"({', '.join(str(a) for a in sweep_angles if is_ring(a))} deg) views; mismatch summed over a "
                 "group's angles (orders 1 and 2), UV and light-travel-time p99 of its worst angle. "
                 "Plot: [accuracy_pareto.png](accuracy_pareto.png).", "", *lines, ""]
+    if args.sweep:
+        tri_lines, tri_ref = triangle_pareto(w, h, max(1, args.repeat // 2))
+        out += ["## Pareto sweep, triangle scene", "",
+                "Seed 000's triangle behind the hole (section 4.1; sample scene `triangle`, in units of r_s: "
+                f"camera at {R_OBS:g} r_s, {TRIANGLE_FOV_DEG:g} deg vertical field of view, {w}x{h}) at "
+                f"{len(TRIANGLE_STEPS)} positions of its way from p2 to p1 (fractions "
+                f"{', '.join(f'{t:g}' for t in TRIANGLE_STEPS)}); the same settings as above; mismatch summed "
+                "over the positions, p99 of the worst one; speed-up = the reference's mean time "
+                f"({tri_ref:.2f} s) over the mean build_images time.", "", *tri_lines, ""]
     if args.orbit:
         orbit = ["## Over the orbit", "", *orbit_table(args.orbit, cam, lut, max(1, args.repeat // 2), refs), ""]
         print("\n".join(orbit), flush=True)

@@ -471,6 +471,19 @@ def test_orbit_summary_lists_the_misses_or_the_closest():
     assert "The whole sequence (12 frames): the reference took 14 s, build_images 0.09 s, 166 times less" in text
 
 
+def test_benchmark_triangle_is_the_sample_scene_s_in_units_of_r_s():
+    """bench_accuracy.triangle_scene: the sample scene's triangle (r_s = 2 BU, legs of 3 BU from p2 to
+    p1) scaled to r_s = 1, with its UVs; the camera at the same 20 r_s and field of view."""
+    bench = _bench_accuracy()
+    src, tri_scene = bench.triangle_scene(0.0)
+    legs = np.array([[0.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 3.0]])
+    assert np.allclose(2.0 * src.positions, np.array([-5.0, 0.5, -0.5]) + legs)
+    assert np.allclose(2.0 * bench.triangle_scene(1.0)[0].positions, np.array([-5.0, 3.0, -0.5]) + legs)
+    assert np.array_equal(src.corner_uv[0], [[0, 0], [1, 0], [0, 1]]) and np.array_equal(tri_scene.tris, src.tris)
+    cam = bench.triangle_camera(64, 36)
+    assert np.allclose(cam.position, [20.0, 0.0, 0.0]) and np.isclose(cam.fov_y, math.radians(20.0))
+
+
 @pytest.mark.parametrize("angle, bound", [(0, 0.05), (170, 0.008), (180, 0.006)])
 def test_sphere_ring_views_vs_reference(lut, angle, bound):
     """The paper's sphere next to and on the observer-hole axis at 320x180, where the second-order
