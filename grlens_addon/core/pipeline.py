@@ -506,10 +506,14 @@ def _patch_corner_values(values, face_src, bary, vertex_tri, vertex_bary, corner
     """(F, 3, K) corner values of patch faces (see _patch_parts and PATCH_SEAM_JUMP) from the source
     triangles' corner values ``values`` (T, 3, K)."""
     values = np.asarray(values, dtype=np.float64)
-    carried = np.matmul(bary, values.take(face_src, axis=0))  # the face's triangle, extrapolated
     own = subdivision.carry_rows(vertex_bary, vertex_tri, corner_row, values)
-    seam = (np.abs(own - carried) > PATCH_SEAM_JUMP).any(axis=(1, 2))
-    own[seam] = carried[seam]
+    # only faces with a corner on another triangle than their own can be across a seam (where all
+    # three lie on it, both ways interpolate in that triangle at the same point)
+    other = np.flatnonzero((vertex_tri.take(corner_row) != face_src[:, None]).any(axis=1))
+    if other.size:
+        carried = np.matmul(bary[other], values.take(face_src[other], axis=0))  # the face's triangle, extrapolated
+        seam = (np.abs(own[other] - carried) > PATCH_SEAM_JUMP).any(axis=(1, 2))
+        own[other[seam]] = carried[seam]
     return own
 
 
