@@ -62,6 +62,7 @@ def test_frame_check_sees_the_polygon_method_s_error_at_the_ring(lut):
     check = frame_check.check_frame([src], scene, lut, settings, cam)
     m = check.metrics["orders"]["all"]
     assert 0 < m["mismatch"] and m["mismatch_frac"] < 0.02
+    assert frame_check.passes(check)["Check.mismatch.V"].sum() == m["mismatch"]
     assert check.metrics["orders"][1]["covered_ref"] > 500 and check.metrics["orders"][1]["covered_test"] > 500
 
 
@@ -72,3 +73,18 @@ def test_frame_check_refuses_bad_input(lut):
     other = raytrace.Camera.look_at([R_OBS, 1.0, 0.0], [0.0, 0.0, 0.0], math.radians(19.0), 160, 90)
     with pytest.raises(ValueError, match="not the scene's observer"):
         frame_check.check_frame([src], scene, lut, settings, other)
+
+
+def test_mismatch_pass_counts_what_the_metric_counts():
+    """image_metrics.mismatch_mask (the Check.mismatch pass): a pixel differs where exactly one render
+    shows an (object, order) of orders 1-2; a third-order pixel of the reference alone is not counted,
+    as in compare's coverage mismatch."""
+    from grlens_addon.core import image_metrics
+
+    ref, test = raytrace.PixelBuffers.empty((1, 5)), raytrace.PixelBuffers.empty((1, 5))
+    for buf, orders, objs in ((ref, [1, 2, 3, 1, 0], [0, 0, 0, 0, -1]), (test, [1, 1, 0, 0, 2], [0, 0, -1, -1, 0])):
+        buf.order[0] = orders
+        buf.object_id[0] = objs
+        buf.hit[0] = np.array(orders) > 0
+    assert image_metrics.mismatch_mask(ref, test).tolist() == [[False, True, False, True, True]]
+    assert image_metrics.compare(ref, test)["orders"]["all"]["mismatch"] == 3

@@ -102,7 +102,8 @@ def passes(check: FrameCheck) -> dict:
     """{channel name: (height, width) float32}: per render (layers ``Reference`` and ``grlens``) the
     light travel time (c*dt, BU; 0 where nothing is hit, as the add-on's AOV), the image order (0
     where nothing is hit), the object index (-1 where nothing is hit) and the UV (NaN where none);
-    layer ``Check``: mismatch (1 where exactly one render shows an object in some order)."""
+    layer ``Check``: mismatch (1 where exactly one render shows an object in image order 1 or 2, the
+    pixels the coverage mismatch counts)."""
     out = {}
     for layer, buf in (("Reference", check.reference), ("grlens", check.polygon)):
         hit = np.asarray(buf.hit, bool)
@@ -111,10 +112,7 @@ def passes(check: FrameCheck) -> dict:
         out[f"{layer}.object_index.V"] = np.where(hit, buf.object_id, -1).astype(np.float32)
         out[f"{layer}.UV.U"] = np.asarray(buf.uv[..., 0], np.float32)
         out[f"{layer}.UV.V"] = np.asarray(buf.uv[..., 1], np.float32)
-    ref, pol = check.reference, check.polygon
-    key_r = np.where(ref.hit, ref.object_id * 8 + np.minimum(ref.order, 7), -1)
-    key_p = np.where(pol.hit, pol.object_id * 8 + np.minimum(pol.order, 7), -1)
-    out["Check.mismatch.V"] = (key_r != key_p).astype(np.float32)
+    out["Check.mismatch.V"] = image_metrics.mismatch_mask(check.reference, check.polygon).astype(np.float32)
     return out
 
 

@@ -62,10 +62,21 @@ def _wrap(d, wrap_uv):
     return d
 
 
-def _key(buf, orders):
-    """Per pixel an integer (object, order) key, -1 for no hit or an order not in ``orders``."""
+def pixel_keys(buf, orders):
+    """Per pixel an integer (object, order) key, -1 for no hit or an order not in ``orders``; a pixel is
+    a mismatch where the two renders' keys differ and one of them is not -1 (:func:`mismatch_mask`)."""
     ok = buf.hit & np.isin(buf.order, orders)
     return np.where(ok, buf.object_id * 1024 + buf.order, -1)
+
+
+def mismatch_mask(ref, test, orders=(1, 2)) -> np.ndarray:
+    """(S,) bool: pixels where exactly one of the buffers shows a given (object, order), orders among
+    ``orders`` (the coverage mismatch of :func:`compare`)."""
+    return _differ(pixel_keys(ref, orders), pixel_keys(test, orders))
+
+
+def _differ(kr, kt):
+    return (kr != kt) & ((kr >= 0) | (kt >= 0))
 
 
 def uv_surface_points(uv, points, tris, corner_uv, wrap_uv=(False, False), chunk: int = 1024) -> np.ndarray:
@@ -171,8 +182,8 @@ def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(Fals
             screen[o] = np.hypot(np.asarray(col) - (cols[m] + 0.5), np.asarray(row) - (rows[m] + 0.5))
     for o in list(orders) + ["all"]:
         sel = list(orders) if o == "all" else [o]
-        kr, kt = _key(ref, sel), _key(test, sel)
-        mismatch = int(((kr != kt) & ((kr >= 0) | (kt >= 0))).sum())
+        kr, kt = pixel_keys(ref, sel), pixel_keys(test, sel)
+        mismatch = int(_differ(kr, kt).sum())
         covered = int((kr >= 0).sum())
         matched = (kr >= 0) & (kr == kt)
         d_uv = _wrap(test.uv[matched] - ref.uv[matched], wrap_uv)
@@ -296,7 +307,7 @@ def diff_rgb(ref, test) -> np.ndarray:
     """(H, W, 3) picture of coverage differences: grey where both agree on (object, order), red where
     only the reference shows it, green where only the test does, yellow where they show different
     (object, order)s."""
-    kr, kt = _key(ref, [1, 2, 3, 4, 5, 6, 7, 8]), _key(test, [1, 2, 3, 4, 5, 6, 7, 8])
+    kr, kt = pixel_keys(ref, [1, 2, 3, 4, 5, 6, 7, 8]), pixel_keys(test, [1, 2, 3, 4, 5, 6, 7, 8])
     img = np.full(ref.shape + (3,), 0.1)
     img[(kr >= 0) & (kr == kt)] = 0.45
     img[(kr >= 0) & (kt < 0)] = (1.0, 0.1, 0.1)
