@@ -170,8 +170,8 @@ class GRLENS_OT_check_frame(bpy.types.Operator):
 
     percentage: bpy.props.IntProperty(
         name="Resolution %", default=50, min=1, max=100, subtype="PERCENTAGE",
-        description="Resolution of the check, in percent of the render resolution (the ray tracer takes "
-                    "about a second per 100k pixels, more where an object surrounds the hole's direction)")
+        description="Resolution of the check, in percent of the render resolution (the ray tracer is slow: "
+                    "seconds per frame at 640x360, the most where an object surrounds the hole's direction)")
     filepath: bpy.props.StringProperty(
         name="Output", default="//grlens_check_####.exr", subtype="FILE_PATH",
         description="OpenEXR file for the passes of both renders and the mismatch (# -> frame number; "
