@@ -302,7 +302,8 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                 want = np.where(near, np.maximum(want, raised), want)
             strip = np.zeros(cand.size, bool)
             if STRIP_BAND_PX and cand.size:
-                strip = _strip_candidates(src, cand, want, r_px, leaving, order)
+                strip = _strip_candidates(src, cand, want, r_px, leaving, order, axis_xy(), scene, lut,
+                                          settings.pixel_angle)
             if strip.any():
                 # strips: each side gets the level of its own azimuth (see STRIP_BAND_PX)
                 tight = (want > want0)[strip]  # raised to the silhouette's tolerance
@@ -743,7 +744,7 @@ STRIP_BAND_PX = 1.0
 STRIP_MIN_LEVEL = 3
 STRIP_TOLERANCE = 0.25
 """Ring triangles (_ring_levels) whose image lies within a band of STRIP_BAND_PX pixels in radius
-about the hole's direction (their corners'), that face one way at all corners (no fold inside) and
+about the hole's direction (their corners' and that of their point nearest to the axis), that face one way at all corners (no fold inside) and
 whose level is at least STRIP_MIN_LEVEL are cut into strips across the ring (subdivision.subdivide,
 ``strips``) instead of the uniform grid: the ring's straight-side bound concerns the pieces' extent
 in azimuth only, and across a band that narrow straight strips stay within the tolerance. Each side
@@ -757,16 +758,48 @@ coverage mismatch 0.21 / 0.33% -> 0.19 / 0.36% at 170 / 180 deg. A band of 2 px 
 0.6 px off at 180 deg (screen error p99); 1.5 px gained ~1 ms."""
 
 
-def _strip_candidates(src, cand, want, corner_px, leaving: _Leaving, order) -> np.ndarray:
-    """(len(cand),) bool: the ring triangles ``cand`` to cut into strips (see STRIP_BAND_PX)."""
+def _strip_candidates(src, cand, want, corner_px, leaving: _Leaving, order, xy, scene, lut, pixel_angle) -> np.ndarray:
+    """(len(cand),) bool: the ring triangles ``cand`` to cut into strips (see STRIP_BAND_PX). Their image
+    must lie in the band all over, not only at the corners: also the image of the triangle's point
+    nearest to the axis (an edge passing close to the axis comes close to the Einstein ring in
+    between; a triangle containing the axis covers the whole ring) is checked; ``xy`` (N, 2): the
+    source vertices' axis coordinates."""
     c0, c1, c2 = corner_px[:, 0], corner_px[:, 1], corner_px[:, 2]
     band = np.maximum(np.maximum(c0, c1), c2) - np.minimum(np.minimum(c0, c1), c2)
     ok = (band < STRIP_BAND_PX) & (want >= STRIP_MIN_LEVEL)
+    if ok.any():
+        at = np.flatnonzero(ok)
+        near_px = _nearest_point_radius(src, cand[at], xy, scene, lut, order, pixel_angle)
+        lo = np.minimum(np.minimum(np.minimum(c0[at], c1[at]), c2[at]), near_px)
+        hi = np.maximum(np.maximum(np.maximum(c0[at], c1[at]), c2[at]), near_px)
+        ok[at] = hi - lo < STRIP_BAND_PX  # NaN (no image there, or the axis itself): not a strip
     if ok.any():
         corners, pts, local = silhouette.compact(src.positions, src.tris.take(cand[ok], axis=0))
         sign = silhouette.facing_signs(pts, local, leaving.at(corners, order))
         ok[ok] = (sign == sign[:, :1]).all(axis=1) & (sign[:, 0] != 0)
     return ok
+
+
+def _nearest_point_radius(src, tris_idx, xy, scene, lut, order, pixel_angle) -> np.ndarray:
+    """(K,) pixels: the angle from the hole's direction of the ``order`` image of each source triangle's
+    point nearest to the axis in projection (on its boundary; NaN when the axis passes through it)."""
+    t3 = src.tris.take(tris_idx, axis=0)
+    px, py = xy[t3, 0], xy[t3, 1]  # (K, 3)
+    qx, qy = np.roll(px, -1, axis=1), np.roll(py, -1, axis=1)
+    cross = px * qy - py * qx
+    inside = (cross >= 0).all(axis=1) | (cross <= 0).all(axis=1)
+    dx, dy = qx - px, qy - py
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.nan_to_num(np.clip(-(px * dx + py * dy) / (dx * dx + dy * dy), 0.0, 1.0))
+    k = np.argmin(np.hypot(px + t * dx, py + t * dy), axis=1)  # the side with the nearest point
+    rows = np.arange(len(t3))
+    a = src.positions.take(t3[rows, k], axis=0)
+    b = src.positions.take(t3[rows, (k + 1) % 3], axis=0)
+    point = a + t[rows, k][:, None] * (b - a)  # the projection along the axis is affine
+    img = mapping.map_vertices_orders(point, scene, lut, (order,))[order]
+    with np.errstate(invalid="ignore"):
+        r = culling.hole_angle(img.direction, scene.camera, scene.hole) / pixel_angle
+    return np.where(inside | ~img.valid, np.nan, r)
 
 
 def _side_levels(xy, tris, corner_px, tolerance, settings) -> np.ndarray:
