@@ -274,8 +274,14 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
                                             fit.max_error_px * SILHOUETTE_FACTOR)
             raise_edges = tight != levels[probe]
             cap = (lambda t: _span_cap(order_patches, src.tris.take(t, axis=0), axis_xy())) if order_patches else None
+            on_sheets = None
+            if order_patches:  # the source triangles some patch draws a part of
+                on_sheets = np.zeros(len(src.tris), bool)
+                for p in order_patches:
+                    on_sheets[p.face_src] = on_sheets[p.vertex_tri] = on_sheets[p.replaced] = True
+            hidden = (lambda t: _turned_away(src, t, leaving, (order,)) if seen_closed() else np.zeros(len(t), bool))
             cand, want, sharp, gap_want, r_px = _ring_levels(src, src_circ, img_circ, scene, hole_r, order, fit,
-                                                             replaced, cap, axis_xyz)
+                                                             replaced, cap, axis_xyz, on_sheets, hidden)
             want0 = want
             maybe = sharp != want
             if raise_edges.any() or maybe.any():
@@ -649,8 +655,13 @@ def _ring_candidates(src_circ, img_circ) -> np.ndarray:
         return np.flatnonzero(img_circ > RING_MAGNIFICATION * src_circ)
 
 
+EDGE_ON_RATIO = 0.1
+"""See :func:`_ring_levels` (``on_sheets``): triangles off the patches' sheets whose projection along
+the axis has under this fraction of their area get levels for the azimuth next to the axis."""
+
+
 def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settings, skip=None, cap=None,
-                 axis_xyz=None):
+                 axis_xyz=None, on_sheets=None, hidden=None):
     """The levels that strongly magnified source triangles near the axis need so that their
     sub-triangles are narrow enough on screen (see culling.ring_sagitta: a piece covering an azimuth d
     at an angular radius R from the hole's direction has straight sides R (1 - cos(d/2)) inside the
@@ -662,7 +673,13 @@ def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settin
     direction (culling.hole_angle); ``skip`` (T,) bool: triangles left alone (replaced by an axis patch);
     ``cap``: None, or a function of the candidates' indices giving the most azimuth (radians) each
     must be cut into pieces narrow in (:func:`_span_cap`), where that is less than the azimuth it covers;
-    ``axis_xyz``: culling.axis_coordinates of the source positions, when the caller has them.
+    ``axis_xyz``: culling.axis_coordinates of the source positions, when the caller has them;
+    ``on_sheets`` (T,) bool: the triangles axis patches draw parts of (when the mesh has patches). A
+    candidate on none of them that passes beside the axis at d_min (e.g. a face of a box parallel to
+    the axis, next to the face the axis crosses) covers the azimuth h / d_min per length h next to the
+    axis, far more than its average: its level counts that (as _presplit_levels does for meshes
+    without patches), else its pieces there are culled and leave a gap in the ring; ``hidden``: a
+    function of triangle indices giving those hidden in this order (back faces), which do not need it.
 
     Returns (cand, want, sharp, gap, corner_px): the candidate triangles (indices), their levels for
     ``max_error_px``, for SILHOUETTE_FACTOR * max_error_px (the silhouette's tolerance) and for
@@ -678,6 +695,24 @@ def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settin
     _, span = culling.axis_geometry(src.positions, tris[cand], scene.camera, scene.hole, order, axis_xyz=axis_xyz)
     if cap is not None:
         span = np.fmin(span, cap(cand))
+    off = np.flatnonzero(~on_sheets[cand]) if on_sheets is not None else np.zeros(0, np.int64)
+    if off.size and hidden is not None:
+        off = off[~hidden(cand[off])]
+    if off.size:
+        x, y, _ = culling.axis_coordinates(src.positions, scene.camera, scene.hole) if axis_xyz is None else axis_xyz
+        t_off = tris.take(cand[off], axis=0)
+        # only triangles nearly parallel to the axis (projected area under EDGE_ON_RATIO of their own):
+        # the others' pieces spread their azimuth evenly enough for the level of the azimuth they span
+        px, py = x[t_off], y[t_off]
+        proj = np.abs((px[:, 1] - px[:, 0]) * (py[:, 2] - py[:, 0]) - (px[:, 2] - px[:, 0]) * (py[:, 1] - py[:, 0]))
+        own = mapping.row_norm(silhouette.normals(src.positions, t_off))
+        keep = proj < EDGE_ON_RATIO * own
+        off, t_off = off[keep], t_off[keep]
+    if off.size:
+        d_min = culling.axis_distance(x, y, t_off)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            near = np.where(d_min > 0, culling.longest_side(x, y, t_off) / d_min, np.nan)
+        span[off] = np.fmax(span[off], near)
     with np.errstate(invalid="ignore", divide="ignore"):
         radius = hole_r / settings.pixel_angle  # px
         corner_px = radius.take(tris.take(cand, axis=0))
