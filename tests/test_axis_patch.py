@@ -281,7 +281,7 @@ def test_clipped_patch_covers_the_mesh_up_to_its_edge(lut, monkeypatch):
     on_y = np.isclose(np.abs(py[rim]), 0.04, rtol=0, atol=1e-12).all(axis=1)
     assert (on_x | on_y).all()
     # the area of the square inside the outer circle (chords of it, N per turn), against Monte Carlo
-    area = np.abs(axis_patch._projected_area(px, py, p.tris)).sum() / 2
+    area = np.abs(culling.projected_area(px, py, p.tris)).sum() / 2
     rng = np.random.default_rng(1)
     q = rng.uniform(-0.04, 0.04, (400000, 2))
     inside = np.hypot(q[:, 0], q[:, 1]) <= p.radius * math.cos(math.pi / p.n_azimuths)
@@ -311,7 +311,7 @@ def test_clipped_patch_leaves_out_a_hole_in_the_mesh(lut, monkeypatch):
     on_hole = ((np.abs(hx) <= 0.005 + 1e-12) & (np.abs(hy) <= 0.005 + 1e-12)
                & np.isclose(np.maximum(np.abs(hx), np.abs(hy)), 0.005, rtol=0, atol=1e-12)).all(axis=1)
     assert (on_border | on_hole).all() and on_hole.sum() >= 4
-    area = np.abs(axis_patch._projected_area(px, py, p.tris)).sum() / 2
+    area = np.abs(culling.projected_area(px, py, p.tris)).sum() / 2
     rng = np.random.default_rng(2)
     q = rng.uniform(-0.04, 0.04, (400000, 2))
     inside = np.hypot(q[:, 0], q[:, 1]) <= p.radius * math.cos(math.pi / p.n_azimuths)
@@ -342,7 +342,7 @@ def test_clipped_patch_on_a_sphere_next_to_its_limb(lut, monkeypatch):
         assert len(rim) > 0
         # the fold: edges between triangles wound oppositely in projection
         e = subdivision.mesh_edges(tris)
-        sign = np.sign(axis_patch._projected_area(x, y, tris))
+        sign = np.sign(culling.projected_area(x, y, tris))
         pos, neg = (np.bincount(e.of_tri.ravel(), weights=np.repeat(sign == k, 3), minlength=len(e.verts))
                     for k in (1, -1))
         fold = e.verts[(pos > 0) & (neg > 0)]

@@ -62,7 +62,7 @@ from . import illumination, mapping, silhouette
 from .mapping import row_norm
 from .ragged import group_offsets
 from .culling import (axis_coordinates, axis_crossing, axis_distance, hole_angle, longest_side, max_ring_span,
-                      within_axis_distance)
+                      projected_area, within_axis_distance)
 
 EDGE_FACTOR = 1.0 / 16.0
 """The ring's edge is drawn with chords that sag by at most this times ``max_error_px``: a second-order
@@ -402,14 +402,6 @@ def open_distance(patch: Patch, tris, x, y) -> np.ndarray:
     return out
 
 
-def _projected_area(x, y, tris) -> np.ndarray:
-    """(T,) twice the signed area of the triangles ``tris`` (T, 3) projected along the axis (BU^2;
-    positive: counter-clockwise seen from the camera's side)."""
-    ax, bx, cx = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
-    ay, by, cy = y[tris[:, 0]], y[tris[:, 1]], y[tris[:, 2]]
-    return (bx - ax) * (cy - ay) - (cx - ax) * (by - ay)
-
-
 def _projected_bary(qx, qy, tris, x, y) -> np.ndarray:
     """(M, 3) barycentrics of points (qx, qy) (M,) in the projections of triangles ``tris`` (M, 3)
     along the axis (extrapolated outside them)."""
@@ -530,7 +522,7 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     # the surface under the grid
     if cand is None or radius != first_radius:
         cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
-    return _grid_patch(radii, n_az, cand, _projected_area(x, y, t0[None])[0] < 0, points, tris, x, y, z,
+    return _grid_patch(radii, n_az, cand, projected_area(x, y, t0[None])[0] < 0, points, tris, x, y, z,
                        scene, lut, orders, closed, cr, look)
 
 
@@ -540,7 +532,7 @@ def _sheet(cr, radius, tris, of_tri, n_edges, x, y) -> np.ndarray:
     parallel to the axis: the sheet beyond the fold projects with the opposite winding and belongs to
     another crossing)."""
     near = np.flatnonzero(within_axis_distance(x, y, tris, radius))
-    near = near[_projected_area(x, y, tris[near]) * _projected_area(x, y, tris[cr.tri][None])[0] > 0]
+    near = near[projected_area(x, y, tris[near]) * projected_area(x, y, tris[cr.tri][None])[0] > 0]
     return near[_connected(cr.tri, near, of_tri, n_edges)]
 
 
@@ -821,7 +813,7 @@ def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
                              n_grid + prow * n_az + pcol], -1)
     vx, vy = gx[keys], gy[keys]
     cnt = np.full(n_p, 4)
-    sign = np.sign(_projected_area(x, y, ct[:1]))[0]
+    sign = np.sign(projected_area(x, y, ct[:1]))[0]
     scale = max(float(ring_radii[-1]), 1e-300)
     slot = np.arange(_MAXV)[None, :]
 

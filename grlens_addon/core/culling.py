@@ -127,6 +127,15 @@ def axis_crossing(x, y, z, tris):
 def axis_distance(x, y, tris) -> np.ndarray:
     """(T,) distance (BU) from the observer-hole axis to the triangles ``tris`` (T, 3) projected along
     it (0 when the axis passes through the projection); x, y from :func:`axis_coordinates`."""
+    inside, _, d = nearest_to_axis(x, y, tris)
+    return np.where(inside, 0.0, d.min(axis=1))
+
+
+def nearest_to_axis(x, y, tris):
+    """(inside, t, d) for the triangles ``tris`` (T, 3) projected along the axis (x, y from
+    :func:`axis_coordinates`): inside (T,) the axis passes through the projection (touching counts);
+    per side k (corner k -> k + 1) the parameter t (T, 3) in [0, 1] of its point nearest to the axis
+    and that point's distance d (T, 3) (BU)."""
     px, py = x[tris], y[tris]  # (T, 3)
     qx, qy = np.roll(px, -1, axis=1), np.roll(py, -1, axis=1)
     cross = px * qy - py * qx  # twice the signed areas of (origin, corner k, corner k+1)
@@ -135,8 +144,15 @@ def axis_distance(x, y, tris) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         t = np.clip(-(px * dx + py * dy) / (dx * dx + dy * dy), 0.0, 1.0)
     t = np.nan_to_num(t)
-    d = np.hypot(px + t * dx, py + t * dy).min(axis=1)
-    return np.where(inside, 0.0, d)
+    return inside, t, np.hypot(px + t * dx, py + t * dy)
+
+
+def projected_area(x, y, tris) -> np.ndarray:
+    """(T,) twice the signed area of the triangles ``tris`` (T, 3) projected along the axis (BU^2;
+    positive: counter-clockwise seen from the camera's side); x, y from :func:`axis_coordinates`."""
+    ax, bx, cx = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
+    ay, by, cy = y[tris[:, 0]], y[tris[:, 1]], y[tris[:, 2]]
+    return (bx - ax) * (cy - ay) - (cx - ax) * (by - ay)
 
 
 def _beside_axis(x, y, tris, tol) -> np.ndarray:

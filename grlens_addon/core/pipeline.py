@@ -703,8 +703,7 @@ def _ring_levels(src, src_circ, img_circ, scene, hole_r, order, settings: Settin
         t_off = tris.take(cand[off], axis=0)
         # only triangles nearly parallel to the axis (projected area under EDGE_ON_RATIO of their own):
         # the others' pieces spread their azimuth evenly enough for the level of the azimuth they span
-        px, py = x[t_off], y[t_off]
-        proj = np.abs((px[:, 1] - px[:, 0]) * (py[:, 2] - py[:, 0]) - (px[:, 2] - px[:, 0]) * (py[:, 1] - py[:, 0]))
+        proj = np.abs(culling.projected_area(x, y, t_off))
         own = mapping.row_norm(silhouette.normals(src.positions, t_off))
         keep = proj < EDGE_ON_RATIO * own
         off, t_off = off[keep], t_off[keep]
@@ -819,14 +818,8 @@ def _nearest_point_radius(src, tris_idx, xy, scene, lut, order, pixel_angle) -> 
     """(K,) pixels: the angle from the hole's direction of the ``order`` image of each source triangle's
     point nearest to the axis in projection (on its boundary; NaN when the axis passes through it)."""
     t3 = src.tris.take(tris_idx, axis=0)
-    px, py = xy[t3, 0], xy[t3, 1]  # (K, 3)
-    qx, qy = np.roll(px, -1, axis=1), np.roll(py, -1, axis=1)
-    cross = px * qy - py * qx
-    inside = (cross >= 0).all(axis=1) | (cross <= 0).all(axis=1)
-    dx, dy = qx - px, qy - py
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.nan_to_num(np.clip(-(px * dx + py * dy) / (dx * dx + dy * dy), 0.0, 1.0))
-    k = np.argmin(np.hypot(px + t * dx, py + t * dy), axis=1)  # the side with the nearest point
+    inside, t, d = culling.nearest_to_axis(xy[:, 0], xy[:, 1], t3)
+    k = np.argmin(d, axis=1)  # the side with the nearest point
     rows = np.arange(len(t3))
     a = src.positions.take(t3[rows, k], axis=0)
     b = src.positions.take(t3[rows, (k + 1) % 3], axis=0)
