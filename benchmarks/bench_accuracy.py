@@ -126,10 +126,7 @@ def triangle_pareto(width, height, repeat):
         for s, (src, _) in frames.items():
             poly, t_poly, _, _ = polygon_image(src, cam, luts[size], settings, repeat)
             times.append(t_poly)
-            ms.append(image_metrics.compare(
-                refs[s][0], poly, texture_size=TEXTURE, image_pixels=exact_pixels(cam),
-                uv_points=lambda uv, src=src: image_metrics.uv_surface_points(uv, src.positions, src.tris,
-                                                                              src.corner_uv)))
+            ms.append(compare(refs[s][0], poly, cam, src, wrap_uv=(False, False)))
         mis, uv99, lt99 = aggregate(ms)
         t = float(np.mean(times))
         lines.append(f"| {label} | {1000 * t:.1f} | {_fmt_pct(mis)} | {uv99:.3f} | {lt99:.1e} | {t_ref / t:.0f}x |")
@@ -168,12 +165,13 @@ def exact_pixels(cam):
     return lambda points, order: raytrace.image_pixels(points, cam, np.zeros(3), R_S, order)
 
 
-def compare(ref, poly, cam, src, **kw):
-    """image_metrics.compare with this benchmark's texture, wrapped U and the exact screen error of the
-    texture (``src``: the pipeline.SourceMesh whose UVs both images show)."""
-    return image_metrics.compare(ref, poly, texture_size=TEXTURE, wrap_uv=(True, False),
+def compare(ref, poly, cam, src, wrap_uv=(True, False), **kw):
+    """image_metrics.compare with this benchmark's texture, the exact screen error of the texture
+    (``src``: the pipeline.SourceMesh whose UVs both images show) and U wrapped (the sphere's UVs; the
+    triangle's: ``wrap_uv`` (False, False))."""
+    return image_metrics.compare(ref, poly, texture_size=TEXTURE, wrap_uv=wrap_uv,
                                  image_pixels=exact_pixels(cam), uv_points=lambda uv: image_metrics.uv_surface_points(
-                                     uv, src.positions, src.tris, src.corner_uv, (True, False)), **kw)
+                                     uv, src.positions, src.tris, src.corner_uv, wrap_uv), **kw)
 
 
 def reference_image(scene, cam):

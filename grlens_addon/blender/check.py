@@ -31,11 +31,9 @@ def check_camera(scene, cam, percentage) -> raytrace.Camera:
     scale = r.resolution_percentage / 100.0 * percentage / 100.0
     width = max(1, round(r.resolution_x * scale))
     height = max(1, round(r.resolution_y * scale))
-    frame = np.array([tuple(v) for v in cam.data.view_frame(scene=scene)])  # camera space, z < 0
-    half_y = np.max(np.abs(frame[:, 1])) / np.max(np.abs(frame[:, 2]))
-    mw = np.array(cam.matrix_world, dtype=np.float64)
-    rot = mw[:3, :3] / np.linalg.norm(mw[:3, :3], axis=0)  # without the camera object's scale
-    return raytrace.Camera(mw[:3, 3], rot, 2.0 * np.arctan(half_y), width, height)
+    _, half_y = rebuild.half_tangents(scene, cam)
+    return raytrace.Camera(np.array(cam.matrix_world.translation, dtype=np.float64), rebuild.camera_rotation(cam),
+                           2.0 * np.arctan(half_y), width, height)
 
 
 def output_path(filepath, frame) -> str:

@@ -96,6 +96,20 @@ def observer_camera(scene):
     return obs if obs is not None else scene.camera
 
 
+def half_tangents(scene, cam) -> tuple[float, float]:
+    """(tan of the horizontal half angle, tan of the vertical half angle) of a perspective camera's
+    actual frame for the scene's render settings (sensor fit and aspect ratio taken into account)."""
+    frame = np.array([tuple(v) for v in cam.data.view_frame(scene=scene)])  # camera space, z < 0
+    return (np.max(np.abs(frame[:, 0])) / np.max(np.abs(frame[:, 2])),
+            np.max(np.abs(frame[:, 1])) / np.max(np.abs(frame[:, 2])))
+
+
+def camera_rotation(cam) -> np.ndarray:
+    """(3, 3) camera-to-world rotation of ``cam`` (its matrix_world without the object's scale)."""
+    mw = np.array(cam.matrix_world, dtype=np.float64)
+    return mw[:3, :3] / np.linalg.norm(mw[:3, :3], axis=0)
+
+
 def _pixel_angle(scene, cam):
     """Radians per pixel on the view sphere for the observer camera and the render resolution (the
     camera's actual frame, so sensor fit and aspect ratio are taken into account)."""
@@ -104,9 +118,7 @@ def _pixel_angle(scene, cam):
     px_y = max(r.resolution_y * r.resolution_percentage / 100.0, 1.0)
     if cam.type != "CAMERA" or cam.data.type != "PERSP":
         return math.radians(60.0) / max(px_x, px_y)  # orthographic/panoramic: a generous estimate
-    frame = np.array([tuple(v) for v in cam.data.view_frame(scene=scene)])  # camera space, z < 0
-    half_x = np.max(np.abs(frame[:, 0])) / np.max(np.abs(frame[:, 2]))
-    half_y = np.max(np.abs(frame[:, 1])) / np.max(np.abs(frame[:, 2]))
+    half_x, half_y = half_tangents(scene, cam)
     return min(2.0 * math.atan(half_x) / px_x, 2.0 * math.atan(half_y) / px_y)
 
 
@@ -122,9 +134,8 @@ def frustum_planes(scene, cam):
         return None
     frame = [np.array(v) for v in cam.data.view_frame(scene=scene)]  # camera space, z = -distance
     corners = np.array([[v[0] * (1 + FRUSTUM_MARGIN), v[1] * (1 + FRUSTUM_MARGIN), v[2]] for v in frame])
-    mw = np.array(cam.matrix_world, dtype=np.float64)
-    rot = mw[:3, :3] / np.linalg.norm(mw[:3, :3], axis=0)  # without the camera object's scale
-    return culling.side_planes(mw[:3, 3], corners @ rot.T)
+    return culling.side_planes(np.array(cam.matrix_world.translation, dtype=np.float64),
+                               corners @ camera_rotation(cam).T)
 
 
 def max_error_px(g, preview: bool = False) -> float | None:
