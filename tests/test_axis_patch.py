@@ -110,8 +110,8 @@ def test_limit_images_are_the_einstein_ring(lut, x):
 def test_patch_on_a_tilted_plane(lut):
     """Grid points lie on the surface at their circle's distance from the axis and their azimuth; faces
     are wound like the source; the triangles inside the patch are replaced, the ones reaching out are
-    not; the ring's edge is drawn by chords between exact ring points, sagging by at most
-    EDGE_FACTOR * max_error_px."""
+    not; the ring's edge is drawn by chords sagging by at most EDGE_FACTOR * max_error_px, between
+    points moved CHORD_OUTSET of that sag off the exact ring (lutgen.connect), so that they cross it."""
     pts, tris = _grid(-4.0, 1.0, 10, tilt=0.5)
     (p,) = _patches(pts, tris, lut)
     assert p.complete
@@ -145,11 +145,51 @@ def test_patch_on_a_tilted_plane(lut):
         theta = _angle_from_hole(ring)
         np.testing.assert_allclose(theta, theta[0], rtol=1e-12)
         chord_mid = 0.5 * (ring + np.roll(ring, -1, axis=0))
-        sag = (theta - _angle_from_hole(chord_mid / np.linalg.norm(chord_mid, axis=1)[:, None])) / PIXEL
+        mid = _angle_from_hole(chord_mid / np.linalg.norm(chord_mid, axis=1)[:, None])
+        sag = (theta - mid) / PIXEL
         assert 0 < sag.max() <= axis_patch.EDGE_FACTOR * MAX_ERROR * 1.0001
+        exact = np.pi - connect(20.0, np.linalg.norm(p.crossing.point), np.pi, order).xi
+        np.testing.assert_allclose((theta - exact) / PIXEL, axis_patch.CHORD_OUTSET * sag, rtol=1e-3, atol=1e-6)
+        np.testing.assert_allclose((mid - exact) / PIXEL, (axis_patch.CHORD_OUTSET - 1.0) * sag, rtol=1e-3, atol=1e-6)
         # the innermost circle is within BAND_FACTOR * max_error_px of the ring
         inner = _angle_from_hole(im.direction[n:2 * n])
         assert np.abs(inner - theta[0]).max() / PIXEL <= axis_patch.BAND_FACTOR * MAX_ERROR * 1.5
+
+
+@pytest.mark.parametrize("theta_deg", [0.5, 8.0, 60.0, 120.0, 175.0])
+def test_chord_sag_and_outset(theta_deg):
+    """chord_sag is the angle of the great-circle arc's midpoint (slerp) from the ring's angle, for
+    rings on either side of the equator; limit points moved off by CHORD_OUTSET of it make a polygon
+    whose area on the view sphere equals the ring's cap (its chords cross the ring evenly), where the
+    exact points leave a sliver along the whole ring (inside it below the equator, outside beyond)."""
+    theta, n = math.radians(theta_deg), 64
+    xi = np.pi - theta  # the ring at theta from the hole's direction -e1 (e1 towards the camera)
+    step = 2 * np.pi / n
+    e1, u, v = np.eye(3)
+
+    def points(x, psi):
+        return np.cos(x) * e1 + np.sin(x) * (np.cos(psi)[:, None] * u + np.sin(psi)[:, None] * v)
+
+    a, b = points(xi, np.zeros(1))[0], points(xi, np.full(1, step))[0]
+    w = math.acos(float(a @ b))
+    mid = (math.sin(0.5 * w) * (a + b)) / math.sin(w)  # slerp at 1/2
+    np.testing.assert_allclose(float(axis_patch.chord_sag(xi, step)), math.acos(mid @ e1) - xi, atol=1e-14)
+
+    def cap_error(x):  # (polygon area - cap area) on the unit sphere, the polygon about -e1
+        p = points(x, step * np.arange(n))
+        centre = -e1
+        area = 0.0
+        for i in range(n):  # spherical triangles (centre, p_i, p_i+1), Van Oosterom-Strackee
+            q, r = p[i], p[(i + 1) % n]
+            num = abs(centre @ np.cross(q, r))
+            den = 1 + centre @ q + q @ r + r @ centre
+            area += 2 * math.atan2(num, den)
+        return area - 2 * np.pi * (1 - math.cos(theta))
+
+    exact = cap_error(xi)
+    moved = cap_error(xi - axis_patch.CHORD_OUTSET * axis_patch.chord_sag(xi, step))
+    assert np.sign(exact) == (-1 if theta_deg < 90 else 1)  # the chords bow towards the nearer pole
+    assert abs(moved) < 0.01 * abs(exact)
 
 
 @pytest.mark.parametrize("tilt_deg", [0.0, 50.0, 70.0, 80.0])
@@ -648,12 +688,15 @@ def test_silhouette_of_an_open_disc_is_its_boundary(lut):
 
 def test_pipeline_ring_reaches_the_einstein_radius(lut):
     """Behind the hole, the order-1 image of the sphere starts at the Einstein ring of the crossing
-    point, all round (no culled gap), and order 2 ends there."""
+    point, all round (no culled gap), and order 2 ends there (the same ring: phi = pi either way);
+    the ring's points lie CHORD_OUTSET of their chords' sag outside it."""
     pts, tris = _sphere([-3.0, 0.0, 0.01])
     settings = pipeline.Settings(pixel_angle=PIXEL)
     out = pipeline.build_images(pipeline.SourceMesh(pts, tris), SCENE, lut, settings)
     near = max(axis_patch.find_crossings(pts, tris, CAMERA, HOLE), key=lambda c: c.along)
     theta_e = np.pi - connect(20.0, abs(near.along), np.pi, 1).xi
+    most = axis_patch.CHORD_OUTSET * axis_patch.EDGE_FACTOR * settings.max_error_px * PIXEL
+    outset = None
     for order in (1, 2):
         img = out[order]
         assert img.report.patch_faces > 0 and img.report.einstein_ring <= 10
@@ -661,7 +704,8 @@ def test_pipeline_ring_reaches_the_einstein_radius(lut):
         d /= np.linalg.norm(d, axis=1)[:, None]
         theta = _angle_from_hole(d)
         if order == 1:  # nothing of order 1 lies inside the ring (order 2 also shows the far side)
-            assert abs(theta.min() - theta_e) < 1e-6
-        at_ring = np.abs(theta - theta_e) < 1e-7
+            outset = theta.min() - theta_e
+            assert 0.1 * most < outset <= most * 1.0001
+        at_ring = np.abs(theta - theta_e - outset) < 1e-7
         pa = np.arctan2(d[at_ring, 2], d[at_ring, 1])
         assert len(np.unique(((pa + np.pi) / (2 * np.pi) * 64).astype(int) % 64)) == 64
