@@ -18,8 +18,9 @@ and the plot docs/accuracy_pareto.png; ``--write`` writes everything to docs/acc
 Usage: ./dev python benchmarks/bench_accuracy.py [--resolution 640x360] [--angles 0,45,90,135,170,180]
        [--repeat 5] [--sweep] [--orbit STEP] [--write]
 
-``--orbit 5`` adds every 5 degrees of the orbit (about four more minutes): which angles meet the
-targets, and the rows of those that do not.
+``--orbit STEP`` adds every STEP degrees of the orbit (``--orbit 1``, the 360 frames of seed 000's
+sphere sequence, takes about twenty more minutes; ``--orbit 5`` about four): which angles meet the
+targets, the rows of those that do not, and the whole sequence's times.
 """
 from __future__ import annotations
 
