@@ -145,5 +145,10 @@ def test_square_off_the_axis_shows_the_patch_not_coarse_pieces(lut, monkeypatch)
         return o["all"]["screen_px"]["p99"]
 
     assert screen_p99() < 0.4
+    settings = pipeline.Settings(64, 5.0, 0.75, 8.0, pixel_angle=cam.pixel_angle)
+    img = pipeline.build_images(pipeline.SourceMesh(pts, tris, uv), scene, lut, settings,
+                                frustum_planes=cam.frustum_planes())[1]
+    rep = img.report  # the dropped pieces are counted (culling.CullReport.patch_covered), not kept
+    assert rep.patch_covered > 0 and rep.kept == len(img.tris)
     monkeypatch.setattr(pipeline, "UNDER_PATCH_ERROR", None)
     assert screen_p99() > 0.6

@@ -31,11 +31,12 @@ class CullReport:
     patch_faces: int = 0  # of the kept faces, those of Einstein-ring patches (axis_patch.py)
     presplit: int = 0  # source triangles added by the pipeline's first split next to the axis (counted above)
     back_face: int = 0  # source triangles hidden behind the front of a closed surface (pipeline.BACK_FACE_MARGIN)
+    patch_covered: int = 0  # pieces that a complete patch draws more exactly (pipeline.UNDER_PATCH_ERROR)
     extra: dict = field(default_factory=dict)
 
     def total_culled(self) -> int:
         return (self.invalid_vertex + self.degenerate_source + self.einstein_ring + self.outside_frustum
-                + self.below_pixel + self.back_face)
+                + self.below_pixel + self.back_face + self.patch_covered)
 
 
 def chord_length(u, v):

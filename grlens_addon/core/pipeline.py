@@ -362,8 +362,12 @@ def build_images(src: SourceMesh, scene: mapping.Scene, lut, settings: Settings,
         report.outside_frustum += n_pre
         report.back_face = n_back
         if order_patches and UNDER_PATCH_ERROR is not None:  # the patch draws these more exactly
-            keep &= ~_coarse_under_patches(order_patches, order, sub.tris, face_src, sub.positions, img, keep,
-                                           scene, lut, settings, len(src.tris))
+            covered = _coarse_under_patches(order_patches, order, sub.tris, face_src, sub.positions, img, keep,
+                                            scene, lut, settings, len(src.tris))
+            report.patch_covered = int(covered.sum())
+            if report.patch_covered:
+                keep &= ~covered
+                report.kept -= report.patch_covered
         report.extra["bad_source_triangles"] = n_bad
         everything = bool(keep.all())
         kept = None if everything else np.flatnonzero(keep)
