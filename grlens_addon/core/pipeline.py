@@ -993,9 +993,8 @@ def _coarse_under_patches(patches, order, tris, face_src, points, img: mapping.I
         true = mapping.map_vertices_orders(points.take(t, axis=0).mean(axis=1), scene, lut, (order,))[order]
         drawn_dir = img.direction.take(t, axis=0).sum(axis=1)
         drawn_dir /= np.maximum(mapping.row_norm(drawn_dir), 1e-300)[:, None]
-        with np.errstate(invalid="ignore"):
-            err = np.arccos(np.clip(np.einsum("ij,ij->i", true.direction, drawn_dir), -1.0, 1.0))
-            out[cand[err > UNDER_PATCH_ERROR * settings.max_error_px * settings.pixel_angle]] = True
+        err = subdivision.angle_of_chord(culling.chord_length(true.direction, drawn_dir))  # radians
+        out[cand[err > UNDER_PATCH_ERROR * settings.max_error_px * settings.pixel_angle]] = True
     return out
 
 
