@@ -75,7 +75,8 @@ def test_sundman_and_affine_parametrisations_agree():
 @pytest.mark.parametrize("r_obs", [1.6, 20.0, 1000.0])
 def test_radial_rays_match_the_exact_radial_geodesic(r_obs):
     """Radial null geodesics: t = r + ln(r - 1) + const exactly, down to r - 1 = 1e-6 (where the
-    travel time is dominated by the logarithm)."""
+    travel time is dominated by the logarithm). The bound is 1e-11: the integrator's rounding
+    depends on the CPU's floating-point kernels (1.3e-12 at r = 1.8 seen on one machine)."""
     for r in (1.0 + 1e-6, 1.2, 1.5, 0.5 * r_obs + 1.0, 3.0 * r_obs):
         exact = abs(r - r_obs) + abs(math.log((r - 1.0) / (r_obs - 1.0)))
         if r < r_obs:
@@ -84,7 +85,7 @@ def test_radial_rays_match_the_exact_radial_geodesic(r_obs):
         else:
             xi, dt, ux, uy = connect_numeric(r_obs, r, 0.0, order=1)
             assert xi == 0.0 and ux > 0
-        assert abs(dt / exact - 1) < 1e-12, (r, dt, exact)
+        assert abs(dt / exact - 1) < 1e-11, (r, dt, exact)
         assert uy == 0.0 and abs(abs(ux) - math.sqrt(1 - 1 / r_obs)) < 1e-11  # u^r = -+k
 
 
