@@ -15,7 +15,7 @@ import bpy
 import numpy as np
 
 from ..core import frame_check, raytrace
-from . import lutcache, rebuild
+from . import gather, lutcache, rebuild
 
 
 def check_camera(scene, cam, percentage) -> raytrace.Camera:
@@ -62,8 +62,16 @@ def check_scene(scene, depsgraph=None, percentage: int = 50, filepath: str = "")
     g = scene.grlens
     lut = lutcache.get_lut(geo.r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
     src_dg = rebuild._source_depsgraph(depsgraph)
-    meshes = [rebuild._extract(s.evaluated_get(src_dg), with_normals=False) for s in srcs]
-    result = frame_check.check_frame(meshes, geo, lut, settings, camera, names=[s.name for s in srcs])
+    found = gather.instances(srcs, src_dg, with_normals=False)
+    meshes, names = [], []
+    for s in srcs:  # as the rebuild gathers them; objects without faces are left out
+        got = gather.gather(s, s.evaluated_get(src_dg), found.get(s.as_pointer()), with_normals=False)
+        if got.mesh is not None and len(got.mesh.tris):
+            meshes.append(got.mesh)
+            names.append(s.name)
+    if not meshes:
+        raise rebuild.RebuildError("no marked object has faces")
+    result = frame_check.check_frame(meshes, geo, lut, settings, camera, names=names)
     path = ""
     if filepath:
         path = output_path(filepath, scene.frame_current)

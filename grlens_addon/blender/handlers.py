@@ -9,6 +9,7 @@ import bpy
 from bpy.app.handlers import persistent
 
 _busy = False
+_printed: list = []  # the report lines printed last (see _run)
 
 
 def wants_preview(depsgraph=None, background=None) -> bool:
@@ -30,8 +31,11 @@ def _run(scene, depsgraph=None):
         report = rebuild_scene(scene, depsgraph, preview=wants_preview(depsgraph))
         if report["status"].startswith("grlens:") and bpy.app.background:
             print(report["status"])
-        for w in report["warnings"]:
-            print(f"grlens: {w}")
+        global _printed
+        if report["warnings"] != _printed:  # the same lines frame after frame are printed once
+            for w in report["warnings"]:
+                print(f"grlens: {w}")
+            _printed = list(report["warnings"])
         return report
     finally:
         _busy = False

@@ -40,8 +40,9 @@ class GRLENS_OT_clear(bpy.types.Operator):
             if is_image_object(obj):
                 remove_image_object(obj)
         for obj in context.scene.objects:
-            if obj.type == "MESH":
-                obj.grlens.enabled = False
+            if not is_image_object(obj):
+                if obj.grlens.enabled:
+                    obj.grlens.enabled = False
                 _set_source_visibility(obj, False)
         return {"FINISHED"}
 

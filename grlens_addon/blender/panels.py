@@ -1,6 +1,8 @@
 """Sidebar panel (3D viewport > N panel > grlens)."""
 import bpy
 
+from .gather import can_lens
+
 
 class VIEW3D_PT_grlens(bpy.types.Panel):
     bl_label = "grlens"
@@ -16,7 +18,7 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         col.prop(g, "r_s")
         col.prop(g, "observer")
         obj = context.object
-        if obj is not None and obj.type == "MESH" and obj.grlens.order == 0:
+        if obj is not None and obj.grlens.order == 0 and (can_lens(obj) or obj.grlens.enabled):
             col.prop(obj.grlens, "enabled", text=f"Lens '{obj.name}'")
             if obj.grlens.enabled:
                 col.prop(obj.grlens, "emitter")
@@ -67,6 +69,23 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
             layout.label(text=g.check_summary, icon="INFO")
         if g.status:
             layout.label(text=g.status, icon="ERROR" if g.status.startswith("grlens:") else "INFO")
+        lines = report_lines(g)
+        if lines:
+            col = layout.column(align=True)
+            for line in lines:
+                col.label(text=line, icon="BLANK1" if line.startswith("...") else "ERROR")
+
+
+def report_lines(g, limit=None) -> list:
+    """The lines of ``g.report_lines`` the panel shows: at most ``limit`` (default
+    rebuild.MAX_PANEL_LINES), the rest summed up as "... and N more"."""
+    from .rebuild import MAX_PANEL_LINES
+
+    limit = MAX_PANEL_LINES if limit is None else limit
+    lines = [ln for ln in g.report_lines.split("\n") if ln]
+    if len(lines) > limit:
+        return lines[:limit - 1] + [f"... and {len(lines) - limit + 1} more"]
+    return lines
 
 
 CLASSES = (VIEW3D_PT_grlens,)

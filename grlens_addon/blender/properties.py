@@ -84,6 +84,10 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
                               description="Rebuild the images on frame changes and edits")
     status: StringProperty(name="Status", default="", options={"SKIP_SAVE"},
                            description="Outcome of the last rebuild (read only)")
+    report_lines: StringProperty(
+        name="Report", default="", options={"SKIP_SAVE"},
+        description="What the last rebuild could not image, one line each (read only): marked objects skipped "
+                    "(no faces) or failed, parts without faces, triangles that could not be mapped and why")
     check_summary: StringProperty(
         name="Last Check", default="",
         description="Outcome of the last bpy.ops.grlens.check_frame(): coverage mismatch, errors and times "
@@ -92,7 +96,9 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
 
 class GRLENS_ObjectSettings(bpy.types.PropertyGroup):
     enabled: BoolProperty(name="Lens This Object", default=False, update=_changed,
-                          description="Replace what the camera sees of this object by its lensed images")
+                          description="Replace what the camera sees of this object by its lensed images (meshes, "
+                                      "curves, text, surfaces, metaballs, Geometry Nodes output and instances; what "
+                                      "has no faces is skipped and named in the report)")
     emitter: EnumProperty(
         name="Emitter", default="SURFACE", update=_changed,
         items=(("SURFACE", "Surface", "Shaded by its own materials (and GR illumination if on)"),

@@ -14,8 +14,8 @@ import uuid
 import bpy
 import numpy as np
 
-from ..core import culling, mapping, pipeline, triangulate
-from . import lutcache, shading, upload
+from ..core import culling, losses, mapping, pipeline
+from . import gather, lutcache, shading, upload
 
 COLLECTION = "grlens"
 
@@ -38,56 +38,15 @@ def is_image_object(obj) -> bool:
 
 
 def sources(scene):
-    return [o for o in scene.objects if o.type == "MESH" and o.grlens.enabled and not is_image_object(o)]
+    """The objects of ``scene`` marked for lensing (``obj.grlens.enabled``), of any type: those that
+    cannot be imaged are skipped with a reason by the rebuild (see gather.py)."""
+    return [o for o in scene.objects if o.grlens.enabled and not is_image_object(o)]
 
 
 def _extract(obj_eval, with_normals: bool = True) -> pipeline.SourceMesh:
-    """World-space triangles, corner UVs, material indices and (only GR illumination
-    uses them: ``with_normals``) corner normals of an evaluated object. Reads Blender's attribute
-    arrays (memory speed) and derives the triangles' corners from them (core.triangulate); only
-    meshes with n-gons use the slower per-triangle API."""
-    me = obj_eval.to_mesh()
-    try:
-        n_v, n_l, n_p = len(me.vertices), len(me.loops), len(me.polygons)
-        co = np.empty(3 * n_v, dtype=np.float32)
-        me.attributes["position"].data.foreach_get("vector", co)
-        co = co.reshape(-1, 3).astype(np.float64)
-        mw = np.array(obj_eval.matrix_world, dtype=np.float64)
-        pos = co @ mw[:3, :3].T + mw[:3, 3]
-        n_t = len(me.loop_triangle_polygons)
-        tri_poly = np.empty(n_t, dtype=np.int32)
-        me.loop_triangle_polygons.foreach_get("value", tri_poly)
-        corner_vert = np.empty(n_l, dtype=np.int32)
-        if n_l:
-            me.attributes[".corner_vert"].data.foreach_get("value", corner_vert)
-        loops = triangulate.tri_corners(tri_poly, n_p, corner_vert, co)
-        if loops is None:  # n-gons: Blender's own polygon fill
-            loops = np.empty(3 * n_t, dtype=np.int32)
-            me.loop_triangles.foreach_get("loops", loops)
-        loops = loops.reshape(-1).astype(np.int64)
-        tris = corner_vert[loops].reshape(-1, 3).astype(np.int64)
-        mat = np.zeros(n_t, dtype=np.int64)
-        mi = me.attributes.get("material_index")
-        if mi is not None and n_p and mi.domain == "FACE":
-            poly_mat = np.empty(n_p, dtype=np.int32)
-            mi.data.foreach_get("value", poly_mat)
-            mat = poly_mat[tri_poly].astype(np.int64)
-        corner_uv = None
-        if me.uv_layers.active is not None and n_l:
-            uv = np.empty(2 * n_l, dtype=np.float32)
-            me.uv_layers.active.uv.foreach_get("vector", uv)
-            corner_uv = uv.reshape(-1, 2).take(loops, axis=0).reshape(-1, 3, 2).astype(np.float64)
-        normals = None
-        if with_normals and n_l:
-            cn = np.empty(3 * n_l, dtype=np.float32)
-            me.corner_normals.foreach_get("vector", cn)
-            nrm = np.linalg.inv(mw[:3, :3]).T
-            n = cn.reshape(-1, 3).take(loops, axis=0).astype(np.float64) @ nrm.T
-            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-            normals = n.reshape(-1, 3, 3)
-        return pipeline.SourceMesh(pos, tris, corner_uv, mat, normals)
-    finally:
-        obj_eval.to_mesh_clear()
+    """World-space triangles, corner UVs, material indices and (only GR illumination uses them:
+    ``with_normals``) corner normals of an evaluated object's own mesh: :func:`gather.extract`."""
+    return gather.extract(obj_eval, with_normals)
 
 
 def observer_camera(scene):
@@ -280,21 +239,85 @@ def _same_inputs(token, inputs) -> bool:
     return True
 
 
-def _remember_inputs(objs, inputs) -> str:
+def _remember_inputs(objs, inputs, lines=()) -> str:
+    """Store ``inputs`` (and the report ``lines`` of that build, repeated while they are unchanged)
+    under a new token and drop the old tokens of the image objects ``objs``."""
     for o in objs:
         _INPUTS.pop(o.get("grlens_input"), None)
     token = uuid.uuid4().hex
-    _INPUTS[token] = inputs
+    _INPUTS[token] = (inputs[0], inputs[1], list(lines))
     return token
+
+
+MAX_PANEL_LINES = 8
+"""Report lines the panel shows (the rest as "... and N more")."""
+
+
+def _plural(n, word, words=None):
+    return f"{n} {word if n == 1 else (words or word + 's')}"
+
+
+def not_imaged_line(name, mesh, images, geo, lut, orders) -> str | None:
+    """The report line of the source triangles of ``mesh`` (a SourceMesh) that ``images`` (the
+    pipeline's {order: ImageMesh}) could not show because a corner could not be mapped, with the
+    reasons (core.losses), or None when there are none. Counted only when the pipeline reports such
+    pieces, so an object without losses costs nothing here. Expected culling (frustum, back faces,
+    Einstein ring, sub-pixel images, the axis) is in the report's stats, not here."""
+    reps = [img.report for img in images.values()]
+    invalid = max((r.invalid_vertex for r in reps), default=0)
+    bad = max((r.extra.get("bad_source_triangles", 0) for r in reps), default=0)
+    if not invalid and not bad:
+        return None
+    u = losses.unimaged_triangles(mesh.positions, mesh.tris, geo, lut, orders)
+    if u.lost:
+        return f"{name}: {u.lost} of {_plural(u.total, 'triangle')} not imaged ({losses.describe(u)})"
+    if invalid and not u.on_axis:  # pieces between mappable corners (an edge passing the horizon)
+        return (f"{name}: {_plural(invalid, 'piece')} of subdivided triangles not imaged (points between their "
+                f"corners inside the lookup table's inner radius or beyond its range)")
+    return None
+
+
+def _stats(images) -> dict:
+    """{order: {reason: count}} of the pieces each image dropped (core CullReport; pieces of the
+    subdivided mesh), for the report's stats."""
+    out = {}
+    for order, img in images.items():
+        r = img.report
+        out[order] = {"kept": r.kept, "invalid_vertex": r.invalid_vertex, "degenerate_source": r.degenerate_source,
+                      "einstein_ring": r.einstein_ring, "outside_frustum": r.outside_frustum,
+                      "below_pixel": r.below_pixel, "back_face": r.back_face, "patch_covered": r.patch_covered,
+                      "patch_replaced": r.patch_replaced, "patch_faces": r.patch_faces,
+                      "bad_source_triangles": int(r.extra.get("bad_source_triangles", 0))}
+    return out
+
+
+def _empty_images(scene, src, orders, wanted):
+    """Empty the existing image objects of ``src`` (none are created) and forget their inputs, so the
+    next rebuild builds them; they are kept (``wanted``)."""
+    for order in orders:
+        for name in (f"{src.name}.GR{order}", f"{src.name}.GR{order}.grlens"):
+            obj = bpy.data.objects.get(name)
+            if obj is not None and is_image_object(obj) and obj.grlens.source == src:
+                _INPUTS.pop(obj.get("grlens_input"), None)
+                if "grlens_input" in obj:
+                    del obj["grlens_input"]
+                if obj.data is not None and len(obj.data.vertices):
+                    upload.forget(obj.data)
+                    obj.data.clear_geometry()
+                wanted.add(obj.name)
 
 
 def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
     """Rebuild every image object of ``scene`` for its current frame. Returns a report dict
-    {"status": str, "objects": {name: {order: (vertices, faces, culled)}}, "warnings": [...]}.
-    ``preview``: an automatic update of the interactive viewport, built to the viewport's tolerance
-    (see :func:`max_error_px`; renders and explicit rebuilds use the render tolerance)."""
+    {"status": str, "objects": {name: {order: (vertices, faces, culled)} | "unchanged" | "skipped" |
+    "failed"}, "stats": {name: {order: {reason: pieces}}}, "warnings": [str]}; the warnings (also in
+    ``scene.grlens.report_lines``, one per line) name every marked object that is skipped or failed
+    and what of an object is not imaged, and why. ``preview``: an automatic update of the interactive
+    viewport, built to the viewport's tolerance (see :func:`max_error_px`; renders and explicit
+    rebuilds use the render tolerance)."""
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
-    report = {"status": "", "objects": {}, "warnings": []}
+    report = {"status": "", "objects": {}, "stats": {}, "warnings": []}
+    warn = report["warnings"]
     srcs = sources(scene)
     wanted = set()
     try:
@@ -308,45 +331,41 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
         if g.use_gr_illumination:
             shading.ensure_node_group()
             if g.light is None:
-                report["warnings"].append("GR illumination is on but no light object is set")
+                warn.append("GR illumination is on but no light object is set")
             else:
                 lpos = np.array(g.light.evaluated_get(depsgraph).matrix_world.translation)
                 r_light = float(np.linalg.norm(lpos - geo.hole) / geo.r_s)
                 if r_light <= 1.5:
-                    report["warnings"].append(f"the light is inside the photon sphere (r = {r_light:.3g} r_s)")
+                    warn.append(f"the light is inside the photon sphere (r = {r_light:.3g} r_s)")
                 else:
                     light = pipeline.Light(lpos, g.light_intensity,
                                            lutcache.get_lut(r_light, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi))
         src_dg = _source_depsgraph(depsgraph)
         shading.ensure_view_layer_aovs(scene)
+        try:
+            found = gather.instances(srcs, src_dg, with_normals=light is not None)
+            walk_error = None
+        except Exception as exc:  # noqa: BLE001 (reported per object below)
+            found, walk_error = {}, exc
+        counts = {"lensed": 0, "skipped": 0, "failed": 0}
         for src in srcs:
-            src_eval = src.evaluated_get(src_dg)
-            mesh = _extract(src_eval, with_normals=light is not None)
-            mats = [shading.image_material(slot.material) for slot in src.material_slots] or \
-                [shading.image_material(None)]
-            disc = _disc_emitter(src_eval)
-            inputs = _inputs(mesh, geo, settings, lut, light, mats, planes, disc)
-            objs = {order: _image_object(scene, src, order) for order in settings.orders}
-            wanted.update(o.name for o in objs.values())
-            _set_source_visibility(src, True)
-            tokens = {o.get("grlens_input") for o in objs.values()}
-            if len(tokens) == 1 and _same_inputs(next(iter(tokens)), inputs):
-                report["objects"][src.name] = "unchanged"  # same geometry, camera and settings: skip
-                continue
-            images = pipeline.build_images(mesh, geo, lut, settings, light, planes, disc)
-            key = _remember_inputs(objs.values(), inputs)
-            entry = {}
-            for order, img in images.items():
-                obj = objs[order]
-                upload.upload(obj.data, img, mats)
-                upload.set_order(obj.data, order)
-                obj["grlens_input"] = key
-                entry[order] = (len(img.positions), len(img.tris), img.report.total_culled())
-                bad = img.report.extra.get("bad_source_triangles", 0)
-                if bad and order == settings.orders[0]:
-                    report["warnings"].append(f"{src.name}: skipped {bad} degenerate or non-finite triangles")
-            report["objects"][src.name] = entry
-        report["status"] = f"{len(srcs)} object(s) lensed, r_obs = {geo.r_obs:.4g} r_s"
+            try:
+                if walk_error is not None and gather.may_have_instances(src):
+                    raise walk_error
+                outcome = _rebuild_source(scene, src, src_dg, found.get(src.as_pointer()), geo, settings, lut, light,
+                                          planes, report, wanted)
+            except Exception as exc:  # noqa: BLE001 (one object's failure must not stop the others)
+                warn.append(f"{src.name}: failed: {type(exc).__name__}: {exc}" if not str(exc) else
+                            f"{src.name}: failed: {exc}")
+                report["objects"][src.name] = outcome = "failed"
+                _set_source_visibility(src, True)
+                _empty_images(scene, src, settings.orders, wanted)
+            counts[outcome] += 1
+        report["status"] = f"{counts['lensed']} object(s) lensed"
+        for key in ("skipped", "failed"):
+            if counts[key]:
+                report["status"] += f", {counts[key]} {key}"
+        report["status"] += f", r_obs = {geo.r_obs:.4g} r_s"
         if settings.max_error_px != max_error_px(g):
             report["status"] += f" (viewport preview: {settings.max_error_px:.3g} px)"
     except RebuildError as exc:
@@ -355,16 +374,60 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
         report["status"] = f"grlens: {exc}"
     # image objects not rebuilt now: keep (empty) those of enabled sources while the scene is invalid,
     # remove those of sources that are gone or disabled and of orders switched off
-    failed = report["status"].startswith("grlens:")
+    invalid = report["status"].startswith("grlens:")
     for obj in list(bpy.data.objects):
         if is_image_object(obj) and obj.name not in wanted:
             src = obj.grlens.source
-            if failed and src is not None and src.grlens.enabled:
+            if invalid and src is not None and src.grlens.enabled:
                 obj.data.clear_geometry()
             else:
                 remove_image_object(obj)
     for o in scene.objects:
-        if o.type == "MESH" and not is_image_object(o) and not o.grlens.enabled:
+        if not is_image_object(o) and not o.grlens.enabled:
             _set_source_visibility(o, False)
     scene.grlens.status = report["status"]
+    scene.grlens.report_lines = "\n".join(warn)
     return report
+
+
+def _rebuild_source(scene, src, src_dg, inst, geo, settings, lut, light, planes, report, wanted) -> str:
+    """Build (or skip) the images of one marked object; returns "lensed" or "skipped" and fills
+    ``report`` (objects, stats, warnings) and ``wanted`` (names of image objects to keep)."""
+    warn = report["warnings"]
+    src_eval = src.evaluated_get(src_dg)
+    _set_source_visibility(src, True)
+    got = gather.gather(src, src_eval, inst, with_normals=light is not None)
+    if got.skip is not None:
+        warn.append(f"{src.name}: skipped: {got.skip}")
+        report["objects"][src.name] = "skipped"
+        _empty_images(scene, src, settings.orders, wanted)
+        return "skipped"
+    warn.extend(f"{src.name}: {note}" for note in got.notes)
+    mesh = got.mesh
+    mats = [shading.image_material(m) for m in got.materials] or [shading.image_material(None)]
+    disc = _disc_emitter(src_eval)
+    inputs = _inputs(mesh, geo, settings, lut, light, mats, planes, disc)
+    objs = {order: _image_object(scene, src, order) for order in settings.orders}
+    wanted.update(o.name for o in objs.values())
+    tokens = {o.get("grlens_input") for o in objs.values()}
+    if len(tokens) == 1 and _same_inputs(next(iter(tokens)), inputs):
+        report["objects"][src.name] = "unchanged"  # same geometry, camera and settings: skip
+        warn.extend(_INPUTS[next(iter(tokens))][2])
+        return "lensed"
+    images = pipeline.build_images(mesh, geo, lut, settings, light, planes, disc)
+    lines = []
+    line = not_imaged_line(src.name, mesh, images, geo, lut, settings.orders)
+    if line:
+        lines.append(line)
+    key = _remember_inputs(objs.values(), inputs, lines)
+    entry = {}
+    for order, img in images.items():
+        obj = objs[order]
+        upload.upload(obj.data, img, mats)
+        upload.set_order(obj.data, order)
+        obj["grlens_input"] = key
+        entry[order] = (len(img.positions), len(img.tris), img.report.total_culled())
+    report["objects"][src.name] = entry
+    report["stats"][src.name] = _stats(images)
+    warn.extend(lines)
+    return "lensed"

@@ -1,0 +1,389 @@
+"""The geometry of a marked object, of any type, as one world-space source mesh (bpy side).
+
+* Meshes, curves, text, surfaces and metaballs: their evaluated mesh (``Object.to_mesh()``: modifiers
+  with their viewport settings, the realized mesh of Geometry Nodes; curves and text with their
+  bevel, extrusion and fill; a metaball family's surface belongs to its basis object, the one whose
+  name has no ``.001`` suffix).
+* Instances, through the evaluated depsgraph's ``object_instances`` (entries whose ``parent`` is the
+  marked object: collection instances, vertex and face instancing, particle systems that render
+  objects or collections, Geometry Nodes instances, nested instances included): the instanced meshes
+  placed with each instance's ``matrix_world``, appended to the object's own faces (its own faces
+  only if it shows its instancer in renders, ``show_instancer_for_render``). Geometry Nodes output of
+  another kind (curves of a Geometry Nodes modifier on a curve object) comes the same way.
+* Material slots of the combined mesh: the object's own slots first, as they are, then every other
+  material of the instanced meshes in the order met (one slot per material); each face keeps its
+  own material.
+* What has no faces is counted (loose vertices and edges, hair curves, point clouds, volumes,
+  particles drawn as paths or halos) for the report: an object with no faces at all is skipped
+  with a reason, one with faces is imaged and the rest named.
+
+The depsgraph is the one the sources are evaluated in (the view layer's: see
+rebuild._source_depsgraph); its instances are walked once per rebuild, and only when a marked
+object may have instances. Units: Blender units, world space.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from ..core import pipeline, triangulate
+
+CONVERTED = ("MESH", "CURVE", "SURFACE", "FONT", "META")
+"""Object types whose own surface ``Object.to_mesh()`` gives."""
+
+NO_FACES = {"CURVES": "hair curves", "POINTCLOUD": "point cloud", "VOLUME": "volume"}
+"""Object types without faces that render (in Cycles and Eevee) but cannot be imaged."""
+
+
+def can_lens(obj) -> bool:
+    """Whether ``obj`` can have images: object types that can produce geometry (meshes, curves, text,
+    surfaces, metaballs; hair curves, point clouds and volumes through Geometry Nodes) and empties
+    that instance a collection. The panel offers ``obj.grlens.enabled`` for these."""
+    return obj.type in CONVERTED or obj.type in NO_FACES or (obj.type == "EMPTY" and obj.instance_type == "COLLECTION")
+
+
+def may_have_instances(obj) -> bool:
+    """Whether the depsgraph may hold instances made by ``obj`` (so its instances are gathered)."""
+    return (obj.type == "EMPTY" or obj.is_instancer or len(obj.particle_systems) > 0
+            or any(m.type == "NODES" and m.show_viewport for m in obj.modifiers))
+
+
+@dataclass
+class Part:
+    """One evaluated mesh in its object's local space (BU): co (V, 3), tris (T, 3) vertex indices,
+    corner_uv (T, 3, 2) or None, material (T,) slot indices, corner_normals (T, 3, 3) (local, not
+    normalised) or None, materials: its slots' materials (original data-blocks or None), and its
+    loose vertices and edges (in no face)."""
+
+    co: np.ndarray
+    tris: np.ndarray
+    corner_uv: np.ndarray | None
+    material: np.ndarray
+    corner_normals: np.ndarray | None
+    materials: list = field(default_factory=list)
+    loose_verts: int = 0
+    loose_edges: int = 0
+
+
+@dataclass
+class Gathered:
+    """What a marked object gives: ``mesh`` (world space; None when nothing can be imaged),
+    ``materials`` the image's material slots (original data-blocks or None for an empty slot),
+    ``skip`` the reason nothing can be imaged (else None), ``notes`` the parts of it that cannot be
+    imaged (each a phrase for the report), ``instances`` the number of instances with faces."""
+
+    mesh: pipeline.SourceMesh | None
+    materials: list
+    skip: str | None = None
+    notes: list = field(default_factory=list)
+    instances: int = 0
+
+
+@dataclass
+class Instances:
+    """The instances of one marked object: ``parts`` {key: Part}, ``matrices`` {key: [(4, 4) world
+    matrices]}, ``no_faces`` {kind: count} of instanced geometry without faces, ``entries`` all
+    instance entries met."""
+
+    parts: dict = field(default_factory=dict)
+    matrices: dict = field(default_factory=dict)
+    no_faces: dict = field(default_factory=dict)
+    entries: int = 0
+
+
+def _int_attr(me, name, n, fallback):
+    """(n,) int32 values of the attribute ``name`` of ``me`` (``fallback()`` when absent)."""
+    out = np.empty(n, dtype=np.int32)
+    a = me.attributes.get(name)
+    if a is None:
+        return fallback()
+    if n:
+        a.data.foreach_get("value", out)
+    return out
+
+
+def _edge_verts(me) -> np.ndarray:
+    ev = np.empty(2 * len(me.edges), dtype=np.int32)
+    if len(ev):
+        me.edges.foreach_get("vertices", ev)
+    return ev
+
+
+def mesh_part(me, materials=(), with_normals: bool = True) -> Part:
+    """A :class:`Part` of the mesh ``me`` (as from ``to_mesh()``). Reads Blender's attribute arrays
+    (memory speed) and derives the triangles' corners from them (core.triangulate); only meshes with
+    n-gons use the slower per-triangle API."""
+    n_v, n_l, n_p, n_e = len(me.vertices), len(me.loops), len(me.polygons), len(me.edges)
+    if n_v == 0:
+        return Part(np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, np.zeros(0, np.int64), None, list(materials))
+    co = np.empty(3 * n_v, dtype=np.float32)
+    me.attributes["position"].data.foreach_get("vector", co)
+    co = co.reshape(-1, 3).astype(np.float64)
+    if n_p == 0:
+        ev = _edge_verts(me)
+        return Part(co, np.zeros((0, 3), np.int64), None, np.zeros(0, np.int64), None, list(materials),
+                    loose_verts=n_v - int(np.count_nonzero(np.bincount(ev, minlength=n_v))) if n_e else n_v,
+                    loose_edges=n_e)
+    n_t = len(me.loop_triangle_polygons)
+    tri_poly = np.empty(n_t, dtype=np.int32)
+    me.loop_triangle_polygons.foreach_get("value", tri_poly)
+    corner_vert = _int_attr(me, ".corner_vert", n_l, lambda: _loops(me, "vertex_index"))
+    loops = triangulate.tri_corners(tri_poly, n_p, corner_vert, co)
+    if loops is None:  # n-gons: Blender's own polygon fill
+        loops = np.empty(3 * n_t, dtype=np.int32)
+        me.loop_triangles.foreach_get("loops", loops)
+    loops = loops.reshape(-1).astype(np.int64)
+    tris = corner_vert[loops].reshape(-1, 3).astype(np.int64)
+    mat = np.zeros(n_t, dtype=np.int64)
+    mi = me.attributes.get("material_index")
+    if mi is not None and mi.domain == "FACE":
+        poly_mat = np.empty(n_p, dtype=np.int32)
+        mi.data.foreach_get("value", poly_mat)
+        mat = poly_mat[tri_poly].astype(np.int64)
+    corner_uv = None
+    if me.uv_layers.active is not None:
+        uv = np.empty(2 * n_l, dtype=np.float32)
+        me.uv_layers.active.uv.foreach_get("vector", uv)
+        corner_uv = uv.reshape(-1, 2).take(loops, axis=0).reshape(-1, 3, 2).astype(np.float64)
+    normals = None
+    if with_normals:
+        cn = np.empty(3 * n_l, dtype=np.float32)
+        me.corner_normals.foreach_get("vector", cn)
+        normals = cn.reshape(-1, 3).take(loops, axis=0).astype(np.float64).reshape(-1, 3, 3)
+    # loose parts: edges in no face, vertices in no edge
+    corner_edge = _int_attr(me, ".corner_edge", n_l, lambda: _loops(me, "edge_index"))
+    loose_edges = n_e - int(np.count_nonzero(np.bincount(corner_edge, minlength=n_e)))
+    free = n_v - int(np.count_nonzero(np.bincount(corner_vert, minlength=n_v)))  # vertices in no face
+    if free and loose_edges:
+        free = n_v - int(np.count_nonzero(np.bincount(_edge_verts(me), minlength=n_v)))
+    return Part(co, tris, corner_uv, mat, normals, list(materials), loose_verts=free, loose_edges=loose_edges)
+
+
+def _loops(me, prop):
+    out = np.empty(len(me.loops), dtype=np.int32)
+    if len(out):
+        me.loops.foreach_get(prop, out)
+    return out
+
+
+def slot_materials(obj_eval) -> list:
+    """The original materials (None: an empty slot) of the material slots of an evaluated object."""
+    return [None if s.material is None else s.material.original for s in obj_eval.material_slots]
+
+
+def part_of(obj_eval, with_normals: bool = True) -> Part:
+    """:func:`mesh_part` of an evaluated object's ``to_mesh()`` (meshes, curves, text, surfaces,
+    metaballs), with its material slots."""
+    me = obj_eval.to_mesh()
+    try:
+        return mesh_part(me, slot_materials(obj_eval), with_normals)
+    finally:
+        obj_eval.to_mesh_clear()
+
+
+def _placed(part: Part, matrices: np.ndarray, with_normals: bool):
+    """World positions (K V, 3), triangles (K T, 3), corner UVs, corner normals (unit) of ``part``
+    placed by the (K, 4, 4) ``matrices``; triangles of mirroring matrices (negative determinant) are
+    turned over, so that outward faces stay outward."""
+    k, n_v = len(matrices), len(part.co)
+    lin = matrices[:, :3, :3]
+    pos = (np.einsum("kij,vj->kvi", lin, part.co) + matrices[:, None, :3, 3]).reshape(-1, 3)
+    tris = (part.tris[None] + (np.arange(k) * n_v)[:, None, None])
+    flip = np.linalg.det(lin) < 0
+    order = np.array([0, 2, 1])
+
+    def corners(a):  # (T, 3, ...) per instance, corners 1 and 2 swapped where mirrored
+        rep = np.repeat(a[None], k, axis=0)
+        if flip.any():
+            rep[flip] = rep[flip][:, :, order]
+        return rep.reshape((-1,) + a.shape[1:])
+
+    if flip.any():
+        tris[flip] = tris[flip][:, :, order]
+    uv = None if part.corner_uv is None else corners(part.corner_uv)
+    nrm = None
+    if with_normals and part.corner_normals is not None:
+        inv_t = np.transpose(np.linalg.inv(lin), (0, 2, 1))  # normals transform by the inverse transpose
+        n = np.einsum("kij,tcj->ktci", inv_t, part.corner_normals)
+        if flip.any():
+            n[flip] = n[flip][:, :, order]
+        n = n.reshape(-1, 3, 3)
+        n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-300)
+        nrm = n
+    return pos, tris.reshape(-1, 3), uv, nrm
+
+
+def combine(placed_parts, with_normals: bool) -> tuple[pipeline.SourceMesh, list]:
+    """One world-space SourceMesh and its material slots from ``placed_parts`` [(Part, (K, 4, 4)
+    matrices)], the first being the object's own (its slots kept as they are; see the module
+    docstring for the slots of the others)."""
+    slots, index = [], {}
+
+    def slot_of(m):
+        key = 0 if m is None else m.as_pointer()
+        if key not in index:
+            index[key] = len(slots)
+            slots.append(m)
+        return index[key]
+
+    pos, tris, uv, nrm, mat = [], [], [], [], []
+    offset = 0
+    any_uv = any(p.corner_uv is not None and len(p.tris) for p, _ in placed_parts)
+    for i, (part, matrices) in enumerate(placed_parts):
+        if i == 0:  # the object's own slots, as they are
+            slots.extend(part.materials)
+            for j, m in enumerate(part.materials):
+                index.setdefault(0 if m is None else m.as_pointer(), j)
+        if not len(part.tris):
+            continue
+        lookup = np.array([slot_of(m) for m in part.materials] or [slot_of(None)], dtype=np.int64)
+        p, t, u, n = _placed(part, matrices, with_normals)
+        pos.append(p)
+        tris.append(t + offset)
+        offset += len(p)
+        if any_uv:
+            uv.append(u if u is not None else np.zeros((len(t), 3, 2)))
+        if with_normals:
+            nrm.append(n if n is not None else np.zeros((len(t), 3, 3)))
+        mat.append(np.tile(lookup[np.clip(part.material, 0, len(lookup) - 1)], len(matrices)))
+    if not tris:
+        return pipeline.SourceMesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, np.zeros(0, np.int64),
+                                   None), slots
+    mesh = pipeline.SourceMesh(np.concatenate(pos), np.concatenate(tris), np.concatenate(uv) if any_uv else None,
+                               np.concatenate(mat), np.concatenate(nrm) if with_normals else None)
+    return mesh, slots
+
+
+def extract(obj_eval, with_normals: bool = True) -> pipeline.SourceMesh:
+    """World-space triangles, corner UVs, material (slot) indices and, with ``with_normals``, unit
+    corner normals of an evaluated object's own mesh (``to_mesh()``; instances not included)."""
+    part = part_of(obj_eval, with_normals)
+    mw = np.array(obj_eval.matrix_world, dtype=np.float64)[None]
+    if not len(part.tris):
+        return pipeline.SourceMesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, np.zeros(0, np.int64), None)
+    pos, tris, uv, nrm = _placed(part, mw, with_normals)
+    return pipeline.SourceMesh(pos, tris, uv, part.material.copy(), nrm)
+
+
+def instances(srcs, depsgraph, with_normals: bool = True) -> dict:
+    """{``src.as_pointer()``: :class:`Instances`} for the marked objects ``srcs`` (originals) that
+    :func:`may_have_instances`, from one walk over ``depsgraph.object_instances``. Each instanced mesh
+    is read once (keyed by its evaluated data and material slots). grlens' own image objects are
+    never taken (an instanced collection may hold them)."""
+    wanted = {s.as_pointer(): Instances() for s in srcs if may_have_instances(s)}
+    if not wanted:
+        return {}
+    cache = {}
+    for inst in depsgraph.object_instances:
+        if not inst.is_instance or inst.parent is None:
+            continue
+        bucket = wanted.get(inst.parent.original.as_pointer())
+        if bucket is None:
+            continue
+        ob = inst.object
+        orig = ob.original
+        if orig is not None and orig.grlens.order in (1, 2):
+            continue
+        bucket.entries += 1
+        data = ob.data
+        if isinstance(data, bpy.types.Mesh):
+            mats = slot_materials(ob)
+            key = (data.as_pointer(), tuple(0 if m is None else m.as_pointer() for m in mats))
+            if key not in cache:
+                cache[key] = part_of(ob, with_normals)
+            bucket.parts[key] = cache[key]
+            bucket.matrices.setdefault(key, []).append(np.array(inst.matrix_world, dtype=np.float64))
+        elif ob.type in NO_FACES:
+            bucket.no_faces[ob.type] = bucket.no_faces.get(ob.type, 0) + 1
+    return wanted
+
+
+def _plural(n, word, words=None):
+    return f"{n} {word if n == 1 else (words or word + 's')}"
+
+
+def _metaball_basis(name):
+    """The basis object's name of the metaball family of the object ``name`` (Blender groups metaball
+    objects by their name without a trailing ``.NNN``)."""
+    return re.sub(r"\.\d+$", "", name)
+
+
+def _own_kind(src, src_eval, own: Part | None, inst: Instances | None) -> str | None:
+    """The object's own geometry in words when it cannot have faces (None when it can)."""
+    t = src.type
+    if t == "CURVES":
+        n = len(src_eval.data.curves)
+        return f"hair curves: {_plural(n, 'curve')}" if n else None
+    if t == "POINTCLOUD":
+        n = len(src_eval.data.points)
+        return f"a point cloud: {_plural(n, 'point')}" if n else None
+    if t == "VOLUME":
+        return "a volume"
+    if t == "EMPTY":
+        return None if inst is not None and inst.entries else "an empty without instances"
+    if t == "META" and own is not None and len(own.co) == 0:
+        basis = _metaball_basis(src.name)
+        if basis != src.name:
+            return f"a metaball element: its family's surface is built in the basis object '{basis}'"
+    if t not in CONVERTED:
+        return f"a {t.lower().replace('_', ' ')} has no geometry"
+    return None
+
+
+_EMPTY_WORDS = {"MESH": "empty mesh", "CURVE": "empty curve", "FONT": "empty text", "SURFACE": "empty surface",
+                "META": "the metaball family has no surface", "EMPTY": "its instances have no faces",
+                "CURVES": "no hair curves", "POINTCLOUD": "no points"}
+
+
+def gather(src, src_eval, inst: Instances | None, with_normals: bool = True) -> Gathered:
+    """The :class:`Gathered` geometry of the marked object ``src`` (evaluated: ``src_eval``) with its
+    :class:`Instances` ``inst`` (None: it has none; see :func:`instances`)."""
+    placed = []
+    own = None
+    instancer = inst is not None and (src.is_instancer or len(src.particle_systems) > 0 or inst.entries > 0)
+    own_shown = not instancer or src.show_instancer_for_render
+    if src.type == "MESH" or (src.type in CONVERTED and inst is None):
+        own = part_of(src_eval, with_normals)
+        placed.append((own if own_shown else Part(own.co[:0], own.tris[:0], None, own.material[:0], None,
+                                                   own.materials), np.array(src_eval.matrix_world, np.float64)[None]))
+    else:  # the object's own slots still come first
+        placed.append((Part(np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, np.zeros(0, np.int64), None,
+                            slot_materials(src_eval)), np.eye(4)[None]))
+    n_inst = 0
+    no_faces = {}
+    if inst is not None:
+        for key, part in inst.parts.items():
+            mats = np.array(inst.matrices[key])
+            placed.append((part, mats))
+            if len(part.tris):
+                n_inst += len(mats)
+            else:
+                no_faces["instance without faces"] = no_faces.get("instance without faces", 0) + len(mats)
+        for kind, n in inst.no_faces.items():
+            no_faces[f"{NO_FACES[kind]} instance"] = n
+    loose_v = sum(p.loose_verts * len(m) for p, m in placed)
+    loose_e = sum(p.loose_edges * len(m) for p, m in placed)
+    mesh, slots = combine(placed, with_normals)
+    # what of it has no faces, in words
+    phrases = []
+    own_kind = _own_kind(src, src_eval, own, inst)
+    if own_kind:
+        phrases.append(own_kind)
+    if loose_v:
+        phrases.append(_plural(loose_v, "loose vertex", "loose vertices"))
+    if loose_e:
+        phrases.append(_plural(loose_e, "loose edge"))
+    phrases += [_plural(n, kind) for kind, n in no_faces.items()]
+    phrases += [f"particle system '{ps.name}' drawn as {ps.settings.render_type.lower()}"
+                for ps in src.particle_systems if ps.settings.render_type in ("PATH", "HALO", "LINE")]
+    if not len(mesh.tris):
+        words = ", ".join(phrases) or _EMPTY_WORDS.get(src.type, "nothing to image")
+        if src.type == "CURVE" and loose_e:
+            words += "; a curve needs a bevel, an extrusion or a fill to have faces"
+        head = "no faces" if src.type in CONVERTED or src.type in NO_FACES or src.type == "EMPTY" else "nothing to image"
+        return Gathered(None, slots, skip=f"{head} ({words})", instances=n_inst)
+    notes = [f"not imaged: {', '.join(phrases)} (no faces)"] if phrases else []
+    return Gathered(mesh, slots, notes=notes, instances=n_inst)
