@@ -11,8 +11,8 @@
   only if it shows its instancer in renders, ``show_instancer_for_render``). Geometry Nodes output of
   another kind (curves of a Geometry Nodes modifier on a curve object) comes the same way.
 * Material slots of the combined mesh: the object's own slots first, as they are, then every other
-  material of the instanced meshes in the order met (one slot per material); each face keeps its
-  own material.
+  material the instanced meshes' faces use, in the order met (one slot per material); each face
+  keeps its own material (an index past the slots uses the last, as in Blender).
 * What has no faces is counted (loose vertices and edges, hair curves, point clouds, volumes,
   particles drawn as paths or halos) for the report: an object with no faces at all is skipped
   with a reason, one with faces is imaged and the rest named.
@@ -239,7 +239,14 @@ def combine(placed_parts, with_normals: bool) -> tuple[pipeline.SourceMesh, list
                 index.setdefault(0 if m is None else m.as_pointer(), j)
         if not len(part.tris):
             continue
-        lookup = np.array([slot_of(m) for m in part.materials] or [slot_of(None)], dtype=np.int64)
+        local = np.clip(part.material, 0, max(len(part.materials) - 1, 0))
+        if part.materials:  # slots for the materials its faces use (all of the object's own)
+            used = range(len(part.materials)) if i == 0 else np.unique(local)
+            lookup = np.zeros(len(part.materials), dtype=np.int64)
+            for j in used:
+                lookup[j] = slot_of(part.materials[j])
+        else:
+            lookup = np.array([slot_of(None)], dtype=np.int64)
         p, t, u, n = _placed(part, matrices, with_normals)
         pos.append(p)
         tris.append(t + offset)
@@ -248,7 +255,7 @@ def combine(placed_parts, with_normals: bool) -> tuple[pipeline.SourceMesh, list
             uv.append(u if u is not None else np.zeros((len(t), 3, 2)))
         if with_normals:
             nrm.append(n if n is not None else np.zeros((len(t), 3, 3)))
-        mat.append(np.tile(lookup[np.clip(part.material, 0, len(lookup) - 1)], len(matrices)))
+        mat.append(np.tile(lookup[local], len(matrices)))
     if not tris:
         return pipeline.SourceMesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, np.zeros(0, np.int64),
                                    None), slots
@@ -377,7 +384,8 @@ def gather(src, src_eval, inst: Instances | None, with_normals: bool = True) -> 
     if loose_e:
         phrases.append(_plural(loose_e, "loose edge"))
     phrases += [_plural(n, kind) for kind, n in no_faces.items()]
-    phrases += [f"particle system '{ps.name}' drawn as {ps.settings.render_type.lower()}"
+    phrases += [f"hair of particle system '{ps.name}'" if ps.settings.type == "HAIR" else
+                f"particle system '{ps.name}' drawn as {ps.settings.render_type.lower()}s"
                 for ps in src.particle_systems if ps.settings.render_type in ("PATH", "HALO", "LINE")]
     if not len(mesh.tris):
         words = ", ".join(phrases) or _EMPTY_WORDS.get(src.type, "nothing to image")

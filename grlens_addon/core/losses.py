@@ -81,13 +81,13 @@ def unimaged_triangles(positions, tris, scene: mapping.Scene, lut, orders=(1, 2)
 
 
 def describe(u: Unimaged) -> str:
-    """The reasons of :func:`unimaged_triangles` in words, e.g. "12 beyond the lookup table's range
-    (r > 40 r_s), 2 inside the horizon"."""
+    """The reasons of :func:`unimaged_triangles` in words, e.g. "12 beyond the lookup table's range,
+    r > 40 r_s; 2 inside the horizon, r <= 1 r_s"."""
     words = {
         "non_finite": "with non-finite coordinates",
-        "horizon": "inside the horizon (r <= 1 r_s)",
-        "below_table": f"inside the lookup table's inner radius (r < {u.r_min:.4g} r_s)",
-        "beyond_table": f"beyond the lookup table's range (r > {u.r_max:.4g} r_s)",
+        "horizon": "inside the horizon, r <= 1 r_s",
+        "below_table": f"inside the lookup table's inner radius, r < {u.r_min:.4g} r_s",
+        "beyond_table": f"beyond the lookup table's range, r > {u.r_max:.4g} r_s",
         "no_ray": "without a connecting ray",
     }
-    return ", ".join(f"{n} {words[k]}" for k, n in u.by_reason.items())
+    return "; ".join(f"{n} {words[k]}" for k, n in u.by_reason.items())
