@@ -438,3 +438,25 @@ def test_the_operator_reports_each_line(demo, capfd):
     out = capfd.readouterr()
     assert "Blank: skipped: no faces (empty mesh)" in out.out + out.err
     assert demo.g.status.startswith("1 object(s) lensed, 1 skipped")
+
+
+def test_editing_an_instanced_object_updates_the_instancers_images(demo):
+    """With auto update, moving an object that a marked collection instance shows (the object itself
+    is not marked) rebuilds the instancer's images: the depsgraph updates the instancer with what it
+    instances, so the handler sees a marked object change."""
+    coll = bpy.data.collections.new("Props")
+    demo.scene.collection.children.link(coll)  # in the view layer, so that it can be edited
+    prop = bpy.data.objects.new("Prop", _cube_mesh("Prop", 0.5))
+    coll.objects.link(prop)
+    prop.location = (0.0, 0.0, 40.0)  # the original far above the camera's view
+    empty = bpy.data.objects.new("PropsInstance", None)
+    empty.instance_type, empty.instance_collection = "COLLECTION", coll
+    coll.instance_offset = (0.0, 0.0, 40.0)
+    demo.link(empty)
+    demo.g.auto_update = True
+    bpy.context.view_layer.update()
+    a = _positions("PropsInstance.GR1")
+    prop.location = (0.0, 0.5, 40.5)
+    bpy.context.view_layer.update()
+    b = _positions("PropsInstance.GR1")
+    assert len(a) and len(b) and (a.shape != b.shape or not np.allclose(a, b))

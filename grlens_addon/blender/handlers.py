@@ -54,6 +54,8 @@ def on_frame_change(scene, depsgraph=None):
 
 
 def _relevant(scene, update):
+    """Whether a depsgraph update can change an image: a marked object (an instancer is updated with
+    what it instances), the camera, hole or light, a mesh."""
     idb = update.id
     if isinstance(idb, bpy.types.Object):
         if idb.grlens.order in (1, 2):
