@@ -460,3 +460,27 @@ def test_editing_an_instanced_object_updates_the_instancers_images(demo):
     bpy.context.view_layer.update()
     b = _positions("PropsInstance.GR1")
     assert len(a) and len(b) and (a.shape != b.shape or not np.allclose(a, b))
+
+
+def test_combined_instances_keep_outward_winding_and_own_slots_first():
+    """gather.combine: instances placed by mirroring matrices are turned over (their faces stay
+    outward: the geometric normal agrees with the carried corner normal); the object's own slots come
+    first as they are, an instanced mesh adds only the materials its faces use; a matrix of scale 0
+    gives zero normals, not an error."""
+    a, b, c = (bpy.data.materials.new(n) for n in "ABC")
+    tri = gather.Part(co=np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), tris=np.array([[0, 1, 2]]),
+                      corner_uv=None, material=np.array([1]), corner_normals=np.tile([0.0, 0, 1], (1, 3, 1)),
+                      materials=[b, c])
+    own = gather.Part(co=tri.co, tris=tri.tris, corner_uv=np.zeros((1, 3, 2)), material=np.array([0]),
+                      corner_normals=tri.corner_normals, materials=[a, None])
+    mirror = np.diag([1.0, 1.0, -1.0, 1.0])
+    mats = np.stack([np.eye(4), mirror, np.diag([0.0, 0.0, 0.0, 1.0])])
+    mesh, slots = gather.combine([(own, np.eye(4)[None]), (tri, mats)], with_normals=True)
+    assert slots == [a, None, c]  # B is unused by the instanced faces
+    assert mesh.material.tolist() == [0, 2, 2, 2]
+    assert mesh.corner_uv.shape == (4, 3, 2)
+    p = mesh.positions[mesh.tris]
+    geometric = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    for k in (0, 1, 2):  # own, instance, mirrored instance
+        assert geometric[k] @ mesh.corner_normals[k, 0] > 0
+    assert np.all(mesh.corner_normals[3] == 0)

@@ -184,13 +184,34 @@ def part_of(obj_eval, with_normals: bool = True) -> Part:
         obj_eval.to_mesh_clear()
 
 
+def _inverse(lin):
+    """Inverses of the (K, 3, 3) matrices ``lin``; zero for singular ones (an object scaled to zero:
+    its triangles are degenerate, its normals 0, which receive no light)."""
+    det = np.linalg.det(lin)
+    ok = np.isfinite(det) & (det != 0)
+    out = np.zeros_like(lin)
+    if ok.any():
+        out[ok] = np.linalg.inv(lin[ok])
+    return out
+
+
 def _placed(part: Part, matrices: np.ndarray, with_normals: bool):
     """World positions (K V, 3), triangles (K T, 3), corner UVs, corner normals (unit) of ``part``
     placed by the (K, 4, 4) ``matrices``; triangles of mirroring matrices (negative determinant) are
     turned over, so that outward faces stay outward."""
     k, n_v = len(matrices), len(part.co)
     lin = matrices[:, :3, :3]
-    pos = (np.einsum("kij,vj->kvi", lin, part.co) + matrices[:, None, :3, 3]).reshape(-1, 3)
+    if k == 1:  # the common case, one object: a plain matrix product
+        m = matrices[0]
+        pos = part.co @ m[:3, :3].T + m[:3, 3]
+        if np.linalg.det(m[:3, :3]) >= 0:
+            nrm = None
+            if with_normals and part.corner_normals is not None:
+                nrm = part.corner_normals @ _inverse(m[:3, :3][None])[0]  # the inverse transpose, on rows
+                nrm /= np.maximum(np.linalg.norm(nrm, axis=2, keepdims=True), 1e-300)
+            return pos, part.tris, part.corner_uv, nrm
+    else:
+        pos = (np.einsum("kij,vj->kvi", lin, part.co) + matrices[:, None, :3, 3]).reshape(-1, 3)
     tris = (part.tris[None] + (np.arange(k) * n_v)[:, None, None])
     flip = np.linalg.det(lin) < 0
     order = np.array([0, 2, 1])
@@ -206,7 +227,7 @@ def _placed(part: Part, matrices: np.ndarray, with_normals: bool):
     uv = None if part.corner_uv is None else corners(part.corner_uv)
     nrm = None
     if with_normals and part.corner_normals is not None:
-        inv_t = np.transpose(np.linalg.inv(lin), (0, 2, 1))  # normals transform by the inverse transpose
+        inv_t = np.transpose(_inverse(lin), (0, 2, 1))  # normals transform by the inverse transpose
         n = np.einsum("kij,tcj->ktci", inv_t, part.corner_normals)
         if flip.any():
             n[flip] = n[flip][:, :, order]
