@@ -368,6 +368,7 @@ def test_hair_curves_point_cloud_volume_and_empty_are_skipped(demo):
     _assert_skipped("Nothing", rep, "Nothing: skipped: no faces (an empty without instances)")
     _assert_skipped("Lamp", rep, "Lamp: skipped: nothing to image (a light has no geometry)")
     assert rep["status"].startswith("1 object(s) lensed, 5 skipped")
+    assert bpy.data.objects["Fur"].hide_render and not lamp.hide_render  # a light marked by a script still lights
     demo.assert_sphere_intact()
     # the panel shows at most 8 lines, the rest summed up
     from grlens_addon.blender.panels import report_lines

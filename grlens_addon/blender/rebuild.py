@@ -358,7 +358,7 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
                 warn.append(f"{src.name}: failed: {type(exc).__name__}: {exc}" if not str(exc) else
                             f"{src.name}: failed: {exc}")
                 report["objects"][src.name] = outcome = "failed"
-                _set_source_visibility(src, True)
+                _set_source_visibility(src, _hides(src))
                 _empty_images(scene, src, settings.orders, wanted)
             counts[outcome] += 1
         report["status"] = f"{counts['lensed']} object(s) lensed"
@@ -390,12 +390,19 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
     return report
 
 
+def _hides(src) -> bool:
+    """Whether a marked object is hidden from renders (its images stand in for it, or stay empty when
+    it is skipped): every object that can have geometry; a light or camera marked by a script is
+    left alone."""
+    return gather.can_lens(src) or src.type == "EMPTY"
+
+
 def _rebuild_source(scene, src, src_dg, inst, geo, settings, lut, light, planes, report, wanted) -> str:
     """Build (or skip) the images of one marked object; returns "lensed" or "skipped" and fills
     ``report`` (objects, stats, warnings) and ``wanted`` (names of image objects to keep)."""
     warn = report["warnings"]
     src_eval = src.evaluated_get(src_dg)
-    _set_source_visibility(src, True)
+    _set_source_visibility(src, _hides(src))
     got = gather.gather(src, src_eval, inst, with_normals=light is not None)
     if got.skip is not None:
         warn.append(f"{src.name}: skipped: {got.skip}")
