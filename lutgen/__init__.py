@@ -5,13 +5,16 @@ angles in radians. Observer static at (r_obs, phi = 0); xi measured from the out
 direction in the observer's static frame; order 1 sweeps phi, order 2 sweeps 2*pi - phi.
 
 Public API (stable): connect, connect_grid, Connection, shadow_half_angle, build_lut, LUT,
-load_lut, save_lut, LUTFileError; command line ``python -m lutgen``.
+load_lut, save_lut, LUTFileError, and the tables that reach infinity for any observer radius:
+WideLUT, build_wide_lut, LUTFamily; command line ``python -m lutgen``.
 """
 from .exr_io import LUTFileError
 from .lut import LUT, Lookup, build_lut
 from .lutfile import load_lut, save_lut
 from .solver import Connection, check_observer_radius, connect, connect_grid, shadow_half_angle
+from .wide_lut import LUTFamily, WideLUT, build_wide_lut
 
 __all__ = ["Connection", "connect", "connect_grid", "shadow_half_angle", "check_observer_radius",
-           "LUT", "Lookup", "build_lut", "load_lut", "save_lut", "LUTFileError"]
+           "LUT", "Lookup", "build_lut", "load_lut", "save_lut", "LUTFileError",
+           "WideLUT", "build_wide_lut", "LUTFamily"]
 __version__ = "0.1.0"
