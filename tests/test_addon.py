@@ -368,10 +368,40 @@ def test_remembered_inputs_and_topologies_stay_bounded():
     assert len(rebuild._INPUTS) == 0 and len(upload._TOPOLOGY) == 0
 
 
-def test_packed_lut_is_saved_and_used_exactly(tmp_path):
+def test_packed_family_tables_are_saved_and_used_exactly(tmp_path):
+    """Every Distance (the default): pack_lut stores the exact tables the camera's table is
+    interpolated from; after a reload nothing is built and the table is the same to the bit."""
     from grlens_addon.blender import lutcache
 
     scene, sphere = _small_demo()
+    assert scene.grlens.lut_mode == "EVERY_DISTANCE"
+    assert bpy.ops.grlens.pack_lut() == {"FINISHED"}
+    built = lutcache.get_table(scene.grlens, 20.0)
+    path = str(tmp_path / "packed.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    lutcache.clear()
+    import lutgen
+
+    calls = []
+    real = lutgen.build_wide_lut
+    lutgen.build_wide_lut = lambda *a, **k: calls.append(a) or real(*a, **k)
+    try:
+        loaded = lutcache.get_table(bpy.context.scene.grlens, 20.0)
+        assert np.array_equal(loaded.data, built.data)
+    finally:
+        lutgen.build_wide_lut = real
+    assert not calls  # read from the file, not built
+    assert bpy.ops.grlens.unpack_luts() == {"FINISHED"}
+    assert lutcache.STORE not in bpy.data.texts
+
+
+def test_packed_lut_is_saved_and_used_exactly(tmp_path):
+    """Fixed Range: the LUT itself is packed."""
+    from grlens_addon.blender import lutcache
+
+    scene, sphere = _small_demo()
+    scene.grlens.lut_mode = "FIXED_RANGE"
     assert bpy.ops.grlens.pack_lut() == {"FINISHED"}
     g = scene.grlens
     key = (20.0, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
@@ -564,11 +594,15 @@ def test_orbiting_camera_reuses_one_lut():
     pivot.keyframe_insert("rotation_euler", index=2, frame=1)
     pivot.rotation_euler = (0.0, 0.0, math.radians(90.0))
     pivot.keyframe_insert("rotation_euler", index=2, frame=9)
-    keys = set()
-    for f in range(1, 10):
-        scene.frame_set(f)
-        keys |= set(lutcache._CACHE)
-    assert len({k for k in keys if k[3] == scene.grlens.lut_n_r}) == 1
+    for mode in ("FIXED_RANGE", "EVERY_DISTANCE"):
+        scene.grlens.lut_mode = mode
+        lutcache.clear()
+        keys = set()
+        for f in range(1, 10):
+            scene.frame_set(f)
+            keys |= set(lutcache._CACHE)
+        assert len(keys) == 1, mode
+    assert lutcache.family(scene.grlens.lut_r_min).built == 4  # the exact tables around 20 r_s
 
 
 def test_demo_orbit_is_uniform():

@@ -60,7 +60,7 @@ def check_scene(scene, depsgraph=None, percentage: int = 50, filepath: str = "")
     geo, settings, cam = rebuild.scene_geometry(scene, depsgraph)
     camera = check_camera(scene, cam, percentage)
     g = scene.grlens
-    lut = lutcache.get_lut(geo.r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
+    lut = lutcache.get_table(g, geo.r_obs)
     src_dg = rebuild._source_depsgraph(depsgraph)
     found = gather.instances(srcs, src_dg, with_normals=False)
     meshes, names = [], []

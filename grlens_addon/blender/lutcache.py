@@ -1,9 +1,18 @@
 """Lookup tables: built on demand, cached by their parameters, optionally packed into the .blend.
 
-Units: all radii in r_s. Tables are deterministic (the same parameters give the same table), so two
-render-farm processes get identical geometry; packing a table (``bpy.ops.grlens.pack_lut()``) saves
+Units: all radii in r_s. Two kinds, chosen by ``scene.grlens.lut_mode``:
+
+* ``EVERY_DISTANCE`` (default): :class:`lutgen.LUTFamily` tables, which reach from ``lut_r_min`` to
+  infinity and serve any camera (or light) radius by interpolating exact tables built at fixed radii
+  (1 + exp(k/16) r_s), so a camera that moves needs no new table per frame; the exact tables are
+  built the first time a radius near them is used (about a second each) and kept.
+* ``FIXED_RANGE``: one :class:`lutgen.LUT` per camera radius over [lut_r_min, lut_r_max] with
+  lut_n_r x lut_n_phi nodes, as grlens built before the family existed.
+
+Tables are deterministic (the same parameters give the same table, whatever was built before), so
+two render-farm processes get identical geometry; packing (``bpy.ops.grlens.pack_lut()``) only saves
 the build time when the file is opened elsewhere. Packed tables live, exactly (float64), as hidden
-custom-property arrays on the Text data-block "grlens LUTs" (fake user), one per parameter set.
+custom-property arrays on the Text data-block "grlens LUTs" (fake user), one per table.
 """
 from collections import OrderedDict
 
@@ -13,12 +22,20 @@ import numpy as np
 STORE = "grlens LUTs"
 _CACHE = OrderedDict()
 _MAX = 4
+_FAMILIES: dict = {}
+_WIDE = "_wide "
 
 
 def _key(r_obs, r_min, r_max, n_r, n_phi):
     """Cache key; r_obs rounded to 7 significant digits (see core.mapping.R_OBS_TOLERANCE), so a
     camera orbiting at a fixed distance (float32 jitter) keeps using one table."""
-    return (float(f"{float(r_obs):.7g}"), float(r_min), float(r_max), int(n_r), int(n_phi))
+    return (round_radius(r_obs), float(r_min), float(r_max), int(n_r), int(n_phi))
+
+
+def round_radius(r_obs) -> float:
+    """A camera or light radius (r_s) rounded to 7 significant digits: the radius tables are made for
+    (single-precision transforms jitter by ~1e-7; the direction error of rounding is below 1e-6 rad)."""
+    return float(f"{float(r_obs):.7g}")
 
 
 def _prop_name(key):
@@ -42,13 +59,17 @@ def _from_store(key):
 
 
 def get_lut(r_obs, r_min, r_max, n_r, n_phi):
-    """The LUT for these parameters: from the memory cache, else from the .blend, else built."""
+    """The fixed-range LUT for these parameters: from the memory cache, else from the .blend, else built."""
     from lutgen import build_lut
 
     key = _key(r_obs, r_min, r_max, n_r, n_phi)
+    return _cached(key, lambda: _from_store(key) or build_lut(*key))
+
+
+def _cached(key, make):
     lut = _CACHE.get(key)
     if lut is None:
-        lut = _from_store(key) or build_lut(*key)
+        lut = make()
         _CACHE[key] = lut
         while len(_CACHE) > _MAX:
             _CACHE.popitem(last=False)
@@ -57,14 +78,64 @@ def get_lut(r_obs, r_min, r_max, n_r, n_phi):
     return lut
 
 
+def _wide_name(r_obs, r_min, rows, n_phi):
+    return _WIDE + " ".join(repr(v) for v in (float(r_obs), float(r_min), *map(int, rows), int(n_phi)))
+
+
+def _wide_builder(r_obs, r_min, rows, n_phi):
+    """A family's exact table: from the .blend if packed there (exact), else built."""
+    from lutgen import WideLUT, build_wide_lut
+
+    store = bpy.data.texts.get(STORE)
+    arr = store.get(_wide_name(r_obs, r_min, rows, n_phi)) if store is not None else None
+    if arr is not None:
+        data = np.frombuffer(memoryview(arr), dtype=np.float64)
+        if data.size == 2 * 4 * sum(rows) * n_phi:
+            return WideLUT(r_obs=r_obs, r_min=r_min, rows=tuple(rows), data=data.reshape(2, 4, sum(rows), n_phi).copy())
+    return build_wide_lut(r_obs, r_min, rows, n_phi)
+
+
+def family(r_min):
+    """The table family for tables from ``r_min`` (r_s) to infinity (one per r_min, kept)."""
+    from lutgen import LUTFamily
+
+    r_min = round_radius(r_min)  # a float32 property: 1.05 reads as 1.0499999523...
+    fam = _FAMILIES.get(r_min)
+    if fam is None:
+        fam = _FAMILIES[r_min] = LUTFamily(r_min=r_min, builder=_wide_builder)
+    return fam
+
+
+def get_table(g, r_obs):
+    """The table for an observer (the camera, or the light of GR illumination) at r_obs (r_s) under the
+    scene settings ``g`` (scene.grlens): a family's table (``lut_mode`` EVERY_DISTANCE) or a
+    fixed-range LUT. Raises ValueError for bad settings or radii."""
+    if g.lut_mode == "FIXED_RANGE":
+        return get_lut(r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
+    r = round_radius(r_obs)
+    fam = family(g.lut_r_min)
+    return _cached(("wide", r, fam.r_min), lambda: fam.at(r))
+
+
 def pack(lut) -> str:
-    """Store ``lut`` in the .blend (exact). Returns the entry's name."""
+    """Store ``lut`` in the .blend (exact): a fixed-range LUT itself; for a family's table, the exact
+    tables it is interpolated from (or itself, if exact). Returns a description of what was packed."""
     store = bpy.data.texts.get(STORE) or bpy.data.texts.new(STORE)
     store.use_fake_user = True
-    key = _key(*(lut.parameters[k] for k in ("r_obs", "r_min", "r_max", "n_r", "n_phi")))
-    name = _prop_name(key)
-    store[name] = lut.data.ravel()
-    return name
+    p = lut.parameters
+    if p.get("kind") != "wide":
+        key = _key(*(p[k] for k in ("r_obs", "r_min", "r_max", "n_r", "n_phi")))
+        store[_prop_name(key)] = lut.data.ravel()
+        return f"the {p['n_r']}x{p['n_phi']} LUT for r_obs = {p['r_obs']:.6g} r_s"
+    fam = family(p["r_min"])
+    ks = fam.nodes_for(p["r_obs"])
+    tables = [fam.exact(fam.node_radius(k)) for k in ks] if ks else [fam.exact(p["r_obs"])]
+    size = 0
+    for t in tables:
+        store[_wide_name(t.r_obs, t.r_min, t.rows, t.n_phi)] = t.data.ravel()
+        size += t.data.nbytes
+    return (f"{len(tables)} exact table(s) for r_obs = {', '.join(f'{t.r_obs:.5g}' for t in tables)} r_s "
+            f"({size / 2**20:.0f} MB)")
 
 
 def unpack_all() -> int:
@@ -72,11 +143,12 @@ def unpack_all() -> int:
     store = bpy.data.texts.get(STORE)
     if store is None:
         return 0
-    n = sum(1 for k in store.keys() if k.startswith("_lut "))
+    n = sum(1 for k in store.keys() if k.startswith("_lut ") or k.startswith(_WIDE))
     bpy.data.texts.remove(store)
     return n
 
 
 def clear():
-    """Forget the memory cache (packed tables stay in the file)."""
+    """Forget the memory caches (packed tables stay in the file)."""
     _CACHE.clear()
+    _FAMILIES.clear()

@@ -121,8 +121,8 @@ def _fcurves(action):
 
 
 class GRLENS_OT_pack_lut(bpy.types.Operator):
-    """Store the lookup table for the current camera distance and settings in the .blend file, so that
-    other processes (render farms) load it instead of building it"""
+    """Store the lookup tables for the current camera distance and settings in the .blend file, so that
+    other processes (render farms) load them instead of building them"""
 
     bl_idname = "grlens.pack_lut"
     bl_label = "Pack LUT into .blend"
@@ -139,9 +139,12 @@ class GRLENS_OT_pack_lut(bpy.types.Operator):
         except (RebuildError, ValueError) as exc:
             self.report({"ERROR"}, f"grlens: {exc}")
             return {"CANCELLED"}
-        lut = lutcache.get_lut(geo.r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
-        lutcache.pack(lut)
-        self.report({"INFO"}, f"packed the {lut.n_r}x{lut.n_phi} LUT for r_obs = {lut.r_obs:.6g} r_s")
+        try:
+            what = lutcache.pack(lutcache.get_table(g, geo.r_obs))
+        except ValueError as exc:
+            self.report({"ERROR"}, f"grlens: {exc}")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"packed {what}")
         return {"FINISHED"}
 
 

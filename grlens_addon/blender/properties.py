@@ -34,18 +34,28 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
     r_s: FloatProperty(
         name="Schwarzschild Radius", default=1.0, min=1e-6, soft_max=100.0, unit="LENGTH", update=_changed,
         description="Schwarzschild radius r_s of the black hole, in scene length units")
+    lut_mode: EnumProperty(
+        name="Lookup Table", default="EVERY_DISTANCE", update=_changed,
+        items=[("EVERY_DISTANCE", "Every Distance",
+                "Tables from LUT r min out to infinity for any camera distance: a camera or light that moves "
+                "needs no new table per frame (exact tables at fixed distances, interpolated)"),
+               ("FIXED_RANGE", "Fixed Range",
+                "One table over [LUT r min, LUT r max] with LUT rows x LUT columns nodes, built for the camera's "
+                "distance (a new one whenever it changes); geometry outside the range is not imaged")],
+        description="Which lookup tables of connecting rays grlens uses")
     lut_r_min: FloatProperty(
         name="LUT r min", default=1.05, min=1.000001, soft_max=10.0, update=_changed,
         description="Smallest radius covered by the lookup table, in units of r_s (> 1: outside the horizon)")
     lut_r_max: FloatProperty(
         name="LUT r max", default=40.0, min=1.1, soft_max=1000.0, update=_changed,
-        description="Largest radius covered by the lookup table, in units of r_s; parts farther out are culled")
+        description="Fixed Range tables only: largest radius covered, in units of r_s; parts farther out are "
+                    "not imaged")
     lut_n_r: IntProperty(
         name="LUT rows", default=256, min=16, max=4096, update=_changed,
-        description="Lookup table rows (uniform in r_s/r)")
+        description="Fixed Range tables only: rows (uniform in r_s/r)")
     lut_n_phi: IntProperty(
         name="LUT columns", default=512, min=16, max=8192, update=_changed,
-        description="Lookup table columns (uniform in the angle phi from 0 to 180 degrees)")
+        description="Fixed Range tables only: columns (uniform in the angle phi from 0 to 180 degrees)")
     max_tess_level: IntProperty(
         name="Max Tess Level", default=64, min=1, max=64, update=_changed,
         description="Largest number of segments an edge is split into (eq. 19 of Mueller et al. 2021)")

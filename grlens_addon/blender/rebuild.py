@@ -326,7 +326,7 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
         geo, settings, cam = scene_geometry(scene, depsgraph, preview)
         planes = frustum_planes(scene, cam)
         g = scene.grlens
-        lut = lutcache.get_lut(geo.r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
+        lut = lutcache.get_table(g, geo.r_obs)
         light = None
         if g.use_gr_illumination:
             shading.ensure_node_group()
@@ -339,7 +339,7 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
                     warn.append(f"the light is inside the photon sphere (r = {r_light:.3g} r_s)")
                 else:
                     light = pipeline.Light(lpos, g.light_intensity,
-                                           lutcache.get_lut(r_light, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi))
+                                           lutcache.get_table(g, r_light))
         src_dg = _source_depsgraph(depsgraph)
         shading.ensure_view_layer_aovs(scene)
         try:
