@@ -103,7 +103,7 @@ def options(rng):
     fam = lutgen.LUTFamily()
     t_nodes, _ = _timed(lambda: fam.at(R_OBS), 1)  # builds its four exact tables
     t_at, interp = _timed(lambda: fam.at(R_OBS), 5)  # a new interpolated table on every call
-    add("family: wide tables at 1 + exp(k/16) r_s, interpolated (any radius)", t_at, 4 * wide.data.nbytes / 2**20,
+    add("family: wide tables at 1 + exp(k/8) r_s, interpolated (any radius)", t_at, 4 * wide.data.nbytes / 2**20,
         interp, f"per new radius {1e3 * t_at:.2f} ms + rows made on first lookup; its 4 exact tables built once "
                 f"({t_nodes:.1f} s)")
     n_nodes = fam.k_hi - fam.k_lo + 1

@@ -61,8 +61,8 @@ no polynomial stencil follows (see docs/tables.md for the errors against the dis
 DEFAULT_SIZE = (48, 48, 192, 384)
 """(n_out, n_mid, n_in, n_phi) of the add-on's wide tables (see docs/tables.md for the trade)."""
 
-FAMILY_STEP = 0.0625
-"""Spacing of a family's observer radii in ln(r_obs - 1) (16 per factor e, about 11 per doubling far
+FAMILY_STEP = 0.125
+"""Spacing of a family's observer radii in ln(r_obs - 1) (8 per factor e, about 6 per doubling far
 out)."""
 
 FAMILY_R_OBS = (1.51, 1.0e5)

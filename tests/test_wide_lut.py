@@ -99,8 +99,8 @@ def test_singular_parts_are_the_flat_space_limit():
 
 @pytest.mark.parametrize("r_obs", [1.7, 3.1, 7.3, 29.0, 611.0])
 def test_family_matches_the_exact_table_of_any_radius(family, r_obs):
-    """The family's interpolated table (four exact tables at 1 + exp(k/16) r_s) against the exact table
-    built for r_obs itself: the same lookups to 1e-6 rad (5e-6 rad next to the photon sphere)."""
+    """The family's interpolated table (four exact tables at 1 + exp(k/8) r_s) against the exact table
+    built for r_obs itself: the same lookups to 3e-6 rad (5e-6 rad next to the photon sphere)."""
     assert family.nodes_for(r_obs) is not None
     interp = family.at(r_obs)
     exact = W.build_wide_lut(r_obs)
@@ -108,13 +108,13 @@ def test_family_matches_the_exact_table_of_any_radius(family, r_obs):
     rng = np.random.default_rng(11)
     r = np.concatenate([10 ** rng.uniform(np.log10(1.06), 6, 3000), _beside(rng, r_obs, 1000, 0.02, 0.5)[0]])
     phi = np.concatenate([rng.uniform(0, np.pi, 3000), _beside(rng, r_obs, 1000, 0.02, 0.5)[1]])
-    tol = 5e-6 if r_obs < 2 else 1e-6
+    tol = 5e-6 if r_obs < 2 else 3e-6
     for order in (1, 2):
         a, b = interp.lookup(r, phi, order), exact.lookup(r, phi, order)
         ok = np.isfinite(b.xi)
         assert np.array_equal(np.isfinite(a.xi), ok)
         assert np.max(np.abs(a.xi[ok] - b.xi[ok])) < tol, (r_obs, order)
-        assert np.max(np.abs(a.dt[ok] / b.dt[ok] - 1)) < 1e-6
+        assert np.max(np.abs(a.dt[ok] / b.dt[ok] - 1)) < 1e-5  # depth: 0.01 r_s at 1000 r_s
     assert np.array_equal(interp.data.shape, exact.data.shape)
 
 

@@ -4,7 +4,7 @@ Units: all radii in r_s. Two kinds, chosen by ``scene.grlens.lut_mode``:
 
 * ``EVERY_DISTANCE`` (default): :class:`lutgen.LUTFamily` tables, which reach from ``lut_r_min`` to
   infinity and serve any camera (or light) radius by interpolating exact tables built at fixed radii
-  (1 + exp(k/16) r_s), so a camera that moves needs no new table per frame; the exact tables are
+  (1 + exp(k/8) r_s), so a camera that moves needs no new table per frame; the exact tables are
   built the first time a radius near them is used (about a second each) and kept.
 * ``FIXED_RANGE``: one :class:`lutgen.LUT` per camera radius over [lut_r_min, lut_r_max] with
   lut_n_r x lut_n_phi nodes, as grlens built before the family existed.
@@ -24,6 +24,9 @@ _CACHE = OrderedDict()
 _MAX = 4
 _FAMILIES: dict = {}
 _WIDE = "_wide "
+FAMILY_TABLES = 24
+"""Exact tables a family keeps in memory (about 7 MB each): enough for a camera that sweeps its radius
+by a factor of 20 (e.g. a fly-in from 60 to 4 r_s) to be scrubbed back and forth without rebuilding."""
 
 
 def _key(r_obs, r_min, r_max, n_r, n_phi):
@@ -102,7 +105,7 @@ def family(r_min):
     r_min = round_radius(r_min)  # a float32 property: 1.05 reads as 1.0499999523...
     fam = _FAMILIES.get(r_min)
     if fam is None:
-        fam = _FAMILIES[r_min] = LUTFamily(r_min=r_min, builder=_wide_builder)
+        fam = _FAMILIES[r_min] = LUTFamily(r_min=r_min, builder=_wide_builder, max_slices=FAMILY_TABLES)
     return fam
 
 
