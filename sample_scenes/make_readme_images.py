@@ -4,8 +4,9 @@
 
 Each scene is rendered by render.py in its own process (default frames, resolution and samples of
 sample_scenes.scenes.DEFAULTS unless listed below); scenes with several frames are put side by side
-(the triangle: p1 = frame 150 on the left, p2 = frame 1 on the right, like the paper's figure 8).
-Prints render.py's per-frame summary for each scene.
+(the triangle: p1 = frame 150 on the left, p2 = frame 1 on the right, like the paper's figure 8),
+except the scenes in SEPARATE, whose frames become one picture each, docs/images/<scene>_NNNN.png
+(the fly-in: far, middle, close). Prints render.py's per-frame summary for each scene.
 """
 import os
 import subprocess
@@ -28,7 +29,9 @@ PICTURES = {  # scene: extra render.py arguments
     "shell": [],
     "room": [],
     "luminet": [], "luminet_blackbody": [],
+    "flyin": ["--frames", "1,120,240"],
 }
+SEPARATE = {"flyin"}  # one picture per frame: <scene>_NNNN.png
 
 
 def side_by_side(paths, gap=4):
@@ -57,9 +60,13 @@ def main(names):
             if "--frames" in frames:  # keep the order given
                 order = [int(f) for f in frames[frames.index("--frames") + 1].split(",")]
                 pngs = [os.path.join(tmp, f"{name}_{f:04d}.png") for f in order]
-            target = os.path.join(OUT, f"{name}.png")
-            side_by_side(pngs).save(target, optimize=True)
-            print(f"-> {os.path.relpath(target, ROOT)} ({os.path.getsize(target) // 1024} KB)", flush=True)
+            if name in SEPARATE:
+                outputs = [(os.path.join(OUT, os.path.basename(p)), [p]) for p in pngs]
+            else:
+                outputs = [(os.path.join(OUT, f"{name}.png"), pngs)]
+            for target, parts in outputs:
+                side_by_side(parts).save(target, optimize=True)
+                print(f"-> {os.path.relpath(target, ROOT)} ({os.path.getsize(target) // 1024} KB)", flush=True)
 
 
 if __name__ == "__main__":

@@ -8,7 +8,8 @@ renders each frame to <output>/<scene>_NNNN.png and a multilayer OpenEXR <output
 (with the light_travel_time and image_order passes; Workbench writes no passes). One progress line per
 frame (time for the grlens rebuild and for the render), then a summary of the time per frame.
 ``--list`` prints the scenes with their defaults: sphere (seed 000, 4.2), triangle and its variants
-(4.1, figure 8), disc and its views (4.3, figure 10), shell (seed 004), room (seed 003). Frames,
+(4.1, figure 8), disc and its views (4.3, figure 10), shell (seed 004), room (seed 003), luminet
+(seed 002), flyin (issue 19: the camera flies in from 80 to 4.5 r_s over a checkered floor). Frames,
 resolution and samples default to the scene's own defaults (sample_scenes.scenes.DEFAULTS).
 """
 import argparse

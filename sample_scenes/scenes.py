@@ -700,6 +700,142 @@ def room(scene):
 
 
 # --------------------------------------------------------------------------------------------------
+# issue 19: a fly-in over a checkered floor (tables for every camera distance)
+# --------------------------------------------------------------------------------------------------
+
+FLYIN_R_S = 2.0
+FLYIN_FRAMES = 240
+FLYIN_DISTANCE = (80.0, 4.5)
+"""Camera distance from the hole at the first and the last frame (r_s)."""
+FLYIN_ELEVATION = (8.0, 16.0)
+"""Camera elevation above the hole's equatorial plane at the first and the last frame (degrees)."""
+FLYIN_AZIMUTH = (-90.0, 20.0)
+"""Camera azimuth about the hole's z axis, from +x, at the first and the last frame (degrees). The
+sphere starts at +90 degrees, so at frame 1 it is right behind the hole."""
+FLYIN_FOV = (25.0, 100.0)
+"""Vertical field of view at the first and the last frame (degrees)."""
+FLOOR_DEPTH = 2.0
+"""The floor lies this far below the hole's equatorial plane (r_s)."""
+FLOOR_RADIUS = 300.0
+"""Radius of the floor disc about the point under the hole (r_s)."""
+FLOOR_CELL = 2.0
+"""Side of the floor's checker squares (r_s)."""
+
+
+def flyin_ease(frame):
+    """The fly-in's progress at ``frame``: 0 at frame 1, 1 at FLYIN_FRAMES, smoothstep in between (the
+    camera starts and stops gently)."""
+    s = min(max((frame - 1.0) / (FLYIN_FRAMES - 1.0), 0.0), 1.0)
+    return s * s * (3.0 - 2.0 * s)
+
+
+def flyin_camera(frame):
+    """(distance in r_s, elevation in degrees, azimuth in degrees, vertical field of view in degrees) of
+    the fly-in's camera at ``frame``: the distance falls geometrically (log-linear in the eased progress,
+    so the view grows at an even rate), elevation, azimuth and field of view change linearly with it."""
+    e = flyin_ease(frame)
+    d = FLYIN_DISTANCE[0] * (FLYIN_DISTANCE[1] / FLYIN_DISTANCE[0]) ** e
+
+    def lerp(pair):
+        return pair[0] + (pair[1] - pair[0]) * e
+
+    return d, lerp(FLYIN_ELEVATION), lerp(FLYIN_AZIMUTH), lerp(FLYIN_FOV)
+
+
+def _polar_floor(scene, name, r_s, depth, radius, cell, material, n_az=96, n_rings=48, r_first=0.2):
+    """A flat disc ``depth`` r_s below the origin, of ``radius`` r_s, as a polar grid: a fan about the
+    centre, then rings at radii growing geometrically from ``r_first`` r_s to ``radius`` (fine under the
+    hole, coarse far out: n_az x (n_rings - 1) quads + n_az triangles). Its spokes are turned by an odd
+    angle so that no vertex is on a line through the centre at a round azimuth. UVs are the planar
+    coordinates in units of ``cell`` r_s, so a checker texture of scale 1 draws squares of ``cell`` r_s,
+    exact on every face (affine in position). Faces point up (+z)."""
+    radii = [r_first * (radius / r_first) ** (k / (n_rings - 1)) for k in range(n_rings)]
+    turn = 0.37 * 2 * math.pi / n_az
+    z = -depth * r_s
+    verts = [(0.0, 0.0, z)]
+    for r in radii:
+        for k in range(n_az):
+            a = turn + 2 * math.pi * k / n_az
+            verts.append((r * r_s * math.cos(a), r * r_s * math.sin(a), z))
+
+    def vid(ring, k):
+        return 1 + ring * n_az + (k % n_az)
+
+    def uv(i):
+        return (verts[i][0] / (cell * r_s), verts[i][1] / (cell * r_s))
+
+    faces = [[0, vid(0, k), vid(0, k + 1)] for k in range(n_az)]
+    for ring in range(n_rings - 1):
+        faces += [[vid(ring, k), vid(ring + 1, k), vid(ring + 1, k + 1), vid(ring, k + 1)] for k in range(n_az)]
+    uvs = [[uv(i) for i in f] for f in faces]
+    return _mesh_object(scene, name, verts, faces, uvs, [material])
+
+
+def flyin(scene):
+    """Issue 19: a fly-in, the camera from 80 r_s to 4.5 r_s, over a checkered floor that reaches the
+    horizon, with the paper's sphere on its orbit. Units: r_s = 2 BU (as the demo); the hole at the
+    origin, its equatorial plane z = 0.
+
+    * The paper's orbiting sphere (bpy.ops.grlens.demo_scene: radius 0.5 r_s, 36 x 18 UV sphere, on the
+      last stable orbit r = 3 r_s in the equatorial plane, one orbit in 360 frames starting at +y),
+      orange/blue checker (6 cells per unit of UV, coarser than the ``sphere`` scene's 12, so that it
+      reads at a distance).
+    * The floor: a disc of radius 300 r_s, 2 r_s below the equatorial plane (its nearest point to the
+      hole is the one right under it, 2 r_s away), a polar grid (96 spokes x 48 rings, 4608 faces,
+      rings from 0.2 r_s growing geometrically), light and dark emissive checker squares of 2 r_s
+      (Checker Texture on its UVs, which are its planar coordinates).
+    * The camera flies in over frames 1..240 while looking at the hole (``flyin_camera``): its
+      distance falls from 80 to 4.5 r_s (geometrically in the eased progress: slow start and stop), its
+      elevation above the equatorial plane grows from 8 to 16 degrees (13.1 r_s above the floor at the
+      start, 3.2 r_s at the end), it turns about the hole from azimuth -90 degrees (the sphere right
+      behind the hole) to +20 degrees, and its vertical field of view widens from 25 to 100 degrees
+      as the shadow grows (1.9 to 30.6 degrees in radius). Keyed every frame (location, rotation, lens;
+      linear in between); it stays outside the sphere's orbit (at least 4.3 r_s from the axis).
+    * grlens' default tables for every camera distance (lut_mode EVERY_DISTANCE, from 1.05 r_s to
+      infinity): an exact table is built once for each node radius 1 + exp(k/16) r_s the camera comes
+      near (about 2 s each), and every frame interpolates four of them.
+    * A dark blue-black world (not lensed: it also fills the shadow); the Standard view transform, so
+      that the emission colours show as they are.
+
+    The camera is placed at frame 1; the images are built by the first frame change (render.py)."""
+    r_s = FLYIN_R_S
+    bpy.ops.grlens.demo_scene(r_s=r_s)  # hole, orbiting sphere, camera; builds its images once
+    g = scene.grlens
+    g.auto_update = False  # until everything is in place (_lens switches it on)
+    hole, sphere, cam = (bpy.data.objects[n] for n in ("BlackHole", "OrbitingSphere", "Camera"))
+    sphere.data.materials.clear()
+    sphere.data.materials.append(_emission_checker("SphereChecker", (0.9, 0.35, 0.03), (0.03, 0.2, 0.9), 6.0))
+    floor_mat = _emission_checker("FloorChecker", (0.62, 0.6, 0.52), (0.035, 0.04, 0.06), 1.0)
+    floor = _polar_floor(scene, "Floor", r_s, FLOOR_DEPTH, FLOOR_RADIUS, FLOOR_CELL, floor_mat)
+    from mathutils import Vector
+
+    cam.data.sensor_fit = "VERTICAL"
+    cam.data.clip_start, cam.data.clip_end = 0.05, 1.0e4
+    previous = None
+    for f in range(1, FLYIN_FRAMES + 1):
+        d, el, az, fov = flyin_camera(f)
+        el, az = math.radians(el), math.radians(az)
+        cam.location = (d * r_s * math.cos(el) * math.cos(az), d * r_s * math.cos(el) * math.sin(az),
+                        d * r_s * math.sin(el))
+        quat = (Vector(hole.location) - cam.location).to_track_quat("-Z", "Y")
+        cam.rotation_euler = quat.to_euler("XYZ", previous) if previous is not None else quat.to_euler("XYZ")
+        previous = cam.rotation_euler.copy()
+        cam.data.angle_y = math.radians(fov)
+        cam.keyframe_insert("location", frame=f)
+        cam.keyframe_insert("rotation_euler", frame=f)
+        cam.data.keyframe_insert("lens", frame=f)
+    _linear_keys(cam)
+    _linear_keys(cam.data)
+    scene.frame_start, scene.frame_end = 1, FLYIN_FRAMES
+    scene.frame_set(1)  # the camera at its first key (no rebuild: auto_update is off)
+    _lens(scene, hole, r_s, [sphere, floor], lut_mode="EVERY_DISTANCE", lut_r_min=1.05, max_tess_level=64,
+          tess_a=5.0, tess_b=0.75)
+    _world(scene, (0.002, 0.003, 0.008))
+    scene.view_settings.view_transform = "Standard"
+    return scene
+
+
+# --------------------------------------------------------------------------------------------------
 # registry: scene name -> builder, and render defaults
 # --------------------------------------------------------------------------------------------------
 
@@ -714,6 +850,7 @@ SCENES = {
     "disc_external": functools.partial(accretion_disc, external=True),
     "shell": gridded_shell,
     "room": room,
+    "flyin": flyin,
 }
 SCENES["luminet"] = _luminet.luminet_disc
 SCENES["luminet_blackbody"] = _luminet.luminet_disc_blackbody
@@ -744,6 +881,8 @@ DEFAULTS = {
                               what="seed 002: the thin disc in blackbody colours of the observed temperature"),
     "room": dict(frames=[1], resolution=(480, 270), samples=64,
                  what="seed 003: Cornell-like room, sphere, cube, cylinder, hole of r_s = 0.4 BU in the middle"),
+    "flyin": dict(frames=[1, 120, 180, 240], resolution=(480, 270), samples=16,
+                  what="issue 19: camera flies in from 80 to 4.5 r_s over a checkered floor, orbiting sphere, 240 frames"),
 }
 for _incl, _letters in ((90, "a, b"), (30, "c, d"), (10, "e, f")):
     _obs, _ext = _letters.split(", ")
