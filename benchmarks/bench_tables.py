@@ -199,7 +199,33 @@ def report(rows, d):
                   f"static frames {d['moving'].mean() / d['static'].mean():.2f}. Image triangles per frame "
                   f"{d['tris'].min()}-{d['tris'].max()}.",
               "", f"The former mode (a new fixed-range 256x512 table every frame, then build_images): "
-                  f"{', '.join(f'{v:.0f}' for v in d['fixed'])} ms on {len(d['fixed'])} frames of the dolly."]
+                  f"{', '.join(f'{v:.0f}' for v in d['fixed'])} ms on {len(d['fixed'])} frames of the dolly.",
+              "", "## The choice", "",
+              "The add-on's default (`scene.grlens.lut_mode = \"EVERY_DISTANCE\"`) is the family, for these "
+              "reasons, all from the tables above:",
+              "",
+              "* Every distance: a fixed-range table either stops at r_max (the former default drops everything "
+              "beyond 40 r_s) or, stretched to 1e4 r_s, loses accuracy far out; both are off by order 1 rad "
+              "beside the camera when their range contains its radius. The wide table reaches infinity and "
+              "is as accurate beside the camera as the former table was anywhere (exact rays in the 12 cells "
+              "around the observer, interpolation of what remains after the chord's angle is subtracted).",
+              "* A moving camera: any table made per radius costs its build every frame (about 100-300x a "
+              "frame). Exact `connect` per point costs about 50-100x the lookups, every frame. A table in "
+              "(1/b, 1/r) would serve every radius with one table, but its root find per point costs at "
+              "least a dozen lookups per point and iteration counts that depend on the point: several times "
+              "today's mapping, with no error advantage. A table over the observer radius built at once "
+              "costs minutes and a gigabyte. The family builds that 3-D table lazily: only the exact tables "
+              "near the radii the camera visits, once each, kept in memory; per frame it costs a few "
+              "microseconds plus interpolating the table rows a frame's points touch.",
+              "* Farms: the family's tables depend only on their radius, so every process computes the same "
+              "geometry for the same frame, whether a table was packed, cached or built. Packing stores the "
+              "four exact tables one frame needs (float64, exact); a shot's worth is not packed by default "
+              "(about 7 MB per table).",
+              "",
+              "The cost: the first pass of a moving camera through a range of distances builds one exact "
+              "table per 1/8 of ln(r_obs - 1) (about six per doubling of the distance far out), each about "
+              "as long as one former table; lookups in the wide table take somewhat longer than in the "
+              "former one (its stencils add the chord's angle and travel time)."]
     return "\n".join(lines) + "\n"
 
 
