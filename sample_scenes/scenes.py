@@ -566,7 +566,8 @@ def gridded_shell(scene):
     no vertex lies on the observer-hole axis (the axis meets the shell at latitude 23.4 degrees,
     between two rings of vertices; a vertex on the axis would image to a ring).
 
-    The LUT covers r = 8..12 r_s only: the shell lies farther out than the observer, which lutgen
+    The LUT (a fixed-range one, lut_mode FIXED_RANGE) covers r = 8..12 r_s only: the shell lies
+    farther out than the observer, which lutgen
     handles (1 < r_min < r_max is its only condition; order-1 rays to targets beyond the observer
     leave outwards), and a range that excludes the observer's own radius keeps the interpolation
     accurate (lookup errors at 10 r_s: 5e-10 rad in xi with [8, 12], 6e-8 rad with [1.05, 12]; a
@@ -585,7 +586,7 @@ def gridded_shell(scene):
     shell.keyframe_insert("rotation_euler", index=2, frame=121)
     _linear_keys(shell)
     scene.frame_start, scene.frame_end = 1, 120
-    _lens(scene, hole, r_s, [shell], lut_r_min=0.8 * SHELL_RADIUS, lut_r_max=1.2 * SHELL_RADIUS,
+    _lens(scene, hole, r_s, [shell], lut_mode="FIXED_RANGE", lut_r_min=0.8 * SHELL_RADIUS, lut_r_max=1.2 * SHELL_RADIUS,
           max_tess_level=64, tess_a=5.0, tess_b=0.75, observer=cam)
     _black_world(scene)
     return scene
@@ -792,8 +793,8 @@ def flyin(scene):
       as the shadow grows (1.9 to 30.6 degrees in radius). Keyed every frame (location, rotation, lens;
       linear in between); it stays outside the sphere's orbit (at least 4.3 r_s from the axis).
     * grlens' default tables for every camera distance (lut_mode EVERY_DISTANCE, from 1.05 r_s to
-      infinity): an exact table is built once for each node radius 1 + exp(k/16) r_s the camera comes
-      near (about 2 s each), and every frame interpolates four of them.
+      infinity, lutgen.LUTFamily): an exact table is built once for each of the family's fixed node
+      radii the camera comes near (a second or two each), and every frame interpolates four of them.
     * A dark blue-black world (not lensed: it also fills the shadow); the Standard view transform, so
       that the emission colours show as they are.
 

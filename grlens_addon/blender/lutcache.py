@@ -117,6 +117,9 @@ def get_table(g, r_obs):
         return get_lut(r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
     r = round_radius(r_obs)
     fam = family(g.lut_r_min)
+    if not fam.r_min < r:
+        raise ValueError(f"the lookup table's innermost radius (LUT r min = {fam.r_min:.4g} r_s) must be below "
+                         f"the distance of the camera or light ({r:.4g} r_s)")
     return _cached(("wide", r, fam.r_min), lambda: fam.at(r))
 
 
