@@ -586,8 +586,8 @@ def gridded_shell(scene):
     shell.keyframe_insert("rotation_euler", index=2, frame=121)
     _linear_keys(shell)
     scene.frame_start, scene.frame_end = 1, 120
-    _lens(scene, hole, r_s, [shell], lut_mode="FIXED_RANGE", lut_r_min=0.8 * SHELL_RADIUS, lut_r_max=1.2 * SHELL_RADIUS,
-          max_tess_level=64, tess_a=5.0, tess_b=0.75, observer=cam)
+    _lens(scene, hole, r_s, [shell], lut_mode="FIXED_RANGE", lut_r_min=0.8 * SHELL_RADIUS,
+          lut_r_max=1.2 * SHELL_RADIUS, max_tess_level=64, tess_a=5.0, tess_b=0.75, observer=cam)
     _black_world(scene)
     return scene
 
