@@ -24,7 +24,7 @@ STATS = os.path.join(HERE, "scripts", "scene_stats.py")
 SCENE_NAMES = sorted([
     "sphere", "triangle", "triangle_tess1", "triangle_tess4", "triangle_tess64", "triangle_flat",
     "disc", "disc_external", "disc_90", "disc_30", "disc_10", "disc_90_external", "disc_30_external",
-    "disc_10_external", "shell", "room", "luminet", "luminet_blackbody"])
+    "disc_10_external", "shell", "room", "luminet", "luminet_blackbody", "flyin"])
 
 # how each scene is rendered here: (resolution, frames, samples); Cycles
 TEST_RENDERS = {
@@ -46,6 +46,7 @@ TEST_RENDERS = {
     "room": ("192x108", "1", 8),
     "luminet": ("96x54", "1", 2),
     "luminet_blackbody": ("96x54", "1", 2),
+    "flyin": ("160x90", "120", 2),
 }
 
 
@@ -345,3 +346,116 @@ def test_room_with_hole_shadow_and_distortion(renders, stats):
     assert wall["n_tris"] > 2 * 41 * 41
     for name in ("BackWall", "Floor", "Ceiling", "LeftWall", "RightWall", "Sphere", "Cube", "Cylinder"):
         assert d["images"][f"{name}.GR2"]["n_tris"] > 0  # second-order images around the shadow
+
+
+# --------------------------------------------------------------------------------------------------
+# fly-in over a checkered floor (issue 19: tables for every camera distance)
+# --------------------------------------------------------------------------------------------------
+
+FLYIN_SCRIPT = r"""
+import json, os, sys
+sys.path.insert(0, sys.argv[1])
+import bpy
+import numpy as np
+import grlens_addon
+from sample_scenes.scenes import SCENES
+
+grlens_addon.register()
+bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+scene = bpy.context.scene
+scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 160, 90, 100
+SCENES["flyin"](scene)
+g = scene.grlens
+r_s = g.r_s
+hole = np.array(g.black_hole.matrix_world.translation)
+out = {"frames": [scene.frame_start, scene.frame_end], "lut_mode": g.lut_mode, "camera": []}
+g.auto_update = False  # the camera's path alone: no rebuilds
+for f in range(scene.frame_start, scene.frame_end + 1):
+    scene.frame_set(f)
+    cam = scene.camera.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    m = np.array(cam.matrix_world)
+    to_hole = hole - m[:3, 3]
+    look = -m[:3, 2] / np.linalg.norm(m[:3, 2])
+    aim = float(np.degrees(np.arccos(np.clip(look @ to_hole / np.linalg.norm(to_hole), -1, 1))))
+    out["camera"].append([f, float(np.linalg.norm(to_hole)) / r_s, float(m[2, 3] - hole[2]) / r_s, aim,
+                          float(np.degrees(cam.data.angle_y))])
+floor = bpy.data.objects["Floor"]
+me = floor.data
+co = np.empty(3 * len(me.vertices))
+me.vertices.foreach_get("co", co)
+mw = np.array(floor.matrix_world)
+co = (co.reshape(-1, 3) @ mw[:3, :3].T + mw[:3, 3] - hole) / r_s
+out["floor"] = {"faces": len(me.polygons), "z": [float(co[:, 2].min()), float(co[:, 2].max())],
+                "reach": float(np.hypot(co[:, 0], co[:, 1]).max()),
+                "extent": [float(co[:, 0].min()), float(co[:, 0].max()), float(co[:, 1].min()),
+                           float(co[:, 1].max())],
+                "nearest_under_hole": float(np.hypot(co[:, 0], co[:, 1]).min())}
+g.auto_update = True
+scene.frame_set(120)
+bpy.ops.grlens.rebuild()
+out["status"], out["report"] = g.status, g.report_lines
+out["images"] = {o.name: len(o.data.polygons) for o in scene.objects if o.type == "MESH" and o.grlens.order in (1, 2)}
+print("FLYIN " + json.dumps(out), flush=True)
+os._exit(0)
+"""
+
+
+@pytest.fixture(scope="module")
+def flyin():
+    out = run(FLYIN_SCRIPT, os.path.join(HERE, ".."), script="-c")
+    return json.loads(next(line for line in out.splitlines() if line.startswith("FLYIN "))[6:])
+
+
+def test_flyin_camera_path(flyin):
+    """The camera flies in from 80 r_s to 4.5 r_s over frames 1-240, smoothly (its distance falls every
+    frame, geometrically at an eased rate), always looking at the hole, above the floor and well
+    outside the photon sphere; its field of view widens with the shadow."""
+    cam = np.array(flyin["camera"])
+    assert flyin["frames"] == [1, 240] and cam[0, 0] == 1 and cam[-1, 0] == 240
+    dist, height, aim, fov = cam[:, 1], cam[:, 2], cam[:, 3], cam[:, 4]
+    assert dist[0] == pytest.approx(80.0, rel=1e-4) and dist[-1] == pytest.approx(4.5, rel=1e-4)
+    assert dist.min() == dist[-1] > 1.5 and np.all(np.diff(dist) < 0)
+    step = np.diff(np.log(dist))  # per-frame change of ln(distance): eased in and out, no jumps
+    assert abs(step[0]) < 1e-3 and abs(step[-1]) < 1e-3 and np.abs(np.diff(step)).max() < 1e-3
+    assert aim.max() < 0.01  # degrees off the hole
+    assert height.min() - flyin["floor"]["z"][1] > 3.0  # at least 3 r_s above the floor
+    assert fov[0] == pytest.approx(25.0, abs=0.01) and fov[-1] == pytest.approx(100.0, abs=0.01)
+    assert flyin["lut_mode"] == "EVERY_DISTANCE"
+
+
+def test_flyin_floor_reaches_far_and_passes_under_the_hole(flyin):
+    fl = flyin["floor"]
+    assert fl["reach"] >= 100.0
+    assert min(-fl["extent"][0], fl["extent"][1], -fl["extent"][2], fl["extent"][3]) >= 100.0  # all around
+    assert -3.0 <= fl["z"][0] <= fl["z"][1] <= -1.0 and fl["z"][1] - fl["z"][0] < 1e-6  # flat, 1-3 r_s below
+    assert fl["nearest_under_hole"] < 0.25  # a vertex right under the hole: no hole in the floor there
+    assert 2000 <= fl["faces"] <= 20000
+
+
+def test_flyin_middle_frame_images(flyin):
+    """At frame 120 (camera at 19 r_s) the floor and the sphere are imaged, both orders of the floor,
+    and nothing is lost (the tables reach the horizon and infinity; the floor stays 2 r_s from the hole)."""
+    im = flyin["images"]
+    assert flyin["status"].startswith("2 object(s) lensed")
+    assert flyin["report"] == ""
+    assert im["Floor.GR1"] > flyin["floor"]["faces"] and im["Floor.GR2"] > 0 and im["OrbitingSphere.GR1"] > 0
+
+
+def test_flyin_render_shadow_and_lensed_horizon(renders):
+    """Frame 120: the shadow in the middle (its upper half is empty: the floor passes in front of the
+    lower half), floor all around it, and the floor behind the hole lifted above its own horizon: in
+    flat space the horizon is a straight horizontal line (no camera roll), here it rises over the hole."""
+    _, _, imgs = renders.get("flyin")
+    img = imgs[120]
+    h, w = img.shape[:2]
+    r, x, y = radius_map(img)
+    big_r = shadow_radius_px(19.15, 25.0 + 75.0 * 0.4969, h)  # flyin_camera(120): 19.15 r_s, 62.3 deg
+    peak = img.max(axis=2)
+    assert peak[(r < 0.8 * big_r) & (y > 0.2 * big_r)].max() < 35  # dark sky colour (sRGB 22-25)
+    ring = (r > 1.3 * big_r) & (r < 2.5 * big_r)
+    assert (peak[ring] > 40).mean() > 0.8  # the floor all around the shadow (dark squares: sRGB 52+)
+    floor = peak > 40
+    top = [int(np.argmax(floor[:, c])) for c in range(w)]  # topmost floor row per column
+    side = min(np.median(top[: w // 8]), np.median(top[-w // 8:]))
+    centre = min(top[w // 2 - 3: w // 2 + 3])
+    assert centre < side - 8, (centre, side)  # 160x90: 9 against 26 rows from the top
