@@ -16,9 +16,10 @@ at the observer's own radius x_o = 1/r_obs:
 
 The point where a table of connecting rays is singular, the observer itself (x_o, phi = 0), where
 xi jumps from 0 (targets beyond it) to pi (targets below it), is then a corner of the outer and the middle
-block, never inside an interpolation stencil; order-1 lookups within ``APEX_CELLS`` cells of it are solved
-exactly with :func:`lutgen.solver.connect` instead (few points: the immediate neighbourhood of the
-camera). Closed-form parts are subtracted before storing (:func:`singular_parts`): from order 1's
+block, never inside an interpolation stencil. Order-1 lookups within APEX_RADIUS * r_obs of the
+observer read a small polar table about it instead (``apex``: rows uniform in the distance s from the
+observer, columns in the angle theta of the chord from the outward radial), where what remains of xi
+after the chord's angle is subtracted is a smooth function (about s times a function of theta). Closed-form parts are subtracted before storing (:func:`singular_parts`): from order 1's
 xi the static-frame angle of the straight chord to the target, and from the travel times a
 closed-form travel time built on the tortoise coordinate r* = r + ln(r - 1), which removes the
 growth to infinity (r + ln r), the logarithm at the horizon and (order 1) the cone at the observer,
@@ -53,10 +54,13 @@ R_FAR = 1e9
 those to infinity by about r_obs / R_FAR rad (2e-8 at r_obs = 20), and dt - |r* - r*_obs| is still
 exact there to about 1e-7 r_s/c in float64."""
 
-APEX_CELLS = 12
-"""Order-1 points within this many table cells (in row and column) of the observer's corner
-(x_o, phi = 0) are solved exactly: there xi is a function of the direction from the camera, which
-no polynomial stencil follows (see docs/tables.md for the errors against the distance in cells)."""
+APEX_RADIUS = 0.3
+"""Order-1 points closer to the observer than this many times r_obs are looked up in the polar table
+about the observer: there xi is mostly a function of the direction from the camera, which the main
+table's rows and columns do not follow (errors of 1e-6 rad at this distance, more closer in)."""
+
+APEX_SIZE = (32, 128)
+"""(rows in s, columns in theta) of the polar table about the observer."""
 
 DEFAULT_SIZE = (48, 48, 192, 384)
 """(n_out, n_mid, n_in, n_phi) of the add-on's wide tables (see docs/tables.md for the trade)."""
@@ -102,6 +106,36 @@ def singular_parts(r, phi, r_obs):
     return xi_chord, dt_chord, np.abs(radial)
 
 
+def apex_coordinates(r, phi, r_obs):
+    """(s, theta): distance (r_s) of points (r, phi) from the observer at (r_obs, 0) in their plane,
+    and the angle (rad, [0, pi]) of the chord to them from the observer's outward radial direction."""
+    r, phi = np.broadcast_arrays(np.asarray(r, dtype=np.float64), np.asarray(phi, dtype=np.float64))
+    with np.errstate(invalid="ignore", over="ignore"):
+        h = np.sin(0.5 * phi)
+        x = (r - r_obs) - 2.0 * r * h * h  # r cos(phi) - r_obs without cancellation
+        y = r * np.sin(phi)
+        return np.hypot(x, y), np.arctan2(y, x)
+
+
+def build_apex(r_obs, size=APEX_SIZE) -> np.ndarray:
+    """The polar table about an observer at r_obs (r_s): (4, n_s, n_theta) order-1 (xi, dt, ux, uy)
+    of :func:`lutgen.solver.connect` at distances s = APEX_RADIUS * r_obs * i / (n_s - 1) and chord
+    angles theta = pi * j / (n_theta - 1), less the chord's angle (xi) and the closed-form travel time
+    (dt) of :func:`singular_parts`. The s = 0 row holds the limits (solved at s = 1e-9 r_obs)."""
+    n_s, n_t = int(size[0]), int(size[1])
+    s = APEX_RADIUS * r_obs * np.linspace(0.0, 1.0, n_s)
+    s[0] = 1e-9 * r_obs
+    theta = np.linspace(0.0, np.pi, n_t)
+    S, T = np.meshgrid(s, theta, indexing="ij")
+    x, y = r_obs + S * np.cos(T), S * np.sin(T)
+    r, phi = np.hypot(x, y), np.arctan2(y, x)
+    c = connect(r_obs, r.ravel(), phi.ravel(), 1)
+    xi_chord, dt_chord, _ = singular_parts(r.ravel(), phi.ravel(), r_obs)
+    out = np.stack([c.xi - xi_chord, c.dt - dt_chord, c.ux, c.uy]).reshape(4, n_s, n_t)
+    out[:2, 0] = 0.0  # the limits at the observer: xi is the chord's angle, dt vanishes with s
+    return out
+
+
 def check_wide_parameters(r_obs, r_min, rows, n_phi):
     """Validate a wide table's parameters (radii in r_s; ``rows`` = (n_out, n_mid, n_in)); returns
     them as (float, float, (int, int, int), int)."""
@@ -142,7 +176,8 @@ class WideLUT:
 
     ``data``: float64 (2, 4, sum(rows), n_phi) = (order - 1, quantity, row, column), quantities
     in the order of ``QUANTITIES``, less the closed-form parts of :func:`singular_parts` (order 1: xi
-    and dt; order 2: dt); ``rows`` = (n_out, n_mid, n_in), the blocks' row counts.
+    and dt; order 2: dt); ``rows`` = (n_out, n_mid, n_in), the blocks' row counts; ``apex``: the
+    polar table about the observer (:func:`build_apex`).
     Build it with :func:`build_wide_lut` or take it from a :class:`LUTFamily`.
     """
 
@@ -150,10 +185,14 @@ class WideLUT:
     r_min: float
     rows: tuple
     data: np.ndarray
+    apex: np.ndarray
     source: str = "exact"
 
     def __post_init__(self):
         self.data = self._checked(np.ascontiguousarray(self.data, dtype=np.float64))
+        self.apex = np.ascontiguousarray(self.apex, dtype=np.float64)
+        if self.apex.ndim != 3 or self.apex.shape[0] != len(QUANTITIES) or min(self.apex.shape[1:]) < 4:
+            raise ValueError(f"the polar table about the observer must have shape (4, n_s, n_theta), got {self.apex.shape}")
 
     def _checked(self, data) -> np.ndarray:
         if data.ndim != 4 or data.shape[:2] != (2, len(QUANTITIES)) or data.shape[2] != sum(self.rows):
@@ -196,12 +235,12 @@ class WideLUT:
             b = min(a + LOOKUP_BLOCK, r.size)
             self._lookup_block(r[a:b], p[a:b], ks, quantities, {o: {q: v[a:b] for q, v in got.items()}
                                                                 for o, got in out.items()})
-        if 1 in ks:  # next to the observer: the exact rays (one call for all points: few of them)
+        if 1 in ks:  # next to the observer: the polar table about it
             near = np.flatnonzero(self.near_observer(r, p))
             if near.size:
-                exact = connect(self.r_obs, r[near], p[near], 1)
+                got = self._apex_lookup(r[near], p[near], quantities)
                 for q in quantities:
-                    out[1][q][near] = getattr(exact, q)
+                    out[1][q][near] = got[q]
         return {order: Lookup(*(got[q].reshape(shape) if q in got else None for q in QUANTITIES))
                 for order, got in out.items()}
 
@@ -220,11 +259,29 @@ class WideLUT:
         return block, g, gp, inside
 
     def near_observer(self, r, p) -> np.ndarray:
-        """Mask of the points (r, p) within APEX_CELLS cells of the observer's corner (x_o, phi = 0),
-        which order 1 solves exactly."""
-        block, g, gp, inside = self.grid_coordinates(r, p)
-        cells = np.where(block == 0, self.rows[0] - 1 - g, np.where(block == 1, g, np.inf))
-        return inside & (cells < APEX_CELLS) & (gp < APEX_CELLS)
+        """Mask of the points (r, p) closer to the observer than APEX_RADIUS * r_obs (and inside the
+        table), whose order-1 rays come from the polar table about the observer."""
+        s, _ = apex_coordinates(r, p, self.r_obs)
+        with np.errstate(invalid="ignore"):
+            return (s < APEX_RADIUS * self.r_obs) & (r >= self.r_min) & (p >= 0.0) & (p <= np.pi)
+
+    def _apex_lookup(self, r, p, quantities) -> dict:
+        """Order-1 {quantity: values} of points next to the observer from the polar table ``apex``."""
+        s, theta = apex_coordinates(r, p, self.r_obs)
+        n_s, n_t = self.apex.shape[1:]
+        gs = np.clip(s / (APEX_RADIUS * self.r_obs) * (n_s - 1), 0.0, n_s - 1)
+        gt = np.clip(theta / np.pi * (n_t - 1), 0.0, n_t - 1)
+        i_s, w_s = _cubic_stencil(gs, n_s)
+        i_t, w_t = _cubic_stencil(gt, n_t)
+        offsets = (np.arange(4)[:, None] * n_t + np.arange(4)[None, :]).ravel()
+        idx = ((i_s * n_t + i_t)[:, None] + offsets).reshape(-1, 4, 4)
+        w = np.ascontiguousarray((w_s[:, None, :] * w_t[None, :, :]).transpose(2, 0, 1))
+        xi_chord, dt_chord, _ = singular_parts(r, p, self.r_obs)
+        out = {}
+        for q in quantities:
+            v = np.einsum("nij,nij->n", self.apex[QUANTITIES.index(q)].reshape(-1).take(idx), w)
+            out[q] = v + (xi_chord if q == "xi" else dt_chord if q == "dt" else 0.0)
+        return out
 
     def _rows_ready(self, first_rows) -> np.ndarray:
         """The array the stencils whose first rows are ``first_rows`` (and the three after each) read:
@@ -264,8 +321,9 @@ class _InterpolatedLUT(WideLUT):
 
     BAND_ROWS = 8
 
-    def __init__(self, r_obs, r_min, rows, weights, tables):
+    def __init__(self, r_obs, r_min, rows, weights, tables, apexes):
         self._weights, self._tables = weights, tables
+        self.apex = sum(wk * a for wk, a in zip(weights, apexes))
         self._made = np.zeros(-(-sum(rows) // self.BAND_ROWS), dtype=bool)
         self._partial = np.empty(tables[0].shape)
         self.r_obs, self.r_min, self.rows, self.source = r_obs, r_min, rows, "family"
@@ -325,7 +383,7 @@ def build_wide_lut(r_obs, r_min=R_MIN, rows=DEFAULT_SIZE[:3], n_phi=DEFAULT_SIZE
     workers = max(1, workers or os.cpu_count() or 1)
     with ThreadPoolExecutor(max_workers=workers) as pool:
         list(pool.map(work, blocks))
-    return WideLUT(r_obs=r_obs, r_min=r_min, rows=rows, data=data)
+    return WideLUT(r_obs=r_obs, r_min=r_min, rows=rows, data=data, apex=build_apex(r_obs))
 
 
 class LUTFamily:
@@ -387,5 +445,5 @@ class LUTFamily:
         t = math.log(r_obs - 1.0) / self.step - ks[0]  # in [1, 2)
         w = [-(t - 1) * (t - 2) * (t - 3) / 6, t * (t - 2) * (t - 3) / 2,
              -t * (t - 1) * (t - 3) / 2, t * (t - 1) * (t - 2) / 6]
-        tables = [self.exact(self.node_radius(k)).data for k in ks]
-        return _InterpolatedLUT(r_obs, self.r_min, self.rows, w, tables)
+        exact = [self.exact(self.node_radius(k)) for k in ks]
+        return _InterpolatedLUT(r_obs, self.r_min, self.rows, w, [t.data for t in exact], [t.apex for t in exact])

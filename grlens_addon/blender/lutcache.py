@@ -89,13 +89,19 @@ def _wide_builder(r_obs, r_min, rows, n_phi):
     """A family's exact table: from the .blend if packed there (exact), else built."""
     from lutgen import WideLUT, build_wide_lut
 
+    from lutgen.wide_lut import APEX_SIZE
+
     store = bpy.data.texts.get(STORE)
-    arr = store.get(_wide_name(r_obs, r_min, rows, n_phi)) if store is not None else None
-    if arr is not None:
+    name = _wide_name(r_obs, r_min, rows, n_phi)
+    arr = store.get(name) if store is not None else None
+    apex = store.get(name + " apex") if store is not None else None
+    if arr is not None and apex is not None:
         data = np.frombuffer(memoryview(arr), dtype=np.float64)
-        if data.size == 2 * 4 * sum(rows) * n_phi:
-            return WideLUT(r_obs=r_obs, r_min=r_min, rows=tuple(rows), data=data.reshape(2, 4, sum(rows), n_phi).copy())
-    return build_wide_lut(r_obs, r_min, rows, n_phi)
+        apex = np.frombuffer(memoryview(apex), dtype=np.float64)
+        if data.size == 2 * 4 * sum(rows) * n_phi and apex.size == 4 * APEX_SIZE[0] * APEX_SIZE[1]:
+            return WideLUT(r_obs=r_obs, r_min=r_min, rows=tuple(rows), data=data.reshape(2, 4, sum(rows), n_phi).copy(),
+                           apex=apex.reshape(4, *APEX_SIZE).copy())
+    return build_wide_lut(r_obs, r_min, rows, n_phi)  # not packed, or damaged: built (the same table)
 
 
 def family(r_min):
@@ -138,8 +144,10 @@ def pack(lut) -> str:
     tables = [fam.exact(fam.node_radius(k)) for k in ks] if ks else [fam.exact(p["r_obs"])]
     size = 0
     for t in tables:
-        store[_wide_name(t.r_obs, t.r_min, t.rows, t.n_phi)] = t.data.ravel()
-        size += t.data.nbytes
+        name = _wide_name(t.r_obs, t.r_min, t.rows, t.n_phi)
+        store[name] = t.data.ravel()
+        store[name + " apex"] = t.apex.ravel()
+        size += t.data.nbytes + t.apex.nbytes
     return (f"{len(tables)} exact table(s) for r_obs = {', '.join(f'{t.r_obs:.5g}' for t in tables)} r_s "
             f"({size / 2**20:.0f} MB)")
 
@@ -149,7 +157,7 @@ def unpack_all() -> int:
     store = bpy.data.texts.get(STORE)
     if store is None:
         return 0
-    n = sum(1 for k in store.keys() if k.startswith("_lut ") or k.startswith(_WIDE))
+    n = sum(1 for k in store.keys() if k.startswith("_lut ") or (k.startswith(_WIDE) and not k.endswith(" apex")))
     bpy.data.texts.remove(store)
     return n
 
