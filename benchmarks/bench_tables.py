@@ -207,8 +207,8 @@ def report(rows, d):
               "* Every distance: a fixed-range table either stops at r_max (the former default drops everything "
               "beyond 40 r_s) or, stretched to 1e4 r_s, loses accuracy far out; both are off by order 1 rad "
               "beside the camera when their range contains its radius. The wide table reaches infinity and "
-              "is as accurate beside the camera as the former table was anywhere (exact rays in the 12 cells "
-              "around the observer, interpolation of what remains after the chord's angle is subtracted).",
+              "is as accurate beside the camera as elsewhere (a polar table about the observer, in which what "
+              "remains after the chord's angle is subtracted is smooth).",
               "* A moving camera: any table made per radius costs its build every frame (about 100-300x a "
               "frame). Exact `connect` per point costs about 50-100x the lookups, every frame. A table in "
               "(1/b, 1/r) would serve every radius with one table, but its root find per point costs at "
