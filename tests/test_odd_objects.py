@@ -424,6 +424,7 @@ def test_triangles_beyond_the_table_and_inside_the_horizon_are_reported(demo):
     assert rep["stats"]["Far"][1]["invalid_vertex"] >= 12
     again = demo.rebuild()
     assert again["objects"]["Far"] == "unchanged" and again["warnings"] == rep["warnings"]
+    assert again["stats"]["Far"] == rep["stats"]["Far"]
     # half of a cube beyond the range: only the triangles with a corner out there are counted
     far.location = (-80.0 + 1.0, 5.0, 0.0)  # x from -80 to -78: its far face's corners at r > 40 r_s
     inner.grlens.enabled = False

@@ -388,8 +388,8 @@ def gather(src, src_eval, inst: Instances | None, with_normals: bool = True) -> 
             placed.append((part, mats))
             if len(part.tris):
                 n_inst += len(mats)
-            else:
-                no_faces["instance without faces"] = no_faces.get("instance without faces", 0) + len(mats)
+            elif not len(part.co):  # (loose vertices and edges of an instanced mesh are counted as such)
+                no_faces["empty mesh instance"] = no_faces.get("empty mesh instance", 0) + len(mats)
         for kind, n in inst.no_faces.items():
             no_faces[f"{NO_FACES[kind]} instance"] = n
     loose_v = sum(p.loose_verts * len(m) for p, m in placed)

@@ -239,13 +239,13 @@ def _same_inputs(token, inputs) -> bool:
     return True
 
 
-def _remember_inputs(objs, inputs, lines=()) -> str:
-    """Store ``inputs`` (and the report ``lines`` of that build, repeated while they are unchanged)
-    under a new token and drop the old tokens of the image objects ``objs``."""
+def _remember_inputs(objs, inputs, lines=(), stats=None) -> str:
+    """Store ``inputs`` (and the report ``lines`` and ``stats`` of that build, repeated while they are
+    unchanged) under a new token and drop the old tokens of the image objects ``objs``."""
     for o in objs:
         _INPUTS.pop(o.get("grlens_input"), None)
     token = uuid.uuid4().hex
-    _INPUTS[token] = (inputs[0], inputs[1], list(lines))
+    _INPUTS[token] = (inputs[0], inputs[1], list(lines), stats)
     return token
 
 
@@ -419,14 +419,18 @@ def _rebuild_source(scene, src, src_dg, inst, geo, settings, lut, light, planes,
     tokens = {o.get("grlens_input") for o in objs.values()}
     if len(tokens) == 1 and _same_inputs(next(iter(tokens)), inputs):
         report["objects"][src.name] = "unchanged"  # same geometry, camera and settings: skip
-        warn.extend(_INPUTS[next(iter(tokens))][2])
+        _, _, lines, stats = _INPUTS[next(iter(tokens))]
+        warn.extend(lines)
+        if stats is not None:
+            report["stats"][src.name] = stats
         return "lensed"
     images = pipeline.build_images(mesh, geo, lut, settings, light, planes, disc)
     lines = []
     line = not_imaged_line(src.name, mesh, images, geo, lut, settings.orders)
     if line:
         lines.append(line)
-    key = _remember_inputs(objs.values(), inputs, lines)
+    stats = _stats(images)
+    key = _remember_inputs(objs.values(), inputs, lines, stats)
     entry = {}
     for order, img in images.items():
         obj = objs[order]
@@ -435,6 +439,6 @@ def _rebuild_source(scene, src, src_dg, inst, geo, settings, lut, light, planes,
         obj["grlens_input"] = key
         entry[order] = (len(img.positions), len(img.tris), img.report.total_culled())
     report["objects"][src.name] = entry
-    report["stats"][src.name] = _stats(images)
+    report["stats"][src.name] = stats
     warn.extend(lines)
     return "lensed"
