@@ -256,12 +256,12 @@ def report(rows, img, d):
               "beside the camera when their range contains its radius. The wide table reaches infinity and "
               "is as accurate beside the camera as elsewhere (a polar table about the observer, in which what "
               "remains after the chord's angle is subtracted is smooth).",
-              "* A moving camera: any table made per radius costs its build every frame (about 100-300x a "
-              "frame). Exact `connect` per point costs about 50-100x the lookups, every frame. A table in "
+              "* A moving camera: any table made per radius costs its build every frame (the former mode's "
+              "figures at the end of the dolly section). Exact `connect` per point costs about 50-100x the lookups, every frame. A table in "
               "(1/b, 1/r) would serve every radius with one table, but its root find per point costs at "
               "least a dozen lookups per point and iteration counts that depend on the point: several times "
               "today's mapping, with no error advantage. A table over the observer radius built at once "
-              "costs minutes and a gigabyte. The family builds that 3-D table lazily: only the exact tables "
+              "costs minutes and hundreds of MB (its row above). The family builds that 3-D table lazily: only the exact tables "
               "near the radii the camera visits, once each, kept in memory; per frame it costs a few "
               "microseconds plus interpolating the table rows a frame's points touch.",
               "* Farms: the family's tables depend only on their radius, so every process computes the same "
