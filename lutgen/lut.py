@@ -141,26 +141,13 @@ class LUT:
     def lookup_orders(self, r, phi, orders=(1, 2), quantities=QUANTITIES) -> dict:
         """Like :meth:`lookup` for several orders at once: {order: Lookup}. The interpolation stencil
         (which depends on (r, phi) only) is computed once and shared by the orders."""
-        ks = {order: _order_index(order) for order in orders}
-        unknown = set(quantities) - set(QUANTITIES)
-        if unknown:
-            raise ValueError(f"unknown quantities {sorted(unknown)}; choose from {QUANTITIES}")
-        qi = [QUANTITIES.index(q) for q in quantities]
-        r, phi = np.broadcast_arrays(np.asarray(r, dtype=np.float64), np.asarray(phi, dtype=np.float64))
-        shape = r.shape
-        r, p = r.ravel(), phi.ravel()
-        out = {order: {q: np.empty(r.size) for q in quantities} for order in ks}
-        # in blocks: the (n, 4, 4) stencils of a block stay in the CPU's cache (several times faster
-        # than one pass over 10^4-10^5 points); every point's value is computed the same way
-        for a in range(0, r.size, LOOKUP_BLOCK):
-            b = min(a + LOOKUP_BLOCK, r.size)
-            self._lookup_block(r[a:b], p[a:b], ks, quantities, qi, {o: {q: v[a:b] for q, v in got.items()}
-                                                                  for o, got in out.items()})
+        shape, _, out = lookup_in_blocks(self, r, phi, orders, quantities)
         return {order: Lookup(*(got[q].reshape(shape) if q in got else None for q in QUANTITIES))
                 for order, got in out.items()}
 
-    def _lookup_block(self, r, p, ks, quantities, qi, dest):
+    def _lookup_block(self, r, p, ks, quantities, dest):
         """lookup_orders for 1-d ``r``, ``p`` (one block), written into ``dest`` {order: {quantity: (n,)}}."""
+        qi = [QUANTITIES.index(q) for q in quantities]
         with np.errstate(divide="ignore", invalid="ignore"):
             x = 1.0 / r
         gx = (x - self.x_min) / (self.x_max - self.x_min) * (self.n_r - 1)
@@ -187,6 +174,27 @@ class LUT:
         from .lutfile import save_lut
 
         save_lut(self, path)
+
+
+def lookup_in_blocks(table, r, phi, orders, quantities):
+    """The shared frame of the tables' ``lookup_orders``: checks ``orders`` and ``quantities``,
+    broadcasts (r, phi) and fills {order: {quantity: (N,)}} block by block with
+    ``table._lookup_block(r, p, ks, quantities, dest)``. Returns (shape, (r, p) flattened, out)."""
+    ks = {order: _order_index(order) for order in orders}
+    unknown = set(quantities) - set(QUANTITIES)
+    if unknown:
+        raise ValueError(f"unknown quantities {sorted(unknown)}; choose from {QUANTITIES}")
+    r, phi = np.broadcast_arrays(np.asarray(r, dtype=np.float64), np.asarray(phi, dtype=np.float64))
+    shape = r.shape
+    r, p = r.ravel(), phi.ravel()
+    out = {order: {q: np.empty(r.size) for q in quantities} for order in ks}
+    # in blocks: the (n, 4, 4) stencils of a block stay in the CPU's cache (several times faster
+    # than one pass over 10^4-10^5 points); every point's value is computed the same way
+    for a in range(0, r.size, LOOKUP_BLOCK):
+        b = min(a + LOOKUP_BLOCK, r.size)
+        table._lookup_block(r[a:b], p[a:b], ks, quantities, {o: {q: v[a:b] for q, v in got.items()}
+                                                             for o, got in out.items()})
+    return shape, (r, p), out
 
 
 def _order_index(order) -> int:

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .lut import LOOKUP_BLOCK, QUANTITIES, Lookup, _cubic_stencil, _order_index
+from .lut import QUANTITIES, Lookup, _cubic_stencil, lookup_in_blocks
 from .solver import check_observer_radius, connect, connect_grid
 
 R_MIN = 1.05
@@ -223,19 +223,8 @@ class WideLUT:
 
     def lookup_orders(self, r, phi, orders=(1, 2), quantities=QUANTITIES) -> dict:
         """:meth:`lookup` for several orders at once: {order: Lookup} (one stencil per point)."""
-        ks = {order: _order_index(order) for order in orders}
-        unknown = set(quantities) - set(QUANTITIES)
-        if unknown:
-            raise ValueError(f"unknown quantities {sorted(unknown)}; choose from {QUANTITIES}")
-        r, phi = np.broadcast_arrays(np.asarray(r, dtype=np.float64), np.asarray(phi, dtype=np.float64))
-        shape = r.shape
-        r, p = r.ravel(), phi.ravel()
-        out = {order: {q: np.empty(r.size) for q in quantities} for order in ks}
-        for a in range(0, r.size, LOOKUP_BLOCK):
-            b = min(a + LOOKUP_BLOCK, r.size)
-            self._lookup_block(r[a:b], p[a:b], ks, quantities, {o: {q: v[a:b] for q, v in got.items()}
-                                                                for o, got in out.items()})
-        if 1 in ks:  # next to the observer: the polar table about it
+        shape, (r, p), out = lookup_in_blocks(self, r, phi, orders, quantities)
+        if 1 in out:  # next to the observer: the polar table about it
             near = np.flatnonzero(self.near_observer(r, p))
             if near.size:
                 got = self._apex_lookup(r[near], p[near], quantities)

@@ -10,21 +10,7 @@ import pytest
 import bpy  # noqa: E402  (pinned in requirements/dev.txt)
 
 import grlens_addon  # noqa: E402
-
-
-@pytest.fixture(scope="module", autouse=True)
-def registered():
-    grlens_addon.register()
-    grlens_addon.register()  # idempotent
-    yield
-    grlens_addon.unregister()
-
-
-@pytest.fixture(autouse=True)
-def empty_file():
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    yield
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+from blender_session import empty_file, registered  # noqa: E402,F401  (autouse fixtures)
 
 
 def _image_objects():

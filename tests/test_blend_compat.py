@@ -13,24 +13,10 @@ import pytest
 
 import bpy  # noqa: E402
 
-import grlens_addon  # noqa: E402
+from blender_session import empty_file, registered  # noqa: E402,F401  (autouse fixtures)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 BLEND = os.path.join(HERE, "data", "pre_issue19.blend")
-
-
-@pytest.fixture(scope="module", autouse=True)
-def registered():
-    grlens_addon.register()
-    yield
-    grlens_addon.unregister()
-
-
-@pytest.fixture(autouse=True)
-def empty_file():
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    yield
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
 
 
 def _images():

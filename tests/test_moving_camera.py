@@ -10,24 +10,10 @@ import pytest
 
 import bpy
 
-import grlens_addon
+from blender_session import empty_file, registered  # noqa: F401  (autouse fixtures)
 from lutgen import connect
 
 R_S = 2.0
-
-
-@pytest.fixture(scope="module", autouse=True)
-def registered():
-    grlens_addon.register()
-    yield
-    grlens_addon.unregister()
-
-
-@pytest.fixture(autouse=True)
-def empty_file():
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    yield
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
 
 
 def _fly_in_scene():

@@ -21,7 +21,12 @@ def table():
 
 @pytest.fixture(scope="module")
 def family():
-    return W.LUTFamily()
+    """A family of smaller tables (its interpolation in r_obs is what is tested; the default size's
+    spatial accuracy is tested on ``table``)."""
+    return W.LUTFamily(rows=SMALL[:3], n_phi=SMALL[3], max_slices=40)
+
+
+SMALL = (24, 24, 96, 192)
 
 
 def _beside(rng, r_obs, n, d_min, d_max):
@@ -114,7 +119,7 @@ def test_family_matches_the_exact_table_of_any_radius(family, r_obs):
     built for r_obs itself: the same lookups to 3e-6 rad (5e-6 rad next to the photon sphere)."""
     assert family.nodes_for(r_obs) is not None
     interp = family.at(r_obs)
-    exact = W.build_wide_lut(r_obs)
+    exact = W.build_wide_lut(r_obs, rows=SMALL[:3], n_phi=SMALL[3])
     assert interp.parameters["source"] == "family" and exact.parameters["source"] == "exact"
     rng = np.random.default_rng(11)
     r = np.concatenate([10 ** rng.uniform(np.log10(1.06), 6, 3000), _beside(rng, r_obs, 1000, 0.02, 0.5)[0]])
@@ -140,7 +145,7 @@ def test_family_is_deterministic_and_builds_each_node_once():
 
     rng = np.random.default_rng(5)
     r, phi = 10 ** rng.uniform(0.1, 3, 2000), rng.uniform(0, np.pi, 2000)
-    fam1, fam2 = W.LUTFamily(builder=builder), W.LUTFamily(builder=builder)
+    fam1, fam2 = (W.LUTFamily(rows=SMALL[:3], n_phi=SMALL[3], builder=builder) for _ in range(2))
     k = fam1.nodes_for(10.0)[1]
     inside = [1 + (fam1.node_radius(k) - 1) * math.exp(t * fam1.step) for t in (0.1, 0.4, 0.7, 0.95)]
     for r_obs in inside:
@@ -154,7 +159,7 @@ def test_family_is_deterministic_and_builds_each_node_once():
 
 
 def test_family_outside_its_range_builds_the_radius_itself():
-    fam = W.LUTFamily(max_slices=2)
+    fam = W.LUTFamily(rows=SMALL[:3], n_phi=SMALL[3], max_slices=2)
     assert fam.nodes_for(1.51) is None and fam.nodes_for(2e5) is None
     lut = fam.at(1.51)
     assert lut.parameters["source"] == "exact" and lut.r_obs == 1.51
