@@ -250,9 +250,14 @@ class WideLUT:
     def near_observer(self, r, p) -> np.ndarray:
         """Mask of the points (r, p) closer to the observer than APEX_RADIUS * r_obs (and inside the
         table), whose order-1 rays come from the polar table about the observer."""
-        s, _ = apex_coordinates(r, p, self.r_obs)
+        reach = APEX_RADIUS * self.r_obs
         with np.errstate(invalid="ignore"):
-            return (s < APEX_RADIUS * self.r_obs) & (r >= self.r_min) & (p >= 0.0) & (p <= np.pi)
+            # only points within the reach in r and in phi (sin(phi) <= s / r_obs) can be that close
+            near = (np.abs(r - self.r_obs) < reach) & (p >= 0.0) & (p < math.asin(APEX_RADIUS) + 1e-9) & (r >= self.r_min)
+        at = np.flatnonzero(near)
+        if at.size:
+            near[at] = apex_coordinates(r[at], p[at], self.r_obs)[0] < reach
+        return near
 
     def _apex_lookup(self, r, p, quantities) -> dict:
         """Order-1 {quantity: values} of points next to the observer from the polar table ``apex``."""
