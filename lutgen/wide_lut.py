@@ -15,19 +15,20 @@ at the observer's own radius x_o = 1/r_obs:
 * the inner block, ``n_in`` rows from x_m to x_max = 1/r_min (the hole's neighbourhood).
 
 The point where a table of connecting rays is singular, the observer itself (x_o, phi = 0), where
-xi jumps from 0 (targets beyond it) to pi (targets below it), is then a corner of the outer and the middle
-block, never inside an interpolation stencil. Order-1 lookups within APEX_RADIUS * r_obs of the
-observer read a small polar table about it instead (``apex``: rows uniform in the distance s from the
-observer, columns in the angle theta of the chord from the outward radial), where what remains of xi
-after the chord's angle is subtracted is a smooth function (about s times a function of theta). Closed-form parts are subtracted before storing (:func:`singular_parts`): from order 1's
-xi the static-frame angle of the straight chord to the target, and from the travel times a
-closed-form travel time built on the tortoise coordinate r* = r + ln(r - 1), which removes the
-growth to infinity (r + ln r), the logarithm at the horizon and (order 1) the cone at the observer,
-so that what is interpolated is smooth.
+xi jumps from 0 (targets beyond it) to pi (targets below it), is then a corner of the outer and the
+middle block, never inside an interpolation stencil. Order-1 lookups within APEX_RADIUS * r_obs of
+the observer read a small polar table about it instead (``apex``: rows uniform in the distance s
+from the observer, columns in the angle theta of the chord from the outward radial), where what
+remains of xi after the chord's angle is subtracted is smooth (about s times a function of theta).
 
-Because the blocks are scale-free near the observer (uniform in r_obs/r), the
-tables of different observers agree node by node up to the slow change of the light bending with
-r_obs: :class:`LUTFamily` holds exact tables at the fixed radii 1 + exp(k * step) and interpolates
+Closed-form parts are subtracted before storing (:func:`singular_parts`): from order 1's xi the
+static-frame angle of the straight chord to the target, and from the travel times a closed-form
+travel time built on the tortoise coordinate r* = r + ln(r - 1), which removes the growth to
+infinity (r + ln r), the logarithm at the horizon and (order 1) the cone at the observer, so that
+what is interpolated is smooth.
+
+Because the blocks are scale-free near the observer (uniform in r_obs/r), the tables of different
+observers agree node by node up to the slow change of the light bending with r_obs: :class:`LUTFamily` holds exact tables at the fixed radii 1 + exp(k * step) and interpolates
 them (cubic Lagrange in ln(r_obs - 1), node by node: like ln r_obs far out, denser towards the photon
 sphere, where the tables change fastest) to give the table of any camera radius in milliseconds;
 a camera that moves every frame therefore needs no new table per frame.
@@ -38,7 +39,7 @@ import math
 import os
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -51,13 +52,14 @@ first-order image of a surface is a sliver under the photon ring that no camera 
 
 R_FAR = 1e9
 """The outer block's first row (x = 0) holds the rays to r = R_FAR r_s: their directions differ from
-those to infinity by about r_obs / R_FAR rad (2e-8 at r_obs = 20), and dt - |r* - r*_obs| is still
-exact there to about 1e-7 r_s/c in float64."""
+those to infinity by about r_obs / R_FAR rad (2e-8 at r_obs = 20), and the travel time less its
+closed form (:func:`singular_parts`) is still exact there to about 1e-7 r_s/c in float64."""
 
 APEX_RADIUS = 0.3
 """Order-1 points closer to the observer than this many times r_obs are looked up in the polar table
 about the observer: there xi is mostly a function of the direction from the camera, which the main
-table's rows and columns do not follow (errors of 1e-6 rad at this distance, more closer in)."""
+table's rows and columns do not follow (there its errors are 2e-7 rad at this distance, growing
+towards the camera; the polar table's stay below 1e-8 rad)."""
 
 APEX_SIZE = (32, 128)
 """(rows in s, columns in theta) of the polar table about the observer."""
