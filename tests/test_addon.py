@@ -354,57 +354,29 @@ def test_remembered_inputs_and_topologies_stay_bounded():
     assert len(rebuild._INPUTS) == 0 and len(upload._TOPOLOGY) == 0
 
 
-def test_packed_family_tables_are_saved_and_used_exactly(tmp_path):
-    """Every Distance (the default): pack_lut stores the exact tables the camera's table is
-    interpolated from; after a reload nothing is built and the table is the same to the bit."""
+@pytest.mark.parametrize("mode, builder", [("EVERY_DISTANCE", "build_wide_lut"), ("FIXED_RANGE", "build_lut")])
+def test_packed_tables_are_saved_and_used_exactly(tmp_path, mode, builder):
+    """pack_lut stores the camera's tables (Every Distance, the default: the exact tables its table is
+    interpolated from; Fixed Range: the LUT itself); after a reload nothing is built and the table is
+    the same to the bit; unpack_luts removes them."""
+    import lutgen
     from grlens_addon.blender import lutcache
 
     scene, sphere = _small_demo()
-    assert scene.grlens.lut_mode == "EVERY_DISTANCE"
+    scene.grlens.lut_mode = mode
     assert bpy.ops.grlens.pack_lut() == {"FINISHED"}
     built = lutcache.get_table(scene.grlens, 20.0)
     path = str(tmp_path / "packed.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
     bpy.ops.wm.open_mainfile(filepath=path)
     lutcache.clear()
-    import lutgen
-
     calls = []
-    real = lutgen.build_wide_lut
-    lutgen.build_wide_lut = lambda *a, **k: calls.append(a) or real(*a, **k)
+    real = getattr(lutgen, builder)
+    setattr(lutgen, builder, lambda *a, **k: calls.append(a) or real(*a, **k))
     try:
         loaded = lutcache.get_table(bpy.context.scene.grlens, 20.0)
-        assert np.array_equal(loaded.data, built.data)
     finally:
-        lutgen.build_wide_lut = real
-    assert not calls  # read from the file, not built
-    assert bpy.ops.grlens.unpack_luts() == {"FINISHED"}
-    assert lutcache.STORE not in bpy.data.texts
-
-
-def test_packed_lut_is_saved_and_used_exactly(tmp_path):
-    """Fixed Range: the LUT itself is packed."""
-    from grlens_addon.blender import lutcache
-
-    scene, sphere = _small_demo()
-    scene.grlens.lut_mode = "FIXED_RANGE"
-    assert bpy.ops.grlens.pack_lut() == {"FINISHED"}
-    g = scene.grlens
-    key = (20.0, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
-    built = lutcache.get_lut(*key)
-    path = str(tmp_path / "packed.blend")
-    bpy.ops.wm.save_as_mainfile(filepath=path)
-    bpy.ops.wm.open_mainfile(filepath=path)
-    lutcache.clear()
-    import lutgen
-
-    calls = []
-    real = lutgen.build_lut
-    lutgen.build_lut = lambda *a, **k: calls.append(a) or real(*a, **k)
-    try:
-        loaded = lutcache.get_lut(*key)
-    finally:
-        lutgen.build_lut = real
+        setattr(lutgen, builder, real)
     assert not calls  # read from the file, not built
     assert np.array_equal(loaded.data, built.data)
     assert bpy.ops.grlens.unpack_luts() == {"FINISHED"}
