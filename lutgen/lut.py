@@ -107,11 +107,6 @@ class LUT:
         return np.linspace(0.0, np.pi, self.n_phi)
 
     @property
-    def _stencil_offsets(self) -> np.ndarray:
-        """(16,) flat offsets of a 4x4 interpolation stencil's nodes from its first node, row by row."""
-        return (np.arange(4)[:, None] * self.n_phi + np.arange(4)[None, :]).ravel()
-
-    @property
     def data32(self) -> np.ndarray:
         """The table in float32, (2, 4, n_r, n_phi), C-contiguous (for rendering/upload)."""
         if self._data32 is None:
@@ -156,12 +151,7 @@ class LUT:
         inside = (gx >= -tol) & (gx <= self.n_r - 1 + tol) & (gp >= -tol) & (gp <= self.n_phi - 1 + tol)
         gx = np.where(inside, np.clip(gx, 0.0, self.n_r - 1), 0.0)
         gp = np.where(inside, np.clip(gp, 0.0, self.n_phi - 1), 0.0)
-        ix, wx = _cubic_stencil(gx, self.n_r)
-        ip, wp = _cubic_stencil(gp, self.n_phi)
-        # (N, 4, 4) flat indices into a channel, and weights (built along N: numpy is slow on short
-        # inner axes)
-        idx = ((ix * self.n_phi + ip)[:, None] + self._stencil_offsets).reshape(-1, 4, 4)
-        w = np.ascontiguousarray((wx[:, None, :] * wp[None, :, :]).transpose(2, 0, 1))
+        idx, w = stencil_2d(*_cubic_stencil(gx, self.n_r), *_cubic_stencil(gp, self.n_phi), self.n_phi)
         outside = ~inside
         for order, k in ks.items():
             for q, i in zip(quantities, qi):
@@ -174,6 +164,17 @@ class LUT:
         from .lutfile import save_lut
 
         save_lut(self, path)
+
+
+def stencil_2d(ix, wx, ip, wp, n_cols):
+    """(N, 4, 4) flat indices into a row-major channel of ``n_cols`` columns and the (N, 4, 4) weights
+    of tensor-product cubic stencils, from the first rows ``ix`` and columns ``ip`` (N,) and the
+    weights ``wx``, ``wp`` (4, N) of :func:`_cubic_stencil` (built along N: numpy is slow on short
+    inner axes)."""
+    offsets = (np.arange(4)[:, None] * n_cols + np.arange(4)[None, :]).ravel()
+    idx = ((ix * n_cols + ip)[:, None] + offsets).reshape(-1, 4, 4)
+    w = np.ascontiguousarray((wx[:, None, :] * wp[None, :, :]).transpose(2, 0, 1))
+    return idx, w
 
 
 def lookup_in_blocks(table, r, phi, orders, quantities):

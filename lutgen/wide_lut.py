@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .lut import QUANTITIES, Lookup, _cubic_stencil, lookup_in_blocks
+from .lut import QUANTITIES, Lookup, _cubic_stencil, lookup_in_blocks, stencil_2d
 from .solver import check_observer_radius, connect, connect_grid
 
 R_MIN = 1.05
@@ -267,11 +267,7 @@ class WideLUT:
         n_s, n_t = self.apex.shape[1:]
         gs = np.clip(s / (APEX_RADIUS * self.r_obs) * (n_s - 1), 0.0, n_s - 1)
         gt = np.clip(theta / np.pi * (n_t - 1), 0.0, n_t - 1)
-        i_s, w_s = _cubic_stencil(gs, n_s)
-        i_t, w_t = _cubic_stencil(gt, n_t)
-        offsets = (np.arange(4)[:, None] * n_t + np.arange(4)[None, :]).ravel()
-        idx = ((i_s * n_t + i_t)[:, None] + offsets).reshape(-1, 4, 4)
-        w = np.ascontiguousarray((w_s[:, None, :] * w_t[None, :, :]).transpose(2, 0, 1))
+        idx, w = stencil_2d(*_cubic_stencil(gs, n_s), *_cubic_stencil(gt, n_t), n_t)
         xi_chord, dt_chord, _ = singular_parts(r, p, self.r_obs)
         out = {}
         for q in quantities:
@@ -293,10 +289,7 @@ class WideLUT:
         ix, wx = _cubic_stencil(gl, n)
         ix = ix + self._starts.take(block)
         table = self._rows_ready(ix)
-        ip, wp = _cubic_stencil(gp, self.n_phi)
-        offsets = (np.arange(4)[:, None] * self.n_phi + np.arange(4)[None, :]).ravel()
-        idx = ((ix * self.n_phi + ip)[:, None] + offsets).reshape(-1, 4, 4)
-        w = np.ascontiguousarray((wx[:, None, :] * wp[None, :, :]).transpose(2, 0, 1))
+        idx, w = stencil_2d(ix, wx, *_cubic_stencil(gp, self.n_phi), self.n_phi)
         outside = ~inside
         parts = {}
         if "dt" in quantities or ("xi" in quantities and 1 in ks):
@@ -438,8 +431,7 @@ class LUTFamily:
         ks = self.nodes_for(r_obs)
         if ks is None:
             return self.exact(r_obs)
-        t = math.log(r_obs - 1.0) / self.step - ks[0]  # in [1, 2)
-        w = [-(t - 1) * (t - 2) * (t - 3) / 6, t * (t - 2) * (t - 3) / 2,
-             -t * (t - 1) * (t - 3) / 2, t * (t - 1) * (t - 2) / 6]
+        t = math.log(r_obs - 1.0) / self.step - ks[0]  # in [1, 2): between the middle two nodes
+        w = [float(v) for v in _cubic_stencil(np.array([t]), 4)[1][:, 0]]
         exact = [self.exact(self.node_radius(k)) for k in ks]
         return _InterpolatedLUT(r_obs, self.r_min, self.rows, w, [t.data for t in exact], [t.apex for t in exact])
