@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import math
 import os
 import platform
@@ -177,10 +178,42 @@ def compare(ref, poly, cam, src, wrap_uv=(True, False), **kw):
                                      uv, src.positions, src.tris, src.corner_uv, wrap_uv), **kw)
 
 
+REF_CACHE = None
+"""A directory of stored reference images (``--ref-cache``), or None: references are traced anew."""
+
+
+def _reference_key(scene, cam) -> str:
+    """A digest of everything a reference image depends on: the triangles, UVs, object ids and the camera."""
+    h = hashlib.blake2b(digest_size=16)
+    for a in (scene.positions, scene.tris, scene.corner_uv, scene.object_id, cam.position, cam.rotation):
+        if a is not None:
+            h.update(np.ascontiguousarray(a).tobytes())
+    h.update(repr((cam.fov_y, cam.width, cam.height, R_S)).encode())
+    return h.hexdigest()
+
+
 def reference_image(scene, cam):
+    """(buffers, seconds) of the reference ray tracer; with REF_CACHE, read from there when stored
+    (the seconds are those of the run that traced it), else traced and stored."""
+    path = os.path.join(REF_CACHE, _reference_key(scene, cam) + ".npz") if REF_CACHE else None
+    if path and os.path.exists(path):
+        with np.load(path, allow_pickle=False) as z:
+            fields = {f.name for f in dataclasses.fields(raytrace.PixelBuffers)} - {"info"}
+            buf = raytrace.PixelBuffers(**{k: z[k] for k in z.files if k in fields})
+            empty = raytrace.PixelBuffers.empty(buf.shape)
+            for f in fields - set(z.files):  # a field added to PixelBuffers after the file was written
+                setattr(buf, f, getattr(empty, f))
+            return buf, float(z["_seconds"])
     t0 = time.perf_counter()
     buf = raytrace.trace(scene, cam, np.zeros(3), R_S)
-    return buf, time.perf_counter() - t0
+    seconds = time.perf_counter() - t0
+    if path:
+        os.makedirs(REF_CACHE, exist_ok=True)
+        arrays = {f.name: getattr(buf, f.name) for f in dataclasses.fields(buf) if f.name != "info"}
+        tmp = path + ".tmp.npz"
+        np.savez(tmp, _seconds=seconds, **arrays)
+        os.replace(tmp, path)
+    return buf, seconds
 
 
 def _angle(text):
@@ -444,8 +477,13 @@ def main(argv=None):
                     help="the camera's table: the add-on's default (a LUTFamily table) or the former fixed-range LUT")
     ap.add_argument("--orbit", type=int, default=0, metavar="STEP",
                     help="also every STEP degrees of the orbit: which angles meet the targets")
+    ap.add_argument("--ref-cache", default=None, metavar="DIR",
+                    help="store reference images in DIR and reuse them (keyed by scene and camera; delete DIR "
+                         "when the ray tracer changes)")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore", RuntimeWarning)
+    global REF_CACHE
+    REF_CACHE = args.ref_cache
     w, h = (int(x) for x in args.resolution.lower().split("x"))
     angles = [_angle(a) for a in args.angles.split(",") if a.strip()]
     sweep_angles = [_angle(a) for a in args.sweep_angles.split(",")] if args.sweep_angles else angles

@@ -19,7 +19,7 @@ quads (two triangles each) between consecutive circles, so:
 
 * the ring's edge is drawn by chords between points of the circle theta_E, N per turn, chosen so
   they sag by at most ``EDGE_FACTOR * max_error_px`` pixels; the points are moved off the circle by
-  CHORD_OUTSET of that sag, so that the chords cross it (limit_images);
+  B.CHORD_OUTSET of that sag, so that the chords cross it (limit_images);
 * the ratio q keeps the tangential error of the linear interpolation inside a piece (a point of the
   surface is drawn at the azimuth of its corners' mean, not its own) within ``max_error_px``;
 * the innermost circle is where the image is within ``BAND_FACTOR * max_error_px`` pixels of theta_E,
@@ -31,13 +31,13 @@ not subdivide them. Triangles that reach beyond are kept as they are, so the pat
 the same surface (no cracks; the two draw the same points).
 Where the surface does not cover a whole circle (a mesh boundary, a hole, or the fold where a closed
 surface turns parallel to the axis), the innermost circle must still be complete (the ring's edge
-needs every azimuth), else there is no patch. If the fold comes close to the axis (CLIP_REACH), the
-cells are cut along the source triangles under them (CLIP_TO_TRIANGLES): each face lies on one
+needs every azimuth), else there is no patch. If the fold comes close to the axis (B.CLIP_REACH), the
+cells are cut along the source triangles under them (B.CLIP_TO_TRIANGLES): each face lies on one
 source triangle, the patch reaches the sheet's edge, and it replaces every triangle of its sheet
 inside its outer circle, the crossed ones included. Otherwise (the plain grid) the patch goes on with
 the cells (between two circles and two azimuths) whose four corners are on the surface, and replaces
 only the triangles that lie inside such cells; where the surface turns towards the axis' direction
-(next to such a fold), circles are added between those where it is steep (STEEP_RATIO), so that
+(next to such a fold), circles are added between those where it is steep (B.STEEP_RATIO), so that
 faces stay close to the surface.
 
 Each vertex of a patch lies on one source triangle, whose corner values (UVs, normals) it takes
@@ -45,7 +45,7 @@ Each vertex of a patch lies on one source triangle, whose corner values (UVs, no
 carry their own triangle's values exactly). On a closed surface seen
 from outside, faces turned away along the rays are not drawn, and a patch whose sheet is turned away
 (the far side of an object behind the hole) gets no grid at all: neither when all of it is, nor when
-the part that is not lies well away from the axis (HIDDEN_CORE), where kept pieces draw it.
+the part that is not lies well away from the axis (B.HIDDEN_CORE), where kept pieces draw it.
 
 Units: positions in Blender units (BU); delta in BU; angles in radians; pixel quantities in pixels
 of ``pixel_angle`` radians. Axis coordinates: (x, y, z) relative to the hole, z along the axis
@@ -59,43 +59,12 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from . import illumination, mapping, silhouette
+from . import budget as B
+from . import mapping, silhouette
 from .mapping import row_norm
 from .ragged import group_offsets
 from .culling import (axis_coordinates, axis_crossing, axis_distance, hole_angle, longest_side, max_ring_span,
                       projected_area, within_axis_distance)
-
-EDGE_FACTOR = 1.0 / 16.0
-"""The ring's edge is drawn with chords that sag by at most this times ``max_error_px``: a second-order
-ring is less than a pixel wide, so its coverage follows its edges to a small fraction of a pixel."""
-
-BAND_FACTOR = 0.25
-"""The innermost circle of a patch lies where the image is within this times ``max_error_px`` of the
-Einstein ring; the band inside it is drawn with pieces that span the whole distance to the ring."""
-
-RADIUS_FACTOR = 2.0
-"""A patch reaches this many times the largest distance from the axis of the crossed triangle's
-corners (or less: the last circle with an image). Larger patches would replace more of the
-magnified triangles around the crossing (6: half the pieces of the benchmark sphere's frame behind
-the hole), but a patch face spans several source triangles there and its corner values (UVs,
-normals) are interpolated linearly across them: the texture lands up to 2 px off at 6, 0.2 px at 2
-(benchmarks/bench_accuracy.py, screen error)."""
-
-PROBE_AZIMUTHS = 8
-"""Azimuths at which the crossed triangle's plane is probed for the innermost circle (a tilted surface
-comes closer to the ring's image in some directions than in others)."""
-
-MAX_PATCHES = 8
-"""At most this many patches per mesh (the crossings with the largest triangles): a closed surface
-crosses the axis a few times; a triangle soup may cross it thousands of times, and there the ring
-culling (culling.py) does."""
-
-MAX_AZIMUTHS = 1024
-MAX_CIRCLES = 64
-MAX_GRID = 32768
-"""Bounds of one patch's grid: azimuths per turn, circles, and their product (a patch has twice as
-many faces). Beyond them the ring's edge gets coarser chords or a wider innermost band."""
-
 
 @dataclass
 class Crossing:
@@ -179,7 +148,7 @@ def ring_orders(crossing: Crossing, orders) -> tuple:
     return tuple(o for o in orders if crossing.along < 0 or o == 2)
 
 
-def limit_images(crossing: Crossing, psi, scene: mapping.Scene, lut, order, look=None,
+def limit_images(crossing: Crossing, psi, mp: mapping.Mapper, order, look=None,
                  chords: int | None = None) -> mapping.Images:
     """Images of order ``order`` of the crossing point approached from azimuth ``psi`` (K,) radians
     about the axis (measured in the frame of culling.axis_coordinates): the points of its Einstein
@@ -188,15 +157,16 @@ def limit_images(crossing: Crossing, psi, scene: mapping.Scene, lut, order, look
     when the caller has it (see :func:`_limit_look`).
 
     ``chords``: None (the exact points), or the number of equal azimuth steps per turn in which the
-    ring is drawn as a polygon: then the points are moved off the ring by CHORD_OUTSET times the sag
+    ring is drawn as a polygon: then the points are moved off the ring by B.CHORD_OUTSET times the sag
     of the chords between them (chord_sag), away from the side the chords bow to, so that the chords
-    cross the ring instead of all lying on one side of it (see CHORD_OUTSET)."""
+    cross the ring instead of all lying on one side of it (see B.CHORD_OUTSET)."""
+    scene = mp.scene
     plane = _limit_plane(crossing, psi, scene)
     if look is None:  # one point: the same (r, phi) at every azimuth
-        look = _limit_look(crossing, scene, lut, (order,))[order]
+        look = _limit_look(crossing, mp, (order,))[order]
     xi, dt = np.broadcast_to(look.xi, plane.r.shape), np.broadcast_to(look.dt, plane.r.shape)
     if chords:
-        xi = xi - CHORD_OUTSET * chord_sag(xi, 2.0 * np.pi / chords)
+        xi = xi - B.CHORD_OUTSET * chord_sag(xi, 2.0 * np.pi / chords)
     sign = 1.0 if order == 1 else -1.0
     c, s = np.cos(xi), np.sin(xi)
     direction = c[:, None] * scene.e1 + (sign * s)[:, None] * plane.e2
@@ -208,21 +178,6 @@ def limit_images(crossing: Crossing, psi, scene: mapping.Scene, lut, order, look
                           xi=xi.copy(), dt=dt.copy(), ux=None, uy=None)
 
 
-CHORD_OUTSET = 2.0 / 3.0
-"""The limit vertices (the ring's edge, see limit_images) lie this fraction of their chords' sag off
-the Einstein ring, on the side away from the chords' bow. Chords between exact points of the ring
-lie all on one side of it: the polygon misses (or adds) a sliver along the whole ring, and next to
-thin rings (the second-order ring in front of the hole, under a pixel wide) the pixel centres in
-that sliver were most of the coverage mismatch. Moved out by 2/3 of the sag, the chords cross the
-ring and the polygon covers it on average (the sliver's signed area is zero); the pixels drawn
-wrongly along the edge drop to about 0.38 of those of exact vertices (mean |error| 0.26 s against
-0.67 s for a sag s), and the largest deviation to 2/3 of the sag. Measured on the benchmark sphere
-(benchmarks/bench_accuracy.py, 640x360) every degree at 348-12 and 168-192 deg: the largest coverage
-mismatch 0.52% -> 0.39% (three angles at or above 0.5% before, none now), the sum over 168-192 deg
--9%; in front of the hole the pixel centres next to the ring lie in groups of eight at one distance
-from its centre, which flip together, so single angles move both ways there."""
-
-
 def chord_sag(xi, step):
     """The angle (radians, signed) by which the great-circle chord between two directions at the
     same angle ``xi`` from scene.e1 and ``step`` radians apart in azimuth about it passes, at its
@@ -231,11 +186,11 @@ def chord_sag(xi, step):
     return np.arctan2(np.sin(xi) * np.cos(0.5 * step), np.cos(xi)) - xi
 
 
-def _limit_look(crossing: Crossing, scene: mapping.Scene, lut, orders) -> dict:
+def _limit_look(crossing: Crossing, mp: mapping.Mapper, orders) -> dict:
     """{order: lutgen.Lookup} of (xi, dt) of one point for the rays that reach the crossing point along
     the axis (the same at every azimuth)."""
-    plane = _limit_plane(crossing, np.zeros(1), scene)
-    return lut.lookup_orders(plane.r, plane.phi, tuple(orders), quantities=("xi", "dt"))
+    plane = _limit_plane(crossing, np.zeros(1), mp.scene)
+    return mp.rays(plane.r, plane.phi, orders, ("xi", "dt"))
 
 
 def _limit_plane(crossing: Crossing, psi, scene: mapping.Scene) -> mapping.PlaneCoordinates:
@@ -448,8 +403,8 @@ def _projected_bary(qx, qy, tris, x, y) -> np.ndarray:
 def grid_shape(ring_radius_px, max_error_px) -> tuple[int, float]:
     """(N, q): the number of azimuths per turn and the ratio of consecutive circles of a patch whose
     Einstein ring is ``ring_radius_px`` pixels from the hole's direction (see the module docstring)."""
-    s = float(max_ring_span(ring_radius_px, EDGE_FACTOR * max_error_px))
-    n = int(np.clip(np.ceil(2.0 * np.pi / max(s, 1e-12)), 16, MAX_AZIMUTHS))
+    s = float(max_ring_span(ring_radius_px, B.PATCH_EDGE_FACTOR * (B.COVERAGE_FACTOR * max_error_px)))
+    n = int(np.clip(np.ceil(2.0 * np.pi / max(s, 1e-12)), 16, B.MAX_AZIMUTHS))
     s = 2.0 * np.pi / n
     # a piece spanning circles delta and q delta and one azimuth step draws its interior up to
     # R s (q - 1) / (2 (q + 1)) pixels along the ring from where it belongs
@@ -457,63 +412,68 @@ def grid_shape(ring_radius_px, max_error_px) -> tuple[int, float]:
     return n, (1.0 + a) / (1.0 - a)
 
 
-def build_patches(src_positions, src_tris, edges_of_tri, n_edges, scene: mapping.Scene, lut, orders,
-                  pixel_angle, max_error_px, candidates=None, closed=False, crossings=None,
-                  leaving=None, axis_xyz=None) -> list[Patch]:
-    """The patches of a source mesh (positions (N, 3) BU, triangles (T, 3), ``edges_of_tri`` (T, 3) edge
-    indices of subdivision.Edges) for the image ``orders``, with their images. ``candidates``: the
-    triangles the axis may cross (culling.near_axis); ``crossings``: :func:`find_crossings`' result, when
-    the caller has it already (then ``candidates`` is not used). See the module docstring.
+def patching(frame) -> bool:
+    """True when the frame builds axis patches: pieces are measured on screen and may be subdivided."""
+    return frame.budget.active and frame.settings.max_tess_level > 1
 
-    ``closed`` (bool, or a function giving it, called only when the axis crosses the mesh): the mesh
-    is a closed surface with outward winding (pipeline.is_closed_outward) seen from outside, so
-    its points whose connecting ray starts into the surface (n . d < 0, with n the geometric normal of
-    the face's source triangle and d from illumination.towards_observer) are hidden by the surface
-    itself. Patch faces whose grid corners all face away are then left out (``Patch.facing``): on
-    the side of a closed object turned away from the hole, the whole patch is hidden and its images
-    are not computed (``images`` lacks that order), but it still replaces its triangles (see
-    HIDDEN_CORE for a sheet hidden but next to its rim).
 
-    ``leaving``: a function (vertices (K,) indices, order) -> (K, 3) giving d at source vertices (a
-    cache the caller shares with its own uses); default: looked up here. ``axis_xyz``:
-    culling.axis_coordinates of the source positions, when the caller has them."""
-    if not pixel_angle or not max_error_px:
+def crossings_of(frame, source) -> list[Crossing]:
+    """:func:`find_crossings` of a prepared source (frame.Source), found once and kept on it."""
+    if source.crossings is None:
+        scene = frame.scene
+        source.crossings = find_crossings(source.positions, source.tris, scene.camera, scene.hole,
+                                          source.near_axis, source.axis_xyz)
+    return source.crossings
+
+
+def build_patches(frame, source, sight) -> list[Patch]:
+    """The axis patches of a prepared source (frame.Source) in ``frame``, with their images: one per
+    point where the observer-hole axis crosses its surface (at most MAX_PATCHES), for the frame's
+    orders whose image of that point is an Einstein ring. See the module docstring.
+
+    ``sight`` (visibility.Sight): on a closed surface seen from outside, points whose connecting ray
+    starts into the surface (n . d < 0, with n the geometric normal of the face's source triangle and
+    d the direction the ray leaves it in) are hidden by the surface itself. Patch faces whose grid
+    corners all face away are then left out (``Patch.facing``): on the side of a closed object turned
+    away from the hole the whole patch is hidden and its images are not computed (``images`` lacks
+    that order), but it still replaces its triangles (see HIDDEN_CORE for a sheet hidden but next to
+    its rim)."""
+    if not patching(frame) or source.empty:
         return []
-    points = np.asarray(src_positions, np.float64)
-    tris = np.asarray(src_tris, np.int64)
-    if crossings is None:
-        crossings = find_crossings(points, tris, scene.camera, scene.hole, candidates, axis_xyz)
+    crossings = crossings_of(frame, source)
     if not crossings:
         return []
-    if callable(closed):
-        closed = bool(closed())
-    x, y, z = axis_coordinates(points, scene.camera, scene.hole) if axis_xyz is None else axis_xyz
-    if len(crossings) > MAX_PATCHES:
+    points, tris = source.positions, source.tris
+    x, y, z = source.axis_xyz
+    closed = sight.closed()
+    if len(crossings) > B.MAX_PATCHES:
         size = [np.ptp(x[tris[c.tri]]) + np.ptp(y[tris[c.tri]]) for c in crossings]
-        keep = np.sort(np.argsort(size, kind="stable")[::-1][:MAX_PATCHES])
+        keep = np.sort(np.argsort(size, kind="stable")[::-1][:B.MAX_PATCHES])
         crossings = [crossings[k] for k in keep]
     out = []
+    pixel_angle, tolerance = frame.budget.pixel_angle, frame.budget.tolerance_px
     for cr in crossings:
-        ords = ring_orders(cr, orders)
+        ords = ring_orders(cr, frame.orders)
         if ords:
-            patch = _build_one(cr, ords, points, tris, edges_of_tri, n_edges, x, y, z, scene, lut,
-                               pixel_angle, max_error_px, closed, leaving)
+            patch = _build_one(cr, ords, points, tris, source.edges.of_tri, len(source.edges.verts), x, y, z,
+                               frame.map, pixel_angle, tolerance, closed, sight.leaving)
             if patch is not None:
                 out.append(patch)
     return out
 
 
-def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, scene, lut, pixel_angle, max_error_px,
+def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp, pixel_angle, max_error_px,
                closed=False, leaving=None):
+    scene = mp.scene
     t0 = tris[cr.tri]
-    radius = RADIUS_FACTOR * float(np.hypot(x[t0], y[t0]).max())
+    radius = B.PATCH_RADIUS_FACTOR * float(np.hypot(x[t0], y[t0]).max())
     if not np.isfinite(radius) or radius <= 0:
         return None
     cand, first_radius = None, radius
     if closed:
         cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
-        cone, away = _hidden_sheet(cr, cand, orders, points, tris, scene, lut, leaving)
-        if cone and (away.all() or np.all(axis_distance(x, y, tris[cand[~away]]) >= HIDDEN_CORE * radius)):
+        cone, away = _hidden_sheet(cr, cand, orders, points, tris, mp, leaving)
+        if cone and (away.all() or np.all(axis_distance(x, y, tris[cand[~away]]) >= B.HIDDEN_CORE * radius)):
             # no grid: it would draw nothing, or only next to its rim, where kept pieces draw
             corner_d = np.hypot(x[tris[cand]], y[tris[cand]]).max(axis=1)
             return Patch(crossing=cr, n_azimuths=0, source_position=np.zeros((0, 3)),
@@ -522,25 +482,25 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
                          vertex_tri=np.zeros(0, np.int64), vertex_bary=np.zeros((0, 3)),
                          facing={o: np.zeros(0, bool) for o in orders})
     # the ring's radius on screen, per order
-    look = _limit_look(cr, scene, lut, orders)
-    ring = {o: limit_images(cr, np.zeros(1), scene, lut, o, look[o]) for o in orders}
+    look = _limit_look(cr, mp, orders)
+    ring = {o: limit_images(cr, np.zeros(1), mp, o, look[o]) for o in orders}
     if not all(bool(im.valid[0]) for im in ring.values()):
         return None
     theta_e = {o: float(hole_angle(im.direction, scene.camera, scene.hole)[0]) for o, im in ring.items()}
     n_az, q = grid_shape(max(theta_e.values()) / pixel_angle, max_error_px)
-    # the innermost circle: probe the image at PROBE_AZIMUTHS azimuths in the crossed triangle's plane
-    k = np.arange(MAX_CIRCLES + 1)
+    # the innermost circle: probe the image at B.PROBE_AZIMUTHS azimuths in the crossed triangle's plane
+    k = np.arange(B.MAX_CIRCLES + 1)
     probe_delta = radius * q ** (-k.astype(np.float64))
-    psi_p = 2.0 * np.pi * np.arange(PROBE_AZIMUTHS) / PROBE_AZIMUTHS
+    psi_p = 2.0 * np.pi * np.arange(B.PROBE_AZIMUTHS) / B.PROBE_AZIMUTHS
     qx = (probe_delta[:, None] * np.cos(psi_p)[None, :]).ravel()
     qy = (probe_delta[:, None] * np.sin(psi_p)[None, :]).ravel()
     lam = _projected_bary(qx, qy, np.repeat(t0[None], len(qx), axis=0), x, y)
     probe = lam @ points[t0]
-    band = BAND_FACTOR * max_error_px * pixel_angle
+    band = B.PATCH_BAND_FACTOR * (B.COVERAGE_FACTOR * max_error_px) * pixel_angle
     gap = np.zeros(len(qx))
-    for o, img in mapping.map_vertices_orders(probe, scene, lut, orders).items():
+    for o, img in mp.images(probe, orders).items():
         gap = np.maximum(gap, np.abs(hole_angle(img.direction, scene.camera, scene.hole) - theta_e[o]))  # NaN stays
-    gap = gap.reshape(len(k), PROBE_AZIMUTHS).max(axis=1)
+    gap = gap.reshape(len(k), B.PROBE_AZIMUTHS).max(axis=1)
     # no image (outside the LUT, horizon) next to the axis: no patch; farther out: a smaller patch
     bad = np.flatnonzero(~np.isfinite(gap))
     if bad.size and bad[-1] == len(k) - 1:
@@ -549,13 +509,13 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, sce
     radius = float(probe_delta[start])
     first = np.flatnonzero(gap[start:] <= band)
     n_circles = int(first[0]) + 1 if first.size else len(k) - start  # circles radius q^-k, k = first .. 0
-    n_circles = max(1, min(n_circles, MAX_GRID // n_az))
+    n_circles = max(1, min(n_circles, B.MAX_GRID // n_az))
     radii = radius * q ** (-np.arange(n_circles - 1, -1, -1, dtype=np.float64))
     # the surface under the grid
     if cand is None or radius != first_radius:
         cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
     return _grid_patch(radii, n_az, cand, projected_area(x, y, t0[None])[0] < 0, points, tris, x, y, z,
-                       scene, lut, orders, closed, cr, look)
+                       mp, orders, closed, cr, look)
 
 
 def _sheet(cr, radius, tris, of_tri, n_edges, x, y) -> np.ndarray:
@@ -568,40 +528,27 @@ def _sheet(cr, radius, tris, of_tri, n_edges, x, y) -> np.ndarray:
     return near[_connected(cr.tri, near, of_tri, n_edges)]
 
 
-HIDDEN_AZIMUTHS = 16
-"""Azimuths at which :func:`_hidden_sheet` samples the rays that arrive at a crossing point."""
-
-HIDDEN_CORE = 0.25
-"""On a closed surface, a crossing whose rays all arrive from behind the sheet (the cone of
-:func:`_hidden_sheet`) and whose sheet's triangles that are not turned away at every corner all lie
-at least HIDDEN_CORE times the patch's radius from the axis gets no grid either: the grid would draw
-only faces next to its rim, which those triangles' pieces draw (the ring culling drops none of them:
-none reaches the axis). The patch replaces only the triangles turned away. The benchmark sphere at
-175 / 185 deg: its far patch cost 7 ms of a 34 ms frame; 0.33 / 0.26% -> 0.37 / 0.34% of the pixels
-differ. Where such triangles reach the axis (174 and 186 deg), the grid is built: without it 0.55%
-of the pixels differed."""
-
-
-def _hidden_sheet(cr, cand, orders, points, tris, scene, lut, leaving=None):
+def _hidden_sheet(cr, cand, orders, points, tris, mp, leaving=None):
     """How much of the sheet ``cand`` around the crossing ``cr`` of a closed surface seen from outside
     is turned away from the camera along the rays of every order: (cone, away). ``cone``: at the
-    crossing point, for the rays arriving from HIDDEN_AZIMUTHS directions around the axis (the
+    crossing point, for the rays arriving from B.HIDDEN_AZIMUTHS directions around the axis (the
     point's rays form a cone: its Einstein ring); ``away`` (C,) bool: the triangles turned away at
     every corner (silhouette.turned_away, margin 0). With both, the whole patch draws nothing (the
     far side of an object behind the hole)."""
     corners, pts, local = silhouette.compact(points, tris[cand])
     if leaving is None:
-        looked = illumination.towards_observer(pts, scene, lut, orders)
+        looked = mp.leaving(pts, orders)
         leaving = lambda _, o: looked[o][0]  # noqa: E731
     t0 = tris[cr.tri]
     normal = silhouette.normals(points, t0[None])[0]
     normal = normal / np.linalg.norm(normal)
-    plane = _limit_plane(cr, 2.0 * np.pi * np.arange(HIDDEN_AZIMUTHS) / HIDDEN_AZIMUTHS, scene)
-    looks = lut.lookup_orders(plane.r[:1], plane.phi[:1], tuple(orders), quantities=("ux", "uy"))  # alike at every azimuth
+    scene = mp.scene
+    plane = _limit_plane(cr, 2.0 * np.pi * np.arange(B.HIDDEN_AZIMUTHS) / B.HIDDEN_AZIMUTHS, scene)
+    looks = mp.rays(plane.r[:1], plane.phi[:1], orders, ("ux", "uy"))  # alike at every azimuth
     away = np.ones(len(cand), bool)
     for o in orders:
         ux, uy = (np.broadcast_to(v, plane.r.shape) for v in (looks[o].ux, looks[o].uy))
-        d = illumination.leaving_direction(plane, scene, ux, uy)
+        d = mapping.leaving_direction(plane, scene, ux, uy)
         with np.errstate(invalid="ignore"):
             if not (d @ normal < 0).all():
                 return False, np.zeros(len(cand), bool)
@@ -609,24 +556,11 @@ def _hidden_sheet(cr, cand, orders, points, tris, scene, lut, leaving=None):
     return True, away
 
 
-STEEP_RATIO = 2.0
-"""The circles of a patch are spaced for a surface facing along the axis. Where it turns towards the
-axis' direction (next to its fold, e.g. a sphere whose limb the axis passes close to), the grid
-points of one azimuth on consecutive circles lie farther apart on the surface than across the axis,
-and a patch face, linear between its corners, cuts across several source triangles: its UVs and its
-outline then stray from the surface's (benchmarks/bench_accuracy.py --angles 170.5,171,189,189.5:
-texture up to 0.9 px off, 0.8% of the pixels differ). An interval between circles where that ratio
-exceeds STEEP_RATIO at some azimuth is cut (geometrically) into ceil(ratio / STEEP_RATIO) intervals,
-at most STEEP_SPLIT_MAX, within MAX_GRID. 0 turns this off."""
-
-STEEP_SPLIT_MAX = 4
-
-
 def _refined_radii(radii, n_az, hit, lam, points, cand_tris) -> tuple[np.ndarray, np.ndarray]:
-    """(radii, new): the circles ``radii`` (BU, increasing) with those STEEP_RATIO adds, and a mask of
+    """(radii, new): the circles ``radii`` (BU, increasing) with those B.STEEP_RATIO adds, and a mask of
     the added ones. ``hit``, ``lam``: :func:`_locate`'s result for ``radii`` on ``cand_tris``."""
     n_c = len(radii)
-    if n_c < 2 or not STEEP_RATIO:
+    if n_c < 2 or not B.STEEP_RATIO:
         return radii, np.zeros(n_c, bool)
     ok = hit >= 0
     pos = np.full((len(hit), 3), np.nan)
@@ -635,8 +569,8 @@ def _refined_radii(radii, n_az, hit, lam, points, cand_tris) -> tuple[np.ndarray
     with np.errstate(invalid="ignore"):
         ratio = row_norm((pos[1:] - pos[:-1]).reshape(-1, 3)).reshape(n_c - 1, n_az) / np.diff(radii)[:, None]
     worst = np.max(np.where(np.isfinite(ratio), ratio, 0.0), axis=1)
-    parts = np.clip(np.ceil(worst / STEEP_RATIO), 1, STEEP_SPLIT_MAX).astype(np.int64)
-    parts = np.where(np.cumsum(parts - 1) <= MAX_GRID // n_az - n_c, parts, 1)
+    parts = np.clip(np.ceil(worst / B.STEEP_RATIO), 1, B.STEEP_SPLIT_MAX).astype(np.int64)
+    parts = np.where(np.cumsum(parts - 1) <= B.MAX_GRID // n_az - n_c, parts, 1)
     if parts.max() <= 1:
         return radii, np.zeros(n_c, bool)
     out, new = [radii[:1]], [np.zeros(1, bool)]
@@ -645,29 +579,6 @@ def _refined_radii(radii, n_az, hit, lam, points, cand_tris) -> tuple[np.ndarray
         new.append(np.arange(1, k + 1) < k)
     return np.concatenate(out), np.concatenate(new)
 
-
-CLIP_TO_TRIANGLES = True
-"""Cut the cells of a patch whose sheet folds close to the axis (CLIP_REACH) along the edges of the
-source triangles under them (and along the edge of its sheet), so that every face lies on one
-source triangle. Its corners then carry that triangle's exact values (UVs, normals), and the patch
-draws its whole sheet inside its outer circle. Next to a fold (the limb of a closed surface) the
-surface's projection along the axis is compressed differently on each facet, so values interpolated
-across a facet's edge stray (up to 0.7 px of texture at 172 deg on the benchmark sphere), and cells
-of the plain grid are left undrawn: the triangles reaching into them were kept and cut at ring
-levels (20k pieces per order at 170.5 deg). Clipped, the benchmark sphere at 170.5 deg: 0.31% of the
-pixels differ instead of 0.46%, texture p99 0.23 px instead of 0.43, 43k image triangles instead of
-135k, about half the time (tests/test_raytrace.py). The circles STEEP_RATIO adds are not needed
-then. False: always the plain grid."""
-
-CLIP_REACH = 0.6
-"""Patches are clipped (CLIP_TO_TRIANGLES) when the plain grid would stop short of the fold within this
-fraction of its outer circle (next to the limb: the benchmark sphere at 170.5-172 and 188-189.5 deg,
-where the kept crossed triangles cost most); a plain grid that goes all round farther out is cheaper
-(there its kept triangles are cut only a little) and about as accurate."""
-
-MAX_CLIP_PAIRS = 4 * MAX_GRID
-"""At most this many (cell, triangle) pairs are clipped per patch (a mesh much finer than the cells
-next to the fold makes many); beyond, the plain grid is used."""
 
 _MAXV = 8  # vertices of a clipped cell: a quad cut by a triangle's three edges has at most 7
 
@@ -778,7 +689,7 @@ def _plain_reach(hit, radii, n_az) -> float:
 
 def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
     """The faces of a patch whose cells are cut along the source triangles ``cand`` under them (see
-    CLIP_TO_TRIANGLES): cells whose four corners lie on one triangle stay quads (two faces); the others
+    B.CLIP_TO_TRIANGLES): cells whose four corners lie on one triangle stay quads (two faces); the others
     are clipped by the sides of each triangle that may meet them (:func:`_wedge_cells`; Sutherland-
     Hodgman, vectorised over (cell, triangle) pairs, only by the sides that cut the cell) and fanned.
     ``hit``, ``lam``: :func:`_locate`'s result for the circles ``radii`` (BU).
@@ -789,7 +700,7 @@ def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
     when the innermost circle is not complete, else a dict with faces (F, 3) (counter-clockwise in
     the axis projection), face_src (F,) (indices into tris), bary (F, 3, 3), vertex_tri (V,),
     vertex_bary (V, 3), position (V, 3) BU, ring_radii, replaced (indices into tris); False when there
-    would be more than MAX_CLIP_PAIRS pairs to clip."""
+    would be more than B.MAX_CLIP_PAIRS pairs to clip."""
     n_lim = n_az
     n_c = len(radii)
     on = (hit >= 0).reshape(n_c, n_az)
@@ -825,7 +736,7 @@ def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
     pt, prow, pcol = _wedge_cells(ct, x, y, n_az, ring_radii)
     sel = ~whole[prow, pcol]
     pt, prow, pcol = pt[sel], prow[sel], pcol[sel]
-    if len(pt) > MAX_CLIP_PAIRS:  # a mesh much finer than the cells: the plain grid instead
+    if len(pt) > B.MAX_CLIP_PAIRS:  # a mesh much finer than the cells: the plain grid instead
         return False
     # the source edges of the sheet's triangles (local numbering), per triangle side k (corner k -> k + 1)
     side = np.stack([ct[:, [0, 1]], ct[:, [1, 2]], ct[:, [2, 0]]], axis=1).reshape(-1, 2)
@@ -992,7 +903,7 @@ def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
                 position=position, ring_radii=ring_radii, replaced=replaced)
 
 
-def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orders, closed, crossing,
+def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, mp, orders, closed, crossing,
                 limit_look=None):
     """The patch of ``crossing``: a ring of limit vertices at the crossing point, then the grid of
     circles ``radii`` (BU, increasing) x ``n_az`` azimuths on the surface of the triangles ``cand``
@@ -1000,7 +911,7 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
     counter-clockwise seen from the camera's side of the axis (clockwise with ``flip``). None when the
     innermost circle is not complete."""
     old_hit, old_lam = hit, lam = _locate(radii, n_az, tris[cand], x, y, z, crossing.along)
-    if CLIP_TO_TRIANGLES and _plain_reach(hit, radii, n_az) < CLIP_REACH:
+    if B.CLIP_TO_TRIANGLES and _plain_reach(hit, radii, n_az) < B.CLIP_REACH:
         cut = _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing)
         if cut is None:
             return None
@@ -1017,7 +928,7 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
                       radius=float(ring_radii[-1]), orders=tuple(orders), vertex_tri=cut["vertex_tri"],
                       vertex_bary=cut["vertex_bary"], complete=True,
                       cell=np.ones((len(ring_radii) - 1, n_az), bool), ring_radii=ring_radii)
-        return _shade(patch, points, tris, scene, lut, orders, closed, limit_look)
+        return _shade(patch, points, tris, mp, orders, closed, limit_look)
     radii, new = _refined_radii(radii, n_az, hit, lam, points, tris[cand])
     if new.any():  # the added circles' points; the others' stay
         h, l = _locate(radii[new], n_az, tris[cand], x, y, z, crossing.along)
@@ -1082,10 +993,10 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, scene, lut, orde
                   face_src=face_src, bary=bary, replaced=replaced, radius=float(ring_radii[-1]),
                   orders=tuple(orders), vertex_tri=vertex_tri, vertex_bary=vertex_bary, complete=bool(cell.all()),
                   cell=cell, ring_radii=ring_radii)
-    return _shade(patch, points, tris, scene, lut, orders, closed, limit_look)
+    return _shade(patch, points, tris, mp, orders, closed, limit_look)
 
 
-def _shade(patch: Patch, points, tris, scene, lut, orders, closed, limit_look=None) -> Patch:
+def _shade(patch: Patch, points, tris, mp, orders, closed, limit_look=None) -> Patch:
     """Fill in the patch's ``facing`` (which faces to draw per order: on a closed surface those with a
     corner whose ray leaves the face's source triangle's front) and ``images`` (of the vertices of the
     faces drawn in some order; the limit vertices' are the Einstein ring's points)."""
@@ -1093,12 +1004,13 @@ def _shade(patch: Patch, points, tris, scene, lut, orders, closed, limit_look=No
     faces = patch.tris
     grid_pos = patch.source_position[n_lim:]
     psi = 2.0 * np.pi * np.arange(n_lim) / n_lim
+    scene = mp.scene
     plane = mapping.plane_coordinates(grid_pos, scene)
     looked = None
     if closed:
         # which faces face the camera along each order's rays, from the rays' tangents; looked up
         # with the images (one interpolation stencil: most vertices of a patch are drawn)
-        looked = mapping.map_vertices_orders(grid_pos, scene, lut, orders, plane, tangents=True)
+        looked = mp.images(grid_pos, orders, plane, tangents=True)
         grid_corner = faces >= n_lim  # limit vertices have no direction of their own
         at = np.maximum(faces - n_lim, 0)  # each corner's grid vertex
         # n . d at each corner with the normal of the face's source triangle (the leaving direction
@@ -1108,7 +1020,7 @@ def _shade(patch: Patch, points, tris, scene, lut, orders, closed, limit_look=No
         n1 = f_normal @ scene.e1
         n2 = np.einsum("fx,fcx->fc", f_normal, plane.e2[at])
         for o in orders:
-            a, b = illumination.leaving_in_plane(plane, looked[o].ux, looked[o].uy)
+            a, b = mapping.leaving_in_plane(plane, looked[o].ux, looked[o].uy)
             with np.errstate(invalid="ignore"):
                 dots = a[at] * n1[:, None] + b[at] * n2
             away = np.where(grid_corner, dots < 0, True)  # NaN (no ray) counts as facing
@@ -1121,9 +1033,9 @@ def _shade(patch: Patch, points, tris, scene, lut, orders, closed, limit_look=No
     if looked is not None:
         regs = {o: looked[o] for o in shown}
     else:
-        regs = mapping.map_vertices_orders(grid_pos, scene, lut, shown, plane)
+        regs = mp.images(grid_pos, shown, plane)
     for o, reg in regs.items():
-        lim = limit_images(patch.crossing, psi, scene, lut, o, limit_look and limit_look[o], chords=n_lim)
+        lim = limit_images(patch.crossing, psi, mp, o, limit_look and limit_look[o], chords=n_lim)
         patch.images[o] = mapping.Images(
             position=np.concatenate([lim.position, reg.position]),
             direction=np.concatenate([lim.direction, reg.direction]),

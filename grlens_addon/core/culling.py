@@ -1,4 +1,5 @@
-"""Culling: which image triangles to drop, and why (counted, so the UI can report them).
+"""Culling: which image triangles to drop, and why; the stage that owns every count of the report
+(:func:`cull_pieces`), so the UI can say what happened to each triangle.
 
 Seed 000, section 3.2: a triangle that straddles the observer-hole axis is mapped onto both sides of
 the hole (its images belong to an Einstein ring, which a mesh cannot show); it is recognised by the
@@ -14,6 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import budget as B
+from . import mapping, subdivision
 from .mapping import any_perpendicular, row_norm, used_vertices
 
 
@@ -29,9 +32,9 @@ class CullReport:
     kept: int = 0
     patch_replaced: int = 0  # source triangles drawn by an Einstein-ring patch instead (not culled)
     patch_faces: int = 0  # of the kept faces, those of Einstein-ring patches (axis_patch.py)
-    presplit: int = 0  # source triangles added by the pipeline's first split next to the axis (counted above)
-    back_face: int = 0  # source triangles hidden behind the front of a closed surface (pipeline.BACK_FACE_MARGIN)
-    patch_covered: int = 0  # pieces that a complete patch draws more exactly (pipeline.UNDER_PATCH_ERROR)
+    presplit: int = 0  # source triangles added by the level plan's first split next to the axis (counted above)
+    back_face: int = 0  # source triangles hidden behind the front of a closed surface (budget.BACK_FACE_MARGIN)
+    patch_covered: int = 0  # pieces that a complete patch draws more exactly (budget.UNDER_PATCH_FACTOR)
     extra: dict = field(default_factory=dict)
 
     def total_culled(self) -> int:
@@ -57,22 +60,6 @@ def unit_directions(points, camera):
     v = np.asarray(points, dtype=np.float64) - camera
     with np.errstate(invalid="ignore", divide="ignore"):
         return v / row_norm(v)[:, None]
-
-
-AZIMUTH_SPAN_MAX = np.radians(30.0)
-"""Largest angle around the observer-hole axis (radians) that a strongly magnified triangle may
-cover. Around the Einstein ring the mapping turns azimuth about the axis into position angle along
-the ring, so a triangle covering more than this is drawn with chords that cut visibly across the
-ring (and, close to the axis, across the shadow); with a circumference ratio above ``cull_ratio``
-such triangles are culled."""
-
-
-SAGITTA_CULL_FACTOR = 1.0
-"""A magnified piece is culled when its straight sides fall more than this many times max_error_px
-inside the ring. The subdivision (pipeline.RING_LEVEL_MARGIN) aims every piece below the bound, so
-that the unequal pieces of a triangle split uniformly in space are not culled. (Measured: factor 2
-with no level margin halves the triangles of the ring frames but doubles the pixel mismatch of the
-sphere's second-order ring in front of the hole, docs/accuracy.md.)"""
 
 
 def hole_angle(directions, camera, hole) -> np.ndarray:
@@ -282,14 +269,14 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     triangle whose image circumference exceeds cull_ratio times the undistorted one (seed 000 uses a
     customisable threshold; larger keeps more). With ``hole`` (BU) and ``order`` given, triangles the
     axis passes through are always dropped, and the ratio drops only triangles that also cover more
-    than AZIMUTH_SPAN_MAX around the axis (see :func:`axis_geometry`): near the Einstein ring regular
+    than budget.AZIMUTH_SPAN_MAX around the axis (see :func:`axis_geometry`): near the Einstein ring regular
     triangles are magnified by large factors too (a fine mesh behind the hole would lose its whole
     ring to the ratio alone), but only wide or straddling ones have a wrong image. With
     ``pixel_angle`` (radians per pixel) and ``max_error_px`` given, "wide" is measured on screen: the
     mapping keeps a point's angle about the axis, so near the ring an image triangle covering an
     azimuth D at an angular radius R from the hole's direction has straight sides that fall
     R (1 - cos(D/2)) inside the ring; such magnified triangles are culled when that exceeds
-    SAGITTA_CULL_FACTOR * ``max_error_px`` pixels (else when D > AZIMUTH_SPAN_MAX).
+    ``max_error_px`` pixels, the level plan's measure (else when D > budget.AZIMUTH_SPAN_MAX).
     ``frustum_planes`` (K, 4): rows (n, d) with n . x + d >= 0 inside, applied to ``image_points`` (V, 3).
 
     Values the caller already has can be passed instead of being computed here (the result is the
@@ -331,9 +318,9 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
                 angle[at] = hole_angle(image_dirs.take(at, axis=0), camera, hole)
                 r_px = angle.take(t_sel)
                 r_px = np.maximum(np.maximum(r_px[:, 0], r_px[:, 1]), r_px[:, 2]) / pixel_angle
-                wide[sel] = ring_sagitta(r_px, span[sel]) > SAGITTA_CULL_FACTOR * max_error_px
+                wide[sel] = ring_sagitta(r_px, span[sel]) > max_error_px
             else:
-                wide[sel] = span[sel] > AZIMUTH_SPAN_MAX
+                wide[sel] = span[sel] > B.AZIMUTH_SPAN_MAX
             ring = keep & (straddles | (ring & wide))
     rep.einstein_ring = int(ring.sum())
     keep &= ~ring
@@ -345,3 +332,121 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
         keep &= ~outside
     rep.kept = int(keep.sum())
     return keep, rep
+
+
+def cull_pieces(frame, source, coarse, plan, pieces, patches, order):
+    """The cull stage of one order: (keep, patch_keep, report). ``keep`` (F,) bool over the pieces'
+    faces (None when the level plan built nothing: the image is below a pixel); ``patch_keep``: per
+    axis patch of this order, a mask of its faces to draw (None: the patch draws nothing in it);
+    ``report``: every count of the image (:class:`CullReport`), including what the level plan set
+    aside before cutting (outside the frustum, replaced by patches, back faces) and the source's
+    cleaning (extra["bad_source_triangles"]).
+
+    Pieces are culled by :func:`cull` (no image, degenerate, on an Einstein ring by the level plan's
+    measure, outside the frustum) and under complete patches (:func:`_under_patches`); patch faces
+    with a corner without an image or wholly outside one frustum plane are not drawn."""
+    report = CullReport()
+    report.extra["bad_source_triangles"] = source.n_bad
+    report.presplit = source.presplit
+    if plan.below_pixel:
+        report.below_pixel = len(source.tris)
+        return None, [], report
+    scene, settings, budget, planes = frame.scene, frame.settings, frame.budget, frame.planes
+    sub, img, face_src = pieces.sub, pieces.images, pieces.face_src
+    n_pts = len(source.positions)
+    bits = None
+    if plan.outside_bits is not None:  # frustum bits of the pieces' vertices: the source corners' are known
+        is_corner = sub.vertex_key < n_pts
+        bits = np.empty(len(sub.vertex_key), dtype=np.int64)
+        bits[is_corner] = plan.outside_bits[sub.vertex_key[is_corner]]
+        bits[~is_corner] = outside_bits(img.position[~is_corner], planes)
+    keep, rep = cull(
+        sub.tris, img.direction, img.valid, sub.positions, scene.camera, settings.cull_ratio, planes,
+        img.position, scene.hole, order, budget.pixel_angle, budget.tolerance_px,
+        source_circumference=_face_values(sub, face_src, source.circumference, lambda t: circumference(
+            unit_directions(sub.positions, scene.camera), t)),
+        image_circumference=_face_values(sub, face_src, coarse.circumference[order],
+                                         lambda t: circumference(img.direction, t)),
+        image_outside_bits=bits, axis_candidates=source.near_axis[face_src])
+    rep.extra, rep.presplit = report.extra, report.presplit
+    rep.outside_frustum += plan.set_aside.get("outside_frustum", 0)
+    rep.back_face = plan.set_aside.get("back_face", 0)
+    order_patches = [p for p in patches if order in p.orders]
+    if order_patches and B.UNDER_PATCH_FACTOR is not None:  # the patch draws these more exactly
+        covered = _under_patches(frame, order_patches, order, sub.tris, face_src, sub.positions, img, keep,
+                                 len(source.tris))
+        rep.patch_covered = int(covered.sum())
+        if rep.patch_covered:
+            keep &= ~covered
+            rep.kept -= rep.patch_covered
+    patch_keep = []
+    if order_patches:
+        rep.patch_replaced = plan.set_aside.get("patch_replaced", 0)
+        for p in order_patches:
+            ok = _patch_faces_kept(p, order, planes)
+            patch_keep.append(ok)
+            if ok is not None:
+                rep.patch_faces += int(ok.sum())
+        rep.kept += rep.patch_faces
+    return keep, patch_keep, rep
+
+
+def _patch_faces_kept(patch, order, planes):
+    """(F,) bool: the faces of ``patch`` drawn in ``order``: facing (not hidden), every corner with an
+    image, not wholly outside one frustum plane; None when the patch has no image of that order."""
+    im = patch.images.get(order)
+    if im is None:  # hidden (back faces of a closed surface)
+        return None
+    faces = patch.tris
+    ok = im.valid.take(faces).all(axis=1) & patch.facing[order]
+    if planes is not None:
+        bits = outside_bits(np.where(im.valid[:, None], im.position, 0.0), planes)
+        fb = bits.take(faces)
+        ok &= (fb[:, 0] & fb[:, 1] & fb[:, 2]) == 0
+    return ok
+
+
+def _face_values(sub, face_src, per_source, compute) -> np.ndarray:
+    """(F,) a per-triangle quantity for the faces of ``sub`` (subdivision.Subdivided): taken from
+    ``per_source`` (indexed by ``face_src``) for the faces passed through unsplit, ``compute(tris)``
+    for the split ones."""
+    n = sub.n_pass
+    if n == len(sub.tris):
+        return per_source[face_src]
+    out = np.empty(len(sub.tris))
+    out[:n] = per_source[face_src[:n]]
+    out[n:] = compute(sub.tris[n:])
+    return out
+
+
+def _under_patches(frame, patches, order, tris, face_src, points, img, keep, n_src) -> np.ndarray:
+    """(F,) bool: the pieces ``tris`` (F, 3) (vertices ``points`` (V, 3) BU, their ``order`` images
+    ``img``, source triangles ``face_src``) among ``keep`` that a complete patch draws over (wholly
+    inside its outer circle, on a source triangle it draws in that order) and whose centroid is drawn
+    more than UNDER_PATCH_FACTOR times the tolerance from its true image; ``n_src``: the number of
+    source triangles."""
+    scene = frame.scene
+    out = np.zeros(len(tris), bool)
+    dist = None
+    for p in patches:
+        if not p.complete:
+            continue
+        drawn = np.zeros(n_src, bool)
+        drawn[p.face_src[p.facing[order]]] = True
+        cand = np.flatnonzero(drawn[face_src] & keep & ~out)
+        if not cand.size:
+            continue
+        if dist is None:  # the vertices' distances from the axis (BU)
+            x, y, _ = axis_coordinates(points, scene.camera, scene.hole)
+            dist = np.hypot(x, y)
+        cand = cand[(dist.take(tris.take(cand, axis=0)) < p.radius).all(axis=1)]
+        if not cand.size:
+            continue
+        t = tris.take(cand, axis=0)
+        true = frame.map.images(points.take(t, axis=0).mean(axis=1), (order,))[order]
+        drawn_dir = img.direction.take(t, axis=0).sum(axis=1)
+        drawn_dir /= np.maximum(mapping.row_norm(drawn_dir), 1e-300)[:, None]
+        err = subdivision.angle_of_chord(chord_length(true.direction, drawn_dir))  # radians
+        budget = frame.budget
+        out[cand[err > B.UNDER_PATCH_FACTOR * budget.tolerance_px * budget.pixel_angle]] = True
+    return out

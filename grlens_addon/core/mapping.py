@@ -1,4 +1,5 @@
-"""Mapping: world-space vertices to the positions of their first- and second-order images.
+"""The map stage: world-space points to their first- and second-order images, and the only way into
+the table of connecting rays (a :class:`Mapper` per frame; every other stage asks it).
 
 Units: positions in Blender units (BU); ``r_s`` is the Schwarzschild radius in BU; the LUT works in
 units of r_s (lengths) and r_s/c (times), so a light travel time dt from the LUT is a distance of
@@ -138,6 +139,115 @@ class Images:
     uy: np.ndarray
 
 
+class Mapper:
+    """The table of connecting rays for one frame's observer (``scene.camera``), and every question the
+    core asks it. ``table``: a lutgen.LUT / WideLUT / LUTFamily table (anything with ``r_obs`` and
+    ``lookup_orders``) built for r_obs = scene.r_obs (to R_OBS_TOLERANCE relative); the family's
+    tables depend on the camera's radius, so a moving camera gets a new Mapper per frame."""
+
+    def __init__(self, scene: Scene, table):
+        if abs(table.r_obs / scene.r_obs - 1.0) > R_OBS_TOLERANCE:
+            raise ValueError(f"the LUT was built for r_obs = {table.r_obs:.9g} r_s but the camera is at "
+                             f"{scene.r_obs:.9g} r_s from the hole; rebuild the LUT")
+        self.scene, self.table = scene, table
+
+    def images(self, points, orders=(1, 2), plane: PlaneCoordinates | None = None, tangents: bool = False) -> dict:
+        """{order: :class:`Images`} of world-space ``points`` (N, 3; BU): see :func:`map_vertices_orders`."""
+        for order in orders:
+            if order not in (1, 2):
+                raise ValueError(f"order must be 1 or 2, got {order!r}")
+        scene = self.scene
+        plane = plane if plane is not None else plane_coordinates(points, scene)
+        looks = self.rays(plane.r, plane.phi, orders, ("xi", "dt", "ux", "uy") if tangents else ("xi", "dt"))
+        out = {}
+        for order in orders:
+            look = looks[order]
+            sign = 1.0 if order == 1 else -1.0
+            c, s = np.cos(look.xi), np.sin(look.xi)
+            direction = c[:, None] * scene.e1 + (sign * s)[:, None] * plane.e2
+            distance = look.dt * scene.r_s
+            position = scene.camera + distance[:, None] * direction
+            valid = np.isfinite(distance) & np.isfinite(c) & ~plane.on_axis
+            position[~valid] = np.nan
+            out[order] = Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
+                                xi=look.xi, dt=look.dt, ux=look.ux, uy=look.uy)
+        return out
+
+    def rays(self, r, phi, orders, quantities=("xi", "dt")) -> dict:
+        """{order: lutgen.Lookup} of the table's values at plane coordinates (``r`` in r_s, ``phi`` in
+        radians): the raw rays, for points given by their coordinates (an Einstein ring's limit)."""
+        return self.table.lookup_orders(r, phi, tuple(orders), quantities=tuple(quantities))
+
+    def leaving(self, points, orders=(1, 2)) -> dict:
+        """{order: (d, dt)}: the unit direction d (N, 3; world axes) in which the connecting ray leaves
+        each of ``points`` (N, 3; BU) towards the observer, in the point's static frame, and its travel
+        time dt (N,; r_s / c). A surface with unit normal n faces the observer along that ray when
+        n . d > 0. NaN where the point has no ray of that order."""
+        plane = plane_coordinates(points, self.scene)
+        looks = self.rays(plane.r, plane.phi, orders, ("dt", "ux", "uy"))
+        return {o: (leaving_direction(plane, self.scene, looks[o].ux, looks[o].uy), looks[o].dt) for o in orders}
+
+    def extend(self, coarse: Images, positions, vertex_key, n_pts, order) -> Images:
+        """Images of order ``order`` of subdivided vertices ``positions`` (V, 3; BU) whose welding keys
+        ``vertex_key`` (V,) below ``n_pts`` are source vertices: those reuse ``coarse`` (the source
+        vertices' images), only the new ones are looked up."""
+        is_corner = vertex_key < n_pts
+        if is_corner.all():
+            return take(coarse, vertex_key)
+        new = self.images(positions[~is_corner], (order,))[order]
+        n = len(positions)
+        out = Images(position=np.empty((n, 3)), direction=np.empty((n, 3)), distance=np.empty(n),
+                     valid=np.empty(n, dtype=bool), plane=None, xi=np.empty(n), dt=np.empty(n), ux=None, uy=None)
+        idx = vertex_key[is_corner]
+        for name in ("position", "direction", "distance", "valid", "xi", "dt"):
+            dst = getattr(out, name)
+            dst[is_corner] = getattr(coarse, name)[idx]
+            dst[~is_corner] = getattr(new, name)
+        return out
+
+
+def take(img: Images, rows) -> Images:
+    """The images ``rows`` (indices) of ``img`` (positions, directions, distances, validity, table values)."""
+    return Images(position=img.position.take(rows, axis=0), direction=img.direction.take(rows, axis=0),
+                  distance=img.distance.take(rows), valid=img.valid.take(rows), plane=None,
+                  xi=img.xi.take(rows), dt=img.dt.take(rows), ux=None, uy=None)
+
+
+def leaving_direction(plane, scene: Scene, ux, uy) -> np.ndarray:
+    """(N, 3) unit direction, in the static frame of points with plane coordinates ``plane``, opposite
+    to the tangent (ux, uy) of their connecting rays from the table (components along e1 and e2 of the
+    plane, see lutgen): the way the light leaves the point towards the observer. NaN where the ray is
+    undefined."""
+    e1 = scene.e1
+    c, s, f_r, r_uphi = _static_frame(plane, ux, uy)
+    e_r = c[:, None] * e1 + s[:, None] * plane.e2
+    e_phi = -s[:, None] * e1 + c[:, None] * plane.e2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = -(f_r[:, None] * e_r + r_uphi[:, None] * e_phi)
+        d /= row_norm(d)[:, None]
+    return d
+
+
+def leaving_in_plane(plane, ux, uy):
+    """(a, b), each (N,): :func:`leaving_direction` = (a e1 + b e2) / |(a, b)|, without the
+    normalisation (a positive factor per point: enough for the sign of n . d). NaN where the ray is
+    undefined."""
+    c, s, f_r, r_uphi = _static_frame(plane, ux, uy)
+    with np.errstate(invalid="ignore"):
+        return -(f_r * c - r_uphi * s), -(f_r * s + r_uphi * c)
+
+
+def _static_frame(plane, ux, uy):
+    """cos phi, sin phi and the ray's tangent in the points' static frame: its components along e_r
+    and e_phi (f_r, r_uphi), from the table's (ux, uy) (along e1 and e2)."""
+    c, s = np.cos(plane.phi), np.sin(plane.phi)
+    u_r = ux * c + uy * s  # dr/dlambda
+    r_uphi = -ux * s + uy * c  # r dphi/dlambda
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f_r = u_r / np.sqrt(1.0 - 1.0 / plane.r)  # local static frame components
+    return c, s, f_r, r_uphi
+
+
 def map_vertices(points: np.ndarray, scene: Scene, lut, order: int, plane: PlaneCoordinates | None = None) -> Images:
     """Images of order 1 or 2 of world-space ``points`` (N, 3; BU) seen from ``scene.camera``.
 
@@ -152,25 +262,4 @@ def map_vertices_orders(points: np.ndarray, scene: Scene, lut, orders=(1, 2),
     """:func:`map_vertices` for several orders at once ({order: Images}); the plane coordinates and
     the LUT's interpolation stencil are computed once. With ``tangents`` the rays' tangents ux, uy at
     the points are looked up too (for illumination.leaving_direction)."""
-    for order in orders:
-        if order not in (1, 2):
-            raise ValueError(f"order must be 1 or 2, got {order!r}")
-    if abs(lut.r_obs / scene.r_obs - 1.0) > R_OBS_TOLERANCE:
-        raise ValueError(f"the LUT was built for r_obs = {lut.r_obs:.9g} r_s but the camera is at "
-                         f"{scene.r_obs:.9g} r_s from the hole; rebuild the LUT")
-    plane = plane if plane is not None else plane_coordinates(points, scene)
-    looks = lut.lookup_orders(plane.r, plane.phi, tuple(orders),
-                              quantities=("xi", "dt", "ux", "uy") if tangents else ("xi", "dt"))
-    out = {}
-    for order in orders:
-        look = looks[order]
-        sign = 1.0 if order == 1 else -1.0
-        c, s = np.cos(look.xi), np.sin(look.xi)
-        direction = c[:, None] * scene.e1 + (sign * s)[:, None] * plane.e2
-        distance = look.dt * scene.r_s
-        position = scene.camera + distance[:, None] * direction
-        valid = np.isfinite(distance) & np.isfinite(c) & ~plane.on_axis
-        position[~valid] = np.nan
-        out[order] = Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
-                            xi=look.xi, dt=look.dt, ux=look.ux, uy=look.uy)
-    return out
+    return Mapper(scene, lut).images(points, orders, plane, tangents)

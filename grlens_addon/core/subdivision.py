@@ -496,3 +496,31 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
                       source_tri=source_tri, row_bary=np.concatenate(row_bary_parts),
                       row_src=np.concatenate(row_src_parts), corner_row=corner_row,
                       vertex_key=np.concatenate([corners, uniq]), n_pass=n_pass, n_unit_rows=3 * n_unsplit)
+
+
+@dataclass
+class Pieces:
+    """One order's source cut into pieces: ``sub`` (:class:`Subdivided`, over the selected source
+    triangles), ``face_src`` (F,) each face's source triangle (index into the prepared source's tris),
+    ``selected`` (the level plan's selection: sub's triangle t is source triangle selected[t]) and
+    ``images`` (mapping.Images of sub's vertices, in the plan's order)."""
+
+    sub: Subdivided
+    face_src: np.ndarray
+    selected: np.ndarray
+    images: object
+
+
+def cut(frame, source, plan, coarse_images) -> Pieces:
+    """The subdivide stage: the selected source triangles of a level plan (level_plan.LevelPlan) cut at
+    its levels (strips where it says so), and the new vertices mapped (frame.map; the source's own
+    corners keep ``coarse_images``, their images of the plan's order)."""
+    sel = plan.selected
+    edges = source.edges
+    strips = None if plan.strips is None else (plan.strips, source.xy)
+    sub = subdivide(source.positions, source.tris[sel], Edges(edges.verts, edges.of_tri[sel]), plan.levels, strips)
+    if sub.identity:  # the source's own vertices, in order
+        images = coarse_images
+    else:
+        images = frame.map.extend(coarse_images, sub.positions, sub.vertex_key, len(source.positions), plan.order)
+    return Pieces(sub, sel[sub.source_tri], sel, images)

@@ -1,0 +1,183 @@
+"""Assembly: the kept pieces and patch faces of one order as one image mesh, with its attributes.
+
+Vertices are compacted to those the kept faces use, the axis patches' faces are appended, and each
+face corner gets its values (UVs, normals) from its source triangle: interpolated at the corner's
+barycentric coordinates there (subdivision.carry_rows), or for a patch face from the source triangle
+under each corner unless that crosses a seam (budget.PATCH_SEAM_JUMP). GR illumination (a point
+light, illumination.irradiance) and a thin accretion disc's redshift and colour (thin_disc) are
+computed per vertex or corner of the final mesh.
+
+Units: positions in Blender units (BU); light travel time as a length c*dt in BU (c = 1).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import budget as B
+from . import culling, illumination, mapping, subdivision, thin_disc
+from .frame import DiscEmitter, Frame, Source
+
+
+@dataclass
+class ImageMesh:
+    """One lensed image mesh.
+
+    positions (V, 3) BU; tris (F, 3); corner_uv (F, 3, 2) or None; material (F,);
+    light_travel_time (V,) c*dt in BU; irradiance (F, 3) per corner or None; report: culling counts;
+    source_tri (F,) the source triangle of each face; source_position (V, 3) BU: the undistorted
+    world point each image vertex shows; with a :class:`DiscEmitter`: redshift (V,) 1 + z (0 where
+    gas has no circular orbit: r <= 1.5 r_s or on the disc axis) and disc_colour (V, 3) linear RGB
+    (black there), else None. source_tri indexes the caller's SourceMesh.tris.
+    """
+
+    order: int
+    positions: np.ndarray
+    tris: np.ndarray
+    corner_uv: np.ndarray | None
+    material: np.ndarray
+    light_travel_time: np.ndarray
+    irradiance: np.ndarray | None
+    report: culling.CullReport
+    source_tri: np.ndarray = field(repr=False, default=None)
+    source_position: np.ndarray = field(repr=False, default=None)
+    redshift: np.ndarray | None = field(repr=False, default=None)
+    disc_colour: np.ndarray | None = field(repr=False, default=None)
+
+
+def empty_image(order, report: culling.CullReport) -> ImageMesh:
+    """An image mesh without faces, with its ``report``."""
+    return ImageMesh(order, np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, np.zeros(0, np.int64),
+                     np.zeros(0), None, report, np.zeros(0, np.int64), np.zeros((0, 3)))
+
+
+def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, report, order,
+             disc: DiscEmitter | None = None) -> ImageMesh:
+    """The image mesh of ``order``: the ``pieces`` (subdivision.Pieces) that the culling ``keep``s, then
+    the faces of this order's axis ``patches`` that ``patch_keep`` (culling.cull_pieces) marks, with
+    corner values, irradiance (with frame.light) and disc values (with ``disc``)."""
+    if keep is None:
+        return empty_image(order, report)
+    sub, img = pieces.sub, pieces.images
+    everything = bool(keep.all())
+    kept = None if everything else np.flatnonzero(keep)
+    tris = sub.tris if everything else sub.tris.take(kept, axis=0)
+    used = mapping.used_vertices(tris, len(sub.positions))
+    if used.size == len(sub.positions):  # every vertex is used: indices stay as they are
+        image_tris = tris
+    else:
+        remap = np.full(len(sub.positions), -1, dtype=np.int64)
+        remap[used] = np.arange(used.size)
+        image_tris = remap.take(tris)
+    src_tri = pieces.face_src if everything else pieces.face_src.take(kept)
+    # the faces' corners in their source triangles: None (whole source triangles src_tri) or rows
+    # (row barycentrics, row source triangle, face corner rows, unit rows; see subdivision.Subdivided)
+    rows = None
+    if not sub.identity:
+        rows = (sub.row_bary, pieces.selected.take(sub.row_src),
+                sub.corner_row if everything else sub.corner_row.take(kept, axis=0), sub.n_unit_rows)
+    v_pos, v_dir = img.position.take(used, axis=0), img.direction.take(used, axis=0)
+    v_dist, v_src = img.distance[used], sub.positions.take(used, axis=0)
+    patch_corners = None
+    order_patches = [p for p in patches if order in p.orders]
+    parts = _patch_parts(order_patches, patch_keep, order, len(used)) if order_patches else None
+    if parts is not None:
+        p_tris, p_src, patch_corners, p_pos, p_dir, p_dist, p_spos = parts
+        image_tris = np.concatenate([image_tris, p_tris])
+        v_pos, v_dir = np.concatenate([v_pos, p_pos]), np.concatenate([v_dir, p_dir])
+        v_dist, v_src = np.concatenate([v_dist, p_dist]), np.concatenate([v_src, p_spos])
+
+    def corner_values(values):  # (F, 3, K) per face corner, subdivided faces then patch faces
+        own = _carry(values, src_tri, rows)
+        if patch_corners is None:
+            return own
+        return np.concatenate([own, _patch_corner_values(values, p_src, *patch_corners)])
+
+    mesh = source.mesh
+    corner_uv = None
+    if mesh.corner_uv is not None:
+        corner_uv = corner_values(mesh.corner_uv)
+    irr = None
+    scene, light = frame.scene, frame.light
+    if light is not None and mesh.corner_normals is not None:
+        n = corner_values(mesh.corner_normals)
+        n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-300)
+        pts = v_src.take(image_tris.ravel(), axis=0)
+        e, _ = illumination.irradiance(pts, n.reshape(-1, 3), light.position, scene.hole, scene.r_s,
+                                       light.lut, light.intensity)
+        irr = e.reshape(-1, 3)
+    if patch_corners is not None:
+        src_tri = np.concatenate([src_tri, p_src])
+    redshift = colour = None
+    if disc is not None:
+        redshift = thin_disc.vertex_redshift_from_direction(v_src, scene.hole, scene.camera, scene.r_s,
+                                                            disc.axis, v_dir, disc.prograde)
+        r = np.linalg.norm(v_src - scene.hole, axis=1) / scene.r_s
+        colour = np.nan_to_num(thin_disc.disc_colour(r, redshift, disc.mode, r_in=disc.r_in,
+                                                     t_peak=disc.t_peak, exposure=disc.exposure))
+        redshift = np.nan_to_num(redshift, nan=0.0)  # 0: no circular orbit there (r <= 1.5 r_s, axis)
+    return ImageMesh(order=order, positions=v_pos, tris=image_tris, corner_uv=corner_uv,
+                     material=mesh.material[src_tri], light_travel_time=v_dist, irradiance=irr, report=report,
+                     source_tri=source.origin[src_tri], source_position=v_src, redshift=redshift,
+                     disc_colour=colour)
+
+
+def _patch_parts(patches, patch_keep, order, offset):
+    """The kept faces of the axis ``patches`` (masks ``patch_keep``) of ``order`` as arrays to append to
+    an image mesh whose vertex count is ``offset``: (tris, source triangle, corners, image positions,
+    directions, c*dt, source positions), corners = (bary (F, 3, 3) in the face's source triangle, and
+    the rows of subdivision.carry_rows: each appended vertex's own source triangle (V,) and
+    barycentrics there (V, 3), and the faces' corners among them (F, 3)); None when no face is left."""
+    out = [[] for _ in range(7)]
+    first_offset = offset
+    for p, ok in zip(patches, patch_keep):
+        if ok is None:
+            continue
+        im = p.images[order]
+        faces = p.tris[ok]
+        if len(faces) == 0:
+            continue
+        used = mapping.used_vertices(faces, len(p.source_position))
+        remap = np.full(len(p.source_position), -1, dtype=np.int64)
+        remap[used] = np.arange(used.size)
+        out[0].append(remap.take(faces) + offset)
+        out[1].append(p.face_src[ok])
+        out[2].append((p.bary[ok], p.vertex_tri.take(used), p.vertex_bary.take(used, axis=0)))
+        out[3].append(im.position.take(used, axis=0))
+        out[4].append(im.direction.take(used, axis=0))
+        out[5].append(im.distance.take(used))
+        out[6].append(p.source_position.take(used, axis=0))
+        offset += used.size
+    if not out[0]:
+        return None
+    tris = np.concatenate(out[0])
+    bary, vertex_tri, vertex_bary = (np.concatenate(a) for a in zip(*out[2]))
+    corners = (bary, vertex_tri, vertex_bary, tris - first_offset)  # rows: the patch vertices appended
+    return (tris, np.concatenate(out[1]), corners, *(np.concatenate(a) for a in out[3:]))
+
+
+def _patch_corner_values(values, face_src, bary, vertex_tri, vertex_bary, corner_row) -> np.ndarray:
+    """(F, 3, K) corner values of patch faces (see _patch_parts and PATCH_SEAM_JUMP) from the source
+    triangles' corner values ``values`` (T, 3, K)."""
+    values = np.asarray(values, dtype=np.float64)
+    own = subdivision.carry_rows(vertex_bary, vertex_tri, corner_row, values)
+    # only faces with a corner on another triangle than their own can be across a seam (where all
+    # three lie on it, both ways interpolate in that triangle at the same point)
+    other = np.flatnonzero((vertex_tri.take(corner_row) != face_src[:, None]).any(axis=1))
+    if other.size:
+        carried = np.matmul(bary[other], values.take(face_src[other], axis=0))  # the face's triangle, extrapolated
+        seam = (np.abs(own[other] - carried) > B.PATCH_SEAM_JUMP).any(axis=(1, 2))
+        own[other[seam]] = carried[seam]
+    return own
+
+
+def _carry(corner_values, src_tri, rows):
+    """Corner values (F, 3, K) of the image faces from the source triangles' corner values (T, 3, K):
+    the faces' own source triangles' (``src_tri``) when ``rows`` is None, else interpolated at the
+    rows (row_bary, row_src, corner_row, n_unit) of subdivision.carry_rows."""
+    corner_values = np.asarray(corner_values, dtype=np.float64)
+    if rows is None:
+        return corner_values.take(src_tri, axis=0)
+    row_bary, row_src, corner_row, n_unit = rows
+    return subdivision.carry_rows(row_bary, row_src, corner_row, corner_values, n_unit)

@@ -1,0 +1,294 @@
+"""The frame context and the prepared source: what every stage of the core reads, built once.
+
+:func:`frame_context` gathers, once per frame: the scene (camera, hole, r_s), the map stage's table
+(mapping.Mapper: the table may depend on the camera's radius, as the add-on's family of tables does),
+the settings, the camera model (perspective, or a panorama without a frustum; its pixel size as an
+angle), the light of GR illumination and the error budget (budget.Budget). :func:`prepare_source`
+cleans one source mesh and computes what several stages need about it: its edges, its points'
+plane and axis coordinates, its triangles' size on the view sphere and which of them the axis may
+cross, and (on demand) whether it is a closed surface.
+
+Units: positions in Blender units (BU), angles in radians; r in units of r_s.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import culling, mapping, subdivision
+from .budget import Budget
+
+
+@dataclass
+class SourceMesh:
+    """Evaluated source geometry in world space.
+
+    positions (N, 3) BU; tris (T, 3) vertex indices; corner_uv (T, 3, 2) or None; material (T,) slot
+    indices; corner_normals (T, 3, 3) unit normals in world space or None.
+    """
+
+    positions: np.ndarray
+    tris: np.ndarray
+    corner_uv: np.ndarray | None = None
+    material: np.ndarray | None = None
+    corner_normals: np.ndarray | None = None
+
+
+@dataclass
+class Settings:
+    """The numeric settings of scene.grlens (see the add-on's properties for their meaning)."""
+
+    max_tess_level: int = 64
+    tess_a: float = 5.0
+    tess_b: float = 0.75
+    cull_ratio: float = 4.0
+    orders: tuple = (1, 2)
+    pixel_angle: float | None = None  # radians per pixel on the view sphere (caps subdivision)
+    max_error_px: float | None = 0.25  # the error budget's tolerance, pixels (with pixel_angle; see budget.py)
+
+
+@dataclass
+class Light:
+    """A point light for GR illumination: position (BU), intensity I0, and the LUT for its radius."""
+
+    position: np.ndarray
+    intensity: float
+    lut: object
+
+
+@dataclass
+class DiscEmitter:
+    """A source that is a thin accretion disc of gas on circular geodesics (seed 002): its image
+    vertices get the redshift factor 1 + z and a colour from the Page-Thorne flux F(r) / (1 + z)^4.
+
+    axis: unit vector (world) of the disc's angular momentum (prograde gas turns counter-clockwise
+    about it; retrograde with ``prograde`` False); mode: "bolometric" or "blackbody";
+    r_in: inner edge in r_s (>= 3, the ISCO); t_peak: emitted temperature (K) at the flux maximum;
+    exposure: scale of the colour (1: the emitted maximum flux gives 1).
+    """
+
+    axis: np.ndarray
+    prograde: bool = True
+    mode: str = "bolometric"
+    r_in: float = 3.0
+    t_peak: float = 1.0e4
+    exposure: float = 1.0
+
+
+CAMERA_KINDS = ("PERSP", "EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT")
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """What the core needs of the observer camera: ``kind`` (one of CAMERA_KINDS), ``pixel_angle``
+    (radians per pixel on the view sphere: a perspective camera's smaller field over its pixels, a
+    panorama's angular resolution; None: no screen-space bounds) and ``frustum_planes`` (K, 4) rows
+    (n, d), n . x + d >= 0 inside (world space, BU), or None (a panorama sees every direction)."""
+
+    kind: str = "PERSP"
+    pixel_angle: float | None = None
+    frustum_planes: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.kind not in CAMERA_KINDS:
+            raise ValueError(f"camera kind must be one of {CAMERA_KINDS}, got {self.kind!r}")
+
+
+@dataclass
+class Frame:
+    """One frame's context (see the module docstring): ``scene``, ``map`` (mapping.Mapper),
+    ``settings``, ``camera`` (CameraModel), ``budget`` (budget.Budget) and ``light`` (or None)."""
+
+    scene: mapping.Scene
+    map: mapping.Mapper
+    settings: Settings
+    camera: CameraModel
+    budget: Budget
+    light: Light | None = None
+
+    @property
+    def orders(self) -> tuple:
+        return tuple(self.settings.orders)
+
+    @property
+    def planes(self) -> np.ndarray | None:
+        """The frustum planes, or None (no frustum: nothing is culled against one)."""
+        return self.camera.frustum_planes
+
+
+def frame_context(scene: mapping.Scene, table, settings: Settings, light: Light | None = None,
+                  frustum_planes=None, kind: str = "PERSP") -> Frame:
+    """The :class:`Frame` of ``scene`` seen through ``table`` (built for the camera's radius) with
+    ``settings`` (their pixel_angle is the camera's pixel size) and ``frustum_planes`` (or None)."""
+    planes = None if frustum_planes is None or not len(frustum_planes) else np.asarray(frustum_planes, np.float64)
+    camera = CameraModel(kind, settings.pixel_angle, planes)
+    return Frame(scene, mapping.Mapper(scene, table), settings, camera,
+                 Budget(settings.pixel_angle, settings.max_error_px), light)
+
+
+@dataclass
+class Source:
+    """A cleaned source mesh and what the stages share about it.
+
+    mesh: the cleaned SourceMesh; origin (T,): each triangle's index into the caller's tris; n_bad:
+    triangles dropped by the cleaning; presplit: triangles added by a first split (level_plan); edges
+    (subdivision.Edges); plane (mapping.PlaneCoordinates) of the vertices; axis_xyz: their
+    culling.axis_coordinates (BU); circumference (T,): the triangles' undistorted circumference on the
+    view sphere; near_axis (T,): those the axis may cross (culling.near_axis); crossings: where the axis
+    crosses the surface (axis_patch.crossings_of, found when first needed)."""
+
+    mesh: SourceMesh
+    origin: np.ndarray
+    n_bad: int
+    edges: subdivision.Edges | None = None
+    plane: mapping.PlaneCoordinates | None = None
+    axis_xyz: tuple | None = None
+    circumference: np.ndarray | None = None
+    near_axis: np.ndarray | None = None
+    presplit: int = 0
+    crossings: list | None = field(default=None, repr=False)  # axis_patch.crossings_of
+    _xy: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def positions(self) -> np.ndarray:
+        return self.mesh.positions
+
+    @property
+    def tris(self) -> np.ndarray:
+        return self.mesh.tris
+
+    @property
+    def empty(self) -> bool:
+        return len(self.mesh.tris) == 0
+
+    @property
+    def xy(self) -> np.ndarray:
+        """(N, 2) the axis coordinates x, y of the vertices (stacked once, when needed)."""
+        if self._xy is None:
+            self._xy = np.column_stack(self.axis_xyz[:2])
+        return self._xy
+
+
+def prepare_source(frame: Frame, src: SourceMesh, origin=None, n_bad: int = 0) -> Source:
+    """The :class:`Source` of ``src``: cleaned (:func:`clean_source`), with its shared quantities.
+    ``origin``/``n_bad``: for a mesh that is itself a split of the caller's (level_plan's first split),
+    the caller's triangle of each of its triangles and the triangles the first cleaning dropped."""
+    mesh, bad, kept = _clean(src)
+    origin = kept if origin is None else np.asarray(origin)[kept]
+    out = Source(mesh, origin, n_bad + bad)
+    if out.empty:
+        return out
+    scene = frame.scene
+    out.edges = _edges_of(mesh.tris)
+    out.plane = mapping.plane_coordinates(mesh.positions, scene)
+    out.axis_xyz = culling.axis_coordinates(mesh.positions, scene.camera, scene.hole)
+    out.circumference = circumference_from_edges(
+        chord_lengths(culling.unit_directions(mesh.positions, scene.camera), out.edges.verts), out.edges.of_tri)
+    out.near_axis = culling.near_axis(mesh.positions, mesh.tris, scene.camera, scene.hole, axis_xyz=out.axis_xyz)
+    return out
+
+
+def clean_source(src: SourceMesh) -> tuple[SourceMesh, int]:
+    """Drop triangles with out-of-range (negative or >= N) indices, non-finite or repeated vertices.
+    Returns (cleaned, number dropped)."""
+    cleaned, n_bad, _ = _clean(src)
+    return cleaned, n_bad
+
+
+def _clean(src: SourceMesh):
+    """clean_source, and the indices (into src.tris) of the triangles kept."""
+    tris = np.asarray(src.tris).reshape(-1, 3)
+    if not np.issubdtype(tris.dtype, np.integer):
+        raise ValueError(f"triangle indices must be integers, got {tris.dtype}")
+    tris = tris.astype(np.int64, copy=False)
+    pos = np.asarray(src.positions, dtype=np.float64).reshape(-1, 3)
+    t0, t1, t2 = tris[:, 0], tris[:, 1], tris[:, 2]
+    in_range = (np.minimum(np.minimum(t0, t1), t2) >= 0) & (np.maximum(np.maximum(t0, t1), t2) < len(pos))
+    finite = np.isfinite(pos[:, 0]) & np.isfinite(pos[:, 1]) & np.isfinite(pos[:, 2])
+    if len(tris) and len(pos):
+        s0, s1, s2 = (np.where(in_range, t, 0) for t in (t0, t1, t2))
+        ok = in_range & finite[s0] & finite[s1] & finite[s2]
+    else:
+        ok = np.zeros(len(tris), bool)
+    ok &= (t0 != t1) & (t1 != t2) & (t2 != t0)
+
+    all_ok = bool(ok.all())
+
+    def sel(a):
+        return None if a is None else (np.asarray(a) if all_ok else np.asarray(a)[ok])
+
+    cleaned = SourceMesh(pos, sel(tris), _finite_or_zero(sel(src.corner_uv)),
+                         sel(src.material) if src.material is not None else np.zeros(int(ok.sum()), np.int64),
+                         _finite_or_zero(sel(src.corner_normals)))
+    return cleaned, int((~ok).sum()), np.flatnonzero(ok)
+
+
+def _finite_or_zero(a):
+    """Corner attributes with their non-finite values set to 0 (a NaN UV or normal of the user's mesh
+    must not reach an image mesh; a zero normal receives no GR irradiance). Copies only if needed."""
+    if a is None:
+        return None
+    a = np.asarray(a, dtype=np.float64)
+    bad = ~np.isfinite(a)
+    if bad.any():
+        a = np.where(bad, 0.0, a)
+    return a
+
+
+_EDGE_CACHE: dict = {}
+_EDGE_CACHE_SIZE = 8
+
+
+def _edges_of(tris) -> subdivision.Edges:
+    """subdivision.mesh_edges, remembered for the last few topologies (animated meshes usually keep
+    theirs from frame to frame; the key is a digest of the index array)."""
+    key = hashlib.blake2b(np.ascontiguousarray(tris).tobytes(), digest_size=16).digest() + bytes(str(tris.shape), "ascii")
+    edges = _EDGE_CACHE.get(key)
+    if edges is None:
+        edges = subdivision.mesh_edges(tris)
+        if len(_EDGE_CACHE) >= _EDGE_CACHE_SIZE:
+            _EDGE_CACHE.pop(next(iter(_EDGE_CACHE)))
+        _EDGE_CACHE[key] = edges
+    return edges
+
+
+def chord_lengths(directions, edge_verts) -> np.ndarray:
+    """(E,) chord length between the unit ``directions`` of each edge's end points (dimensionless)."""
+    return culling.chord_length(directions.take(edge_verts[:, 1], axis=0),
+                                directions.take(edge_verts[:, 0], axis=0))
+
+
+def circumference_from_edges(chords, of_tri) -> np.ndarray:
+    """(T,) culling.circumference of triangles from the chord lengths (E,) of their edges."""
+    return chords[of_tri[:, 0]] + chords[of_tri[:, 1]] + chords[of_tri[:, 2]]
+
+
+@dataclass
+class SourceImages:
+    """The map stage's images of a prepared source's vertices: ``images`` {order: mapping.Images},
+    per order the chord lengths (E,) of its edges' images and the circumferences (T,) of its
+    triangles' images on the view sphere, and on demand the images' angles from the hole's direction
+    (:meth:`hole_angle`, radians)."""
+
+    images: dict
+    chord: dict
+    circumference: dict
+    scene: mapping.Scene = field(repr=False, default=None)
+    _hole: dict = field(default_factory=dict, repr=False)
+
+    def hole_angle(self, order) -> np.ndarray:
+        """(N,) radians: the angle of each vertex's ``order`` image from the hole's direction."""
+        if order not in self._hole:
+            with np.errstate(invalid="ignore"):
+                self._hole[order] = culling.hole_angle(self.images[order].direction, self.scene.camera, self.scene.hole)
+        return self._hole[order]
+
+
+def map_source(frame: Frame, source: Source) -> SourceImages:
+    """The map stage for the source's vertices: their images of every order of the frame."""
+    images = frame.map.images(source.positions, frame.orders, source.plane)
+    chord = {o: chord_lengths(images[o].direction, source.edges.verts) for o in frame.orders}
+    circ = {o: circumference_from_edges(chord[o], source.edges.of_tri) for o in frame.orders}
+    return SourceImages(images, chord, circ, frame.scene)

@@ -1,0 +1,188 @@
+"""Visibility: which parts of a source can be seen at all, decided before anything is subdivided.
+
+* Silhouettes (silhouette.py): the edges along which the surface turns away from the camera along
+  the rays of an order; they decide coverage, so the level plan gives them the coverage tolerance.
+* Back faces: on a closed, outward-wound surface seen from outside, triangles turned away from the
+  camera along the rays (budget.BACK_FACE_MARGIN) are hidden behind the surface's own front.
+* The frustum: source triangles whose corners and edge midpoints all map outside one frustum plane.
+* Sub-pixel images: a second-order image within one pixel is not built.
+
+:func:`see` gives a :class:`Sight` for one source: the decisions that depend on rays are looked up
+on demand (the leaving directions of the vertices, through the map stage, once per vertex) and kept
+for the rest of the frame. Units: positions in Blender units (BU), angles in radians.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import budget as B
+from . import culling, mapping, silhouette, subdivision
+from .frame import Frame, Source
+
+
+class Sight:
+    """What can be seen of one source in one frame (see the module docstring)."""
+
+    def __init__(self, frame: Frame, source: Source):
+        self.frame, self.source = frame, source
+        self._closed = None
+        n = len(source.positions)
+        self._known = np.zeros(n, bool)
+        self._d = {o: np.full((n, 3), np.nan) for o in frame.orders}
+
+    def closed(self) -> bool:
+        """True for a closed, outward-wound surface seen from outside (computed once)."""
+        if self._closed is None:
+            src = self.source
+            self._closed = bool(is_closed_outward(src.positions, src.tris, src.edges)
+                                and winding_number(src.positions, src.tris, self.frame.scene.camera) < 0.5)
+        return self._closed
+
+    def leaving(self, vertices, order) -> np.ndarray:
+        """(len(vertices), 3) the unit directions in which light leaves the source vertices ``vertices``
+        towards the camera along ``order``'s rays (mapping.Mapper.leaving; looked up for all the
+        frame's orders at once, the first time a vertex is asked for)."""
+        new = vertices[~self._known[vertices]]
+        if new.size:
+            new = np.unique(new)
+            for o, (d, _) in self.frame.map.leaving(self.source.positions.take(new, axis=0), self.frame.orders).items():
+                self._d[o][new] = d
+            self._known[new] = True
+        return self._d[order].take(vertices, axis=0)
+
+    def turned_away(self, tri_idx, orders) -> np.ndarray:
+        """(len(tri_idx),) bool: the source triangles ``tri_idx`` turned away (BACK_FACE_MARGIN) along
+        the rays of every order in ``orders``; only their corners are looked up."""
+        corners, pts, local = silhouette.compact(self.source.positions, self.source.tris.take(tri_idx, axis=0))
+        away = np.ones(len(tri_idx), bool)
+        for o in orders:
+            away &= silhouette.turned_away(pts, local, self.leaving(corners, o), B.BACK_FACE_MARGIN)
+        return away
+
+    def hidden(self, tri_idx, orders) -> np.ndarray:
+        """(len(tri_idx),) bool: back faces (:meth:`turned_away` on a closed surface; none otherwise)."""
+        if not self.closed():
+            return np.zeros(len(tri_idx), bool)
+        return self.turned_away(tri_idx, orders)
+
+    def silhouette(self, order, of_edges):
+        """silhouette.silhouette of ``order`` as (edge mask (E,), triangle mask (T,)), right for the
+        edges ``of_edges`` (indices) and for the triangles whose three edges are among them; only the
+        corners of the triangles around those edges are looked up."""
+        src = self.source
+        mark = np.zeros(len(src.edges.verts), bool)
+        mark[of_edges] = True
+        near = np.flatnonzero(mark.take(src.edges.of_tri).any(axis=1))
+        corners, pts, local = silhouette.compact(src.positions, src.tris.take(near, axis=0))
+        edge, tri_near = silhouette.silhouette(pts, local, src.edges.of_tri.take(near, axis=0), len(src.edges.verts),
+                                               self.leaving(corners, order))
+        tri = np.zeros(len(src.tris), bool)
+        tri[near] = tri_near
+        return edge, tri
+
+    def one_way(self, tri_idx, order) -> np.ndarray:
+        """(len(tri_idx),) bool: triangles facing one way at all corners along ``order``'s rays (no fold
+        of the silhouette inside them)."""
+        corners, pts, local = silhouette.compact(self.source.positions, self.source.tris.take(tri_idx, axis=0))
+        sign = silhouette.facing_signs(pts, local, self.leaving(corners, order))
+        return (sign == sign[:, :1]).all(axis=1) & (sign[:, 0] != 0)
+
+    def back_faces(self, selected, tri_level, order) -> np.ndarray:
+        """The indices among ``selected`` (source triangles, with their levels ``tri_level``) hidden
+        behind the surface's front in ``order``, looked for only when their pieces would be many
+        (BACK_FACE_MIN_PIECES)."""
+        split = selected[tri_level > 1]
+        n_tris = len(self.source.tris)
+        if split.size and int((tri_level[tri_level > 1] ** 2).sum()) >= max(B.BACK_FACE_MIN_PIECES, n_tris) \
+                and self.closed():
+            return split[self.turned_away(split, (order,))]
+        return np.zeros(0, np.int64)
+
+    def below_pixel(self, order, vertex_images: mapping.Images, mid_images: mapping.Images) -> bool:
+        """True when ``order`` is 2 and all valid image points (vertices and probed edge midpoints) lie
+        within one pixel of each other: the image is too small to matter. First-order images are
+        always built, so small objects stay visible."""
+        return order == 2 and _below_pixel(vertex_images, mid_images, self.frame.camera.pixel_angle)
+
+    def inside_frustum(self, vertex_images: mapping.Images, mid_images: mapping.Images, probe):
+        """(selected, outside bits): the source triangles not having their three corners and three edge
+        midpoints all mapped outside one frustum plane (all of them without a frustum), and the
+        culling.outside_bits of the vertices' images (None without a frustum). Midpoints not probed
+        (``probe``: the probed edges, sorted; the others span a pixel at most) are the mean of their
+        end points' images; points without an image count as inside, so culling reports them under
+        their own reason. Midpoints are tested only where the corners are all outside one plane."""
+        planes = self.frame.planes
+        src = self.source
+        tris, edges = src.tris, src.edges
+        if planes is None:
+            return np.arange(len(tris)), None
+        out_v = culling.outside_bits(vertex_images.position, planes)  # (N,) bit k: outside plane k
+        e = edges.of_tri
+        common = out_v[tris[:, 0]] & out_v[tris[:, 1]] & out_v[tris[:, 2]]
+        cand = np.flatnonzero(common)
+        if cand.size == 0:
+            return np.arange(len(tris)), out_v
+        cand_edges, slot = np.unique(e[cand], return_inverse=True)
+        slot = slot.reshape(-1, 3)
+        ev = edges.verts[cand_edges]
+        mid = 0.5 * (vertex_images.position.take(ev[:, 0], axis=0) + vertex_images.position.take(ev[:, 1], axis=0))
+        probe_row = np.searchsorted(probe, cand_edges)  # probe is sorted: where each candidate edge would be
+        probed = probe_row < len(probe)
+        probed[probed] = probe[probe_row[probed]] == cand_edges[probed]
+        mid[probed] = mid_images.position[probe_row[probed]]
+        out_m = culling.outside_bits(mid, planes)
+        outside = common[cand] & out_m[slot[:, 0]] & out_m[slot[:, 1]] & out_m[slot[:, 2]]
+        inside = np.ones(len(tris), dtype=bool)
+        inside[cand[outside != 0]] = False
+        return np.flatnonzero(inside), out_v
+
+
+def see(frame: Frame, source: Source) -> Sight:
+    """The :class:`Sight` of ``source`` in ``frame``."""
+    return Sight(frame, source)
+
+
+def _below_pixel(img_v: mapping.Images, img_m: mapping.Images, pixel_angle) -> bool:
+    """True if all valid image points lie within one pixel (radians) of each other."""
+    if not pixel_angle:
+        return False
+    d = np.concatenate([img_v.direction[img_v.valid], img_m.direction[img_m.valid]])
+    if len(d) == 0:
+        return False  # nothing valid: culling reports why
+    centre = d.mean(axis=0)
+    centre /= max(np.linalg.norm(centre), 1e-300)
+    return bool(np.max(subdivision.chord_angle(d, np.broadcast_to(centre, d.shape))) * 2.0 < pixel_angle)
+
+
+def is_closed_outward(points, tris, edges: subdivision.Edges | None = None) -> bool:
+    """True if the triangles ``tris`` of ``points`` (BU) form closed surfaces with consistent winding
+    (every edge used by exactly two triangles, once in each direction) that enclose a positive
+    volume (normals from the winding point outwards)."""
+    tris = np.asarray(tris, dtype=np.int64)
+    if len(tris) == 0:
+        return False
+    edges = edges if edges is not None else subdivision.mesh_edges(tris)
+    forward = np.where(tris < np.roll(tris, -1, axis=1), 1, -1)  # edge k: corner k -> k+1
+    n_e = len(edges.verts)
+    uses = np.bincount(edges.of_tri.ravel(), minlength=n_e)
+    balance = np.bincount(edges.of_tri.ravel(), weights=forward.ravel(), minlength=n_e)
+    if not (np.all(uses == 2) and np.all(balance == 0)):
+        return False
+    p = np.asarray(points, dtype=np.float64)
+    p = p - p[tris[0, 0]]  # volume about a vertex: no cancellation far from the origin
+    p0, p1, p2 = (p.take(tris[:, k], axis=0) for k in range(3))
+    return bool(np.einsum("ij,ij->", p0, np.cross(p1, p2)) > 0)
+
+
+def winding_number(points, tris, query) -> float:
+    """How many times the triangles ``tris`` of ``points`` (BU) wind around the point ``query`` (3,; BU):
+    1 inside a closed surface with outward winding, 0 outside (the sum of the solid angles the
+    triangles subtend at ``query`` over 4 pi; Van Oosterom and Strackee's formula)."""
+    tris = np.asarray(tris, dtype=np.int64)
+    p = np.asarray(points, dtype=np.float64) - np.asarray(query, np.float64)
+    a, b, c = (p.take(tris[:, k], axis=0) for k in range(3))
+    la, lb, lc = (mapping.row_norm(v) for v in (a, b, c))
+    num = np.einsum("ij,ij->i", a, np.cross(b, c))
+    den = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", b, c) * la
+           + np.einsum("ij,ij->i", c, a) * lb)
+    return float(np.nansum(2.0 * np.arctan2(num, den)) / (4.0 * np.pi))
