@@ -8,6 +8,7 @@ Public API (stable): connect, connect_grid, Connection, shadow_half_angle, build
 load_lut, save_lut, LUTFileError, and the tables that reach infinity for any observer radius:
 WideLUT, build_wide_lut, LUTFamily; command line ``python -m lutgen``.
 """
+from .escape import EscapeTable, escape_angle, escape_limit, escape_table
 from .exr_io import LUTFileError
 from .lut import LUT, Lookup, build_lut
 from .lutfile import load_lut, save_lut
