@@ -88,16 +88,40 @@ _AZ_PAD = 1e-7  # rad, widening of the triangles' azimuth ranges (pairing is onl
 # --------------------------------------------------------------------------------------------------
 # Camera and buffers
 # --------------------------------------------------------------------------------------------------
+CAMERA_KINDS = ("PERSP", "EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT")
+"""The camera models of :class:`Camera`: Blender's perspective camera and two of Cycles' panoramas."""
+
+
 @dataclass
 class Camera:
-    """A pinhole camera (Blender's convention: it looks along its local -Z, local +Y is up, +X right).
+    """A camera in Blender's convention: it looks along its local -Z, local +Y is up, +X right.
 
     position: (3,) BU; rotation: (3, 3) camera-to-world rotation (columns: the camera's x, y, z axes in
-    world space, e.g. ``matrix_world.to_3x3()``); fov_y: full vertical field of view (rad);
-    width, height: resolution in pixels. Pixel (row j, column i) looks through its centre; row 0 is the
-    top of the image, so buffers are (height, width) arrays in image order. (A Blender camera with
-    sensor fit AUTO and width >= height has the horizontal angle ``cam.data.angle``: then
-    fov_y = 2 atan(tan(angle / 2) * height / width).)
+    world space, e.g. ``matrix_world.to_3x3()``); fov_y: full vertical field of view (rad; perspective
+    only, ignored by panoramas); width, height: resolution in pixels. Pixel (row j, column i) looks
+    through its centre; row 0 is the top of the image, so buffers are (height, width) arrays in image
+    order. (A Blender camera with sensor fit AUTO and width >= height has the horizontal angle
+    ``cam.data.angle``: then fov_y = 2 atan(tan(angle / 2) * height / width).)
+
+    ``kind`` selects the projection (:data:`CAMERA_KINDS`); the panoramas follow Cycles
+    (intern/cycles/kernel/camera/projection.h and the camera matrix of Cycles' Blender sync, which
+    turns Cycles' panorama frame, +x forward, +y left, +z up, into Blender's camera axes). With
+    u = (i + 0.5) / width from the left and v = 1 - (j + 0.5) / height from the bottom (Cycles' raster
+    y runs upwards):
+
+    * ``"PERSP"``: the pinhole camera above;
+    * ``"EQUIRECTANGULAR"``: longitude lon = longitude_min + u (longitude_max - longitude_min),
+      latitude lat = latitude_min + v (latitude_max - latitude_min) (rad; Blender's camera settings
+      ``longitude_min/max``, ``latitude_min/max``, default the full 360 x 180 degrees), the direction
+      (cos lat sin lon, sin lat, -cos lat cos lon) in camera axes: the image centre looks along -Z,
+      longitude grows to the right (towards +X), latitude upwards (+Y). With the full range the
+      left and right edges meet behind the camera (the seam, at lon = +-pi);
+    * ``"FISHEYE_EQUIDISTANT"``: x = 2u - 1, y = 2v - 1, rho = hypot(x, y); the angle from the view
+      axis (-Z) is theta = rho * fisheye_fov / 2 (rad), towards (x, y) / rho in the camera's (X, Y)
+      plane. Pixels with rho > 1 see nothing (their directions are NaN). As in Cycles, u and v span
+      the frame's width and height: a square frame holds the circular image (fisheye_fov = pi is a
+      180 degree dome master), another aspect ratio stretches it into an ellipse. fisheye_fov is
+      limited to (0, 2 pi] (beyond, a direction would appear on several rings).
     """
 
     position: np.ndarray
@@ -105,16 +129,40 @@ class Camera:
     fov_y: float
     width: int
     height: int
+    kind: str = "PERSP"
+    fisheye_fov: float = np.pi
+    latitude_min: float = -0.5 * np.pi
+    latitude_max: float = 0.5 * np.pi
+    longitude_min: float = -np.pi
+    longitude_max: float = np.pi
 
     def __post_init__(self):
         self.position = np.asarray(self.position, dtype=np.float64).reshape(3)
         self.rotation = np.asarray(self.rotation, dtype=np.float64).reshape(3, 3)
         self.fov_y = float(self.fov_y)
         self.width, self.height = int(self.width), int(self.height)
+        self.kind = str(self.kind).upper()
+        if self.kind not in CAMERA_KINDS:
+            raise ValueError(f"unknown camera kind {self.kind!r}; expected one of {', '.join(CAMERA_KINDS)}")
+        for k in ("fisheye_fov", "latitude_min", "latitude_max", "longitude_min", "longitude_max"):
+            setattr(self, k, float(getattr(self, k)))
+        if self.kind == "FISHEYE_EQUIDISTANT" and not 0.0 < self.fisheye_fov <= TWO_PI:
+            raise ValueError(f"fisheye_fov must be in (0, 2 pi], got {self.fisheye_fov!r}")
+        if self.kind == "EQUIRECTANGULAR":
+            if not -0.5 * np.pi <= self.latitude_min < self.latitude_max <= 0.5 * np.pi:
+                raise ValueError("the latitude range must satisfy -pi/2 <= latitude_min < latitude_max <= pi/2")
+            if not -np.pi <= self.longitude_min < self.longitude_max <= np.pi:
+                raise ValueError("the longitude range must satisfy -pi <= longitude_min < longitude_max <= pi")
+
+    @property
+    def panoramic(self) -> bool:
+        """True for the panoramic kinds (no perspective frustum, nothing 'behind' the camera)."""
+        return self.kind != "PERSP"
 
     @classmethod
-    def look_at(cls, position, target, fov_y, width, height, up=(0.0, 0.0, 1.0)) -> "Camera":
-        """Camera at ``position`` looking at ``target`` (BU) with the image's up close to ``up``."""
+    def look_at(cls, position, target, fov_y, width, height, up=(0.0, 0.0, 1.0), **lens) -> "Camera":
+        """Camera at ``position`` looking at ``target`` (BU) with the image's up close to ``up``;
+        ``lens``: further fields (kind, fisheye_fov, latitude_min, ...)."""
         position = np.asarray(position, dtype=np.float64)
         fwd = np.asarray(target, dtype=np.float64) - position
         fwd /= np.linalg.norm(fwd)
@@ -124,58 +172,208 @@ class Camera:
         x = np.cross(fwd, up)
         x /= np.linalg.norm(x)
         y = np.cross(x, fwd)
-        return cls(position, np.stack([x, y, -fwd], axis=1), fov_y, width, height)
+        return cls(position, np.stack([x, y, -fwd], axis=1), fov_y, width, height, **lens)
 
     @classmethod
-    def from_matrix_world(cls, matrix_world, fov_y, width, height) -> "Camera":
+    def from_matrix_world(cls, matrix_world, fov_y, width, height, **lens) -> "Camera":
         """From a 4x4 (or 3x4) camera-to-world matrix such as Blender's ``camera.matrix_world`` (its
-        rotation part must be orthonormal: no scale)."""
+        rotation part must be orthonormal: no scale); ``lens``: further fields (kind, ...)."""
         m = np.asarray(matrix_world, dtype=np.float64)
-        return cls(m[:3, 3], m[:3, :3], fov_y, width, height)
+        return cls(m[:3, 3], m[:3, :3], fov_y, width, height, **lens)
 
     @property
     def tan_half(self) -> tuple[float, float]:
-        """(tan of the horizontal half angle, tan of the vertical half angle)."""
+        """(tan of the horizontal half angle, tan of the vertical half angle) (perspective only)."""
         ty = np.tan(0.5 * self.fov_y)
         return ty * self.width / self.height, ty
 
     @property
     def pixel_angle(self) -> float:
-        """Radians per pixel on the view sphere as the add-on computes it for ``Settings.pixel_angle``:
-        the smaller of the horizontal and vertical fields of view divided by their pixel counts."""
+        """Radians per pixel on the view sphere as the add-on computes it for ``Settings.pixel_angle``.
+
+        Perspective: the smaller of the horizontal and vertical fields of view divided by their pixel
+        counts. Equirectangular: the smaller of (longitude_max - longitude_min) / width and
+        (latitude_max - latitude_min) / height (2 pi / width for the full 2:1 panorama: the spacing
+        along the horizon and along every meridian; rows closer to the poles are closer together in
+        longitude). Fisheye: fisheye_fov / max(width, height), the radial spacing of the pixels (the
+        spacing across the rays of the larger image axis; both axes for the square dome master)."""
+        if self.kind == "EQUIRECTANGULAR":
+            return min((self.longitude_max - self.longitude_min) / self.width,
+                       (self.latitude_max - self.latitude_min) / self.height)
+        if self.kind == "FISHEYE_EQUIDISTANT":
+            return self.fisheye_fov / max(self.width, self.height)
         tx, ty = self.tan_half
         return min(2.0 * np.arctan(tx) / self.width, 2.0 * np.arctan(ty) / self.height)
 
-    def pixel_directions(self) -> np.ndarray:
-        """(height, width, 3) unit world-space directions through the pixel centres."""
-        tx, ty = self.tan_half
-        xs = (2.0 * (np.arange(self.width) + 0.5) / self.width - 1.0) * tx
-        ys = (1.0 - 2.0 * (np.arange(self.height) + 0.5) / self.height) * ty
+    def _uv(self):
+        """Per column u (from the left) and per row v (from the bottom) of the pixel centres, in [0, 1]."""
+        u = (np.arange(self.width) + 0.5) / self.width
+        v = 1.0 - (np.arange(self.height) + 0.5) / self.height
+        return u, v
+
+    def local_directions(self) -> np.ndarray:
+        """(height, width, 3) unit directions through the pixel centres in camera axes (NaN for a
+        fisheye's pixels outside its circle)."""
         local = np.empty((self.height, self.width, 3))
-        local[..., 0] = xs[None, :]
-        local[..., 1] = ys[:, None]
-        local[..., 2] = -1.0
-        local /= np.linalg.norm(local, axis=2, keepdims=True)
-        return local @ self.rotation.T
+        if self.kind == "PERSP":
+            tx, ty = self.tan_half
+            xs = (2.0 * (np.arange(self.width) + 0.5) / self.width - 1.0) * tx
+            ys = (1.0 - 2.0 * (np.arange(self.height) + 0.5) / self.height) * ty
+            local[..., 0] = xs[None, :]
+            local[..., 1] = ys[:, None]
+            local[..., 2] = -1.0
+            local /= np.linalg.norm(local, axis=2, keepdims=True)
+            return local
+        u, v = self._uv()
+        if self.kind == "EQUIRECTANGULAR":
+            lon = self.longitude_min + u * (self.longitude_max - self.longitude_min)
+            lat = self.latitude_min + v * (self.latitude_max - self.latitude_min)
+            cl = np.cos(lat)[:, None]
+            local[..., 0] = cl * np.sin(lon)[None, :]
+            local[..., 1] = np.sin(lat)[:, None]
+            local[..., 2] = -cl * np.cos(lon)[None, :]
+            return local
+        x = (2.0 * u - 1.0)[None, :] + np.zeros((self.height, 1))
+        y = (2.0 * v - 1.0)[:, None] + np.zeros((1, self.width))
+        rho = np.hypot(x, y)
+        theta = 0.5 * self.fisheye_fov * rho
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = np.where(rho > 0, np.sin(theta) / rho, 0.0)
+        local[..., 0] = x * s
+        local[..., 1] = y * s
+        local[..., 2] = -np.cos(theta)
+        local[rho > 1.0] = np.nan
+        return local
+
+    def pixel_directions(self) -> np.ndarray:
+        """(height, width, 3) unit world-space directions through the pixel centres (NaN for a
+        fisheye's pixels outside its circle: they see nothing)."""
+        return self.local_directions() @ self.rotation.T
 
     def project(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World points (N, 3; BU) -> (column, row, depth): continuous pixel coordinates (pixel centres
-        at integer + 0.5, row 0 at the top) and the view depth along the camera's -Z (BU; <= 0 behind)."""
-        local = (np.asarray(points, dtype=np.float64) - self.position) @ self.rotation
-        depth = -local[:, 2]
-        tx, ty = self.tan_half
-        with np.errstate(divide="ignore", invalid="ignore"):
-            col = (local[:, 0] / depth / tx + 1.0) * 0.5 * self.width
-            row = (1.0 - local[:, 1] / depth / ty) * 0.5 * self.height
-        return col, row, depth
+        at integer + 0.5, row 0 at the top) and a depth (BU).
 
-    def frustum_planes(self, margin: float = 0.05) -> np.ndarray:
+        Perspective: depth is the view depth along the camera's -Z (<= 0 behind the camera, where the
+        coordinates mean nothing). Panoramas have no 'behind': depth is the distance from the camera
+        (> 0 except at the camera itself). Equirectangular: longitude and latitude as in the class
+        docstring (longitude in [-pi, pi], the seam behind the camera); points outside the longitude /
+        latitude range get coordinates outside [0, width] x [0, height]. Fisheye: NaN coordinates for
+        points outside its field (angle from the view axis above fisheye_fov / 2)."""
+        local = (np.asarray(points, dtype=np.float64) - self.position) @ self.rotation
+        if self.kind == "PERSP":
+            depth = -local[:, 2]
+            tx, ty = self.tan_half
+            with np.errstate(divide="ignore", invalid="ignore"):
+                col = (local[:, 0] / depth / tx + 1.0) * 0.5 * self.width
+                row = (1.0 - local[:, 1] / depth / ty) * 0.5 * self.height
+            return col, row, depth
+        x, y, z = local[:, 0], local[:, 1], local[:, 2]
+        depth = np.sqrt(x * x + y * y + z * z)
+        if self.kind == "EQUIRECTANGULAR":
+            lon = np.arctan2(x, -z)
+            lat = np.arctan2(y, np.hypot(x, z))
+            col = (lon - self.longitude_min) / (self.longitude_max - self.longitude_min) * self.width
+            row = (1.0 - (lat - self.latitude_min) / (self.latitude_max - self.latitude_min)) * self.height
+            return col, row, depth
+        rxy = np.hypot(x, y)
+        theta = np.arctan2(rxy, -z)
+        rho = theta / (0.5 * self.fisheye_fov)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cx = np.where(rxy > 0, x / rxy, 0.0)
+            cy = np.where(rxy > 0, y / rxy, 0.0)
+        col = 0.5 * (1.0 + rho * cx) * self.width
+        row = 0.5 * (1.0 - rho * cy) * self.height
+        out = ~(rho <= 1.0)
+        return np.where(out, np.nan, col), np.where(out, np.nan, row), depth
+
+    def frustum_planes(self, margin: float = 0.05) -> np.ndarray | None:
         """(4, 4) world-space side planes (n, d), n . x + d >= 0 inside, widened by ``margin`` (a
-        fraction of the half-angles' tangents), as the add-on passes to pipeline.build_images."""
+        fraction of the half-angles' tangents), as the add-on passes to pipeline.build_images; None
+        for the panoramas (no perspective frustum: nothing is culled)."""
+        if self.panoramic:
+            return None
         tx, ty = self.tan_half
         tx, ty = tx * (1 + margin), ty * (1 + margin)
         corners = np.array([[-tx, -ty, -1.0], [tx, -ty, -1.0], [tx, ty, -1.0], [-tx, ty, -1.0]]) @ self.rotation.T
         return side_planes(self.position, corners)
+
+    def cap_pixel_boxes(self, centre, radius) -> tuple[np.ndarray, ...]:
+        """Pixel boxes that hold every pixel centre whose direction lies within the angle ``radius``
+        (K,; rad, < pi/2) of the unit world directions ``centre`` (K, 3), panoramas only: (index into
+        the caps, column start, column end, row start, row end), ends inclusive, one or two boxes per
+        cap (two where an equirectangular cap crosses the seam). Used by the rasterizer to find the
+        pixels a triangle may cover: its spherical image lies inside the cap through its corners'
+        directions. Conservative by half a pixel plus one pixel."""
+        c = np.asarray(centre, np.float64).reshape(-1, 3) @ self.rotation  # camera axes
+        rad = np.asarray(radius, np.float64).reshape(-1)
+        k = np.arange(len(c))
+        W, H = self.width, self.height
+        if self.kind == "EQUIRECTANGULAR":
+            lat_c = np.arcsin(np.clip(c[:, 1], -1.0, 1.0))
+            lon_c = np.arctan2(c[:, 0], -c[:, 2])
+            lat0, lat1 = lat_c - rad, lat_c + rad
+            full = (lat1 >= 0.5 * np.pi) | (lat0 <= -0.5 * np.pi)  # around a pole: every longitude
+            with np.errstate(invalid="ignore", divide="ignore"):
+                half = np.arcsin(np.clip(np.sin(rad) / np.cos(lat_c), -1.0, 1.0))
+            dlon = (self.longitude_max - self.longitude_min) / W
+            dlat = (self.latitude_max - self.latitude_min) / H
+            r0 = np.floor((self.latitude_max - lat1) / dlat - 0.5) - 1
+            r1 = np.ceil((self.latitude_max - lat0) / dlat - 0.5) + 1
+            # continuous column of a longitude: (lon - longitude_min) / dlon - 0.5; the cap's longitudes
+            # [lon_c - half, lon_c + half] lie in [-2 pi, 2 pi]: with the shifts by a full turn
+            # (2 pi / dlon columns) every column whose longitude lies in the cap is in one of the boxes
+            a = np.where(full, -np.pi, lon_c - half)
+            b = np.where(full, np.pi, lon_c + half)
+            q0 = np.floor((a - self.longitude_min) / dlon - 0.5) - 1
+            q1 = np.ceil((b - self.longitude_min) / dlon - 0.5) + 1
+            turn = TWO_PI / dlon
+            boxes = [(k, q0, q1, r0, r1)]
+            for shift in (-turn, turn):
+                s_ = ~full & (q0 + shift <= W - 1) & (q1 + shift >= 0)
+                boxes.append((k[s_], np.floor(q0[s_] + shift), np.ceil(q1[s_] + shift), r0[s_], r1[s_]))
+        else:  # fisheye: the cap's angles from the axis and azimuths, an annular sector of the image
+            th_c = np.arctan2(np.hypot(c[:, 0], c[:, 1]), -c[:, 2])
+            az_c = np.arctan2(c[:, 1], c[:, 0])
+            t0, t1 = np.maximum(th_c - rad, 0.0), th_c + rad
+            around = (th_c <= rad) | (th_c + rad >= np.pi)  # the cap holds the view axis or its opposite
+            with np.errstate(invalid="ignore", divide="ignore"):
+                half = np.where(around, np.pi, np.arcsin(np.clip(np.sin(rad) / np.sin(th_c), -1.0, 1.0)))
+            s = 2.0 / self.fisheye_fov
+            rho0 = np.where(around, 0.0, t0 * s)
+            rho1 = np.minimum(t1 * s, 1.0)
+            # bounding box of {rho (cos a, sin a): rho0 <= rho <= rho1, |a - az_c| <= half}
+            angs = [az_c - half, az_c + half]
+            xs = [rho * np.cos(a_) for rho in (rho0, rho1) for a_ in angs]
+            ys = [rho * np.sin(a_) for rho in (rho0, rho1) for a_ in angs]
+            x0, x1 = np.minimum.reduce(xs), np.maximum.reduce(xs)
+            y0, y1 = np.minimum.reduce(ys), np.maximum.reduce(ys)
+            for ax in (0.0, 0.5 * np.pi, np.pi, 1.5 * np.pi):  # axis directions inside the sector
+                inside = around | (np.abs(np.mod(ax - az_c + np.pi, TWO_PI) - np.pi) <= half)
+                x0 = np.where(inside, np.minimum(x0, rho1 * np.cos(ax)), x0)
+                x1 = np.where(inside, np.maximum(x1, rho1 * np.cos(ax)), x1)
+                y0 = np.where(inside, np.minimum(y0, rho1 * np.sin(ax)), y0)
+                y1 = np.where(inside, np.maximum(y1, rho1 * np.sin(ax)), y1)
+            c0 = np.floor(0.5 * (1.0 + x0) * W - 0.5) - 1
+            c1 = np.ceil(0.5 * (1.0 + x1) * W - 0.5) + 1
+            r0 = np.floor(0.5 * (1.0 - y1) * H - 0.5) - 1
+            r1 = np.ceil(0.5 * (1.0 - y0) * H - 0.5) + 1
+            keep = t0 * s <= 1.0  # caps entirely outside the field hold no pixel
+            boxes = [(k[keep], c0[keep], c1[keep], r0[keep], r1[keep])]
+        out = [np.concatenate(x) for x in zip(*boxes)]
+        idx = out[0]
+        c0 = np.clip(out[1], 0, W - 1).astype(np.int64)
+        c1 = np.clip(out[2], -1, W - 1).astype(np.int64)
+        r0 = np.clip(out[3], 0, H - 1).astype(np.int64)
+        r1 = np.clip(out[4], -1, H - 1).astype(np.int64)
+        return idx, c0, c1, r0, r1
+
+
+_BUFFER_FIELDS = (  # name, dtype, fill value, trailing shape
+    ("hit", bool, False, ()), ("object_id", np.int64, -1, ()), ("face", np.int64, -1, ()),
+    ("bary", np.float64, np.nan, (3,)), ("uv", np.float64, np.nan, (2,)), ("order", np.int64, 0, ()),
+    ("light_time", np.float64, np.nan, ()), ("fell", bool, False, ()), ("point", np.float64, np.nan, (3,)),
+    ("phi", np.float64, np.nan, ()), ("depth", np.float64, np.nan, ()), ("sky", np.float64, np.nan, (3,)))
 
 
 @dataclass
@@ -192,7 +390,12 @@ class PixelBuffers:
     the camera to the hit (BU; coordinate time as in lutgen); fell (S) bool: no hit and the ray falls
     into the hole (always False from the rasterizer); point (S, 3): the world point seen (BU; rasterizer:
     the interpolated source position); phi (S): swept angle of the hit (rad; raytracer only, else NaN);
-    depth (S): distance camera-hit along the straight pixel ray (rasterizer only, BU; NaN otherwise).
+    depth (S): distance camera-hit along the straight pixel ray (rasterizer only, BU; NaN otherwise);
+    sky (S, 3): where the ray neither hits anything nor falls in, the unit world direction in which it
+    travels at infinity (the direction of the sky it sees; raytracer: :func:`escape_directions`), NaN
+    elsewhere (and everywhere in the rasterizer's buffers). A fisheye's pixels outside its circle have
+    no ray: no hit, not fallen, no sky. ``sky`` may be left out (None) when constructing: it is then
+    NaN everywhere (buffers stored before it existed).
     """
 
     hit: np.ndarray
@@ -206,17 +409,17 @@ class PixelBuffers:
     point: np.ndarray
     phi: np.ndarray
     depth: np.ndarray
+    sky: np.ndarray | None = None
     info: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.sky is None:
+            self.sky = np.full(np.shape(self.hit) + (3,), np.nan)
 
     @classmethod
     def empty(cls, shape) -> "PixelBuffers":
         shape = tuple(shape)
-        return cls(hit=np.zeros(shape, bool), object_id=np.full(shape, -1, np.int64),
-                   face=np.full(shape, -1, np.int64), bary=np.full(shape + (3,), np.nan),
-                   uv=np.full(shape + (2,), np.nan), order=np.zeros(shape, np.int64),
-                   light_time=np.full(shape, np.nan), fell=np.zeros(shape, bool),
-                   point=np.full(shape + (3,), np.nan), phi=np.full(shape, np.nan),
-                   depth=np.full(shape, np.nan))
+        return cls(**{k: np.full(shape + tail, fill, dt) for k, dt, fill, tail in _BUFFER_FIELDS})
 
     @property
     def shape(self):
@@ -224,12 +427,18 @@ class PixelBuffers:
 
     def reshape(self, shape) -> "PixelBuffers":
         shape = tuple(shape)
-        out = {}
-        for k in ("hit", "object_id", "face", "order", "light_time", "fell", "phi", "depth"):
-            out[k] = getattr(self, k).reshape(shape)
-        for k, n in (("bary", 3), ("uv", 2), ("point", 3)):
-            out[k] = getattr(self, k).reshape(shape + (n,))
-        return PixelBuffers(**out, info=self.info)
+        return PixelBuffers(**{k: getattr(self, k).reshape(shape + tail) for k, _, _, tail in _BUFFER_FIELDS},
+                            info=self.info)
+
+    def scatter(self, mask) -> "PixelBuffers":
+        """Buffers of ``mask``'s shape holding these (flat, one entry per True of ``mask``) where
+        ``mask`` is True and the empty values elsewhere; ``info`` is shared."""
+        mask = np.asarray(mask, bool)
+        out = PixelBuffers.empty(mask.shape)
+        for k, _, _, tail in _BUFFER_FIELDS:
+            getattr(out, k)[mask] = getattr(self, k).reshape((-1,) + tail)
+        out.info = self.info
+        return out
 
 
 @dataclass
@@ -415,6 +624,14 @@ class Rays:
             out[after] = _orb.travel_time(oa, uo[after], oa.e2) + _orb.travel_time(oa, u[after], oa.e2)
         return out
 
+    def escape_directions(self) -> np.ndarray:
+        """(M, 3) unit world directions in which the rays travel at infinity: cos(phi_end) e1 +
+        sin(phi_end) e2, phi_end the total swept angle from the camera to u = 0 (the ray's asymptote is
+        parallel to its position there); NaN rows for rays that fall in."""
+        out = self.e2 * np.sin(self.phi_end)[:, None] + np.cos(self.phi_end)[:, None] * self.e1
+        out[self.falls_in] = np.nan
+        return out
+
     def points(self, idx, phi, u=None):
         """World positions (BU) of the rays ``idx`` at swept angles ``phi``."""
         if u is None:
@@ -433,9 +650,22 @@ def trace(scene: TriangleScene, camera: Camera, hole, r_s, *, pair_chunk: int = 
     hole: (3,) BU; r_s: Schwarzschild radius in BU. Returns :class:`PixelBuffers` of shape
     (camera.height, camera.width); ``info`` holds counts (pairs, candidates, roots, seconds).
     """
-    dirs = camera.pixel_directions().reshape(-1, 3)
-    out = trace_rays(scene, camera.position, dirs, hole, r_s, pair_chunk=pair_chunk)
-    return out.reshape((camera.height, camera.width))
+    dirs = camera.pixel_directions()
+    ray = np.all(np.isfinite(dirs), axis=2)
+    if ray.all():
+        out = trace_rays(scene, camera.position, dirs.reshape(-1, 3), hole, r_s, pair_chunk=pair_chunk)
+        return out.reshape((camera.height, camera.width))
+    # a fisheye's pixels outside its circle: no ray
+    return trace_rays(scene, camera.position, dirs[ray], hole, r_s, pair_chunk=pair_chunk).scatter(ray)
+
+
+def escape_directions(origin, directions, hole, r_s) -> np.ndarray:
+    """(M, 3) the unit world directions in which the null geodesics leaving the static observer at
+    ``origin`` (BU) in the world ``directions`` (M, 3) travel at infinity (where they reach r = inf,
+    u(Phi) = 0 on this module's closed-form curve: swept angle ``Rays.phi_end``, = xi in flat space),
+    NaN rows for rays that fall into the hole (xi beyond the shadow's edge); objects are ignored. The
+    lensed sky each direction sees. hole: (3,) BU; r_s: BU."""
+    return Rays(origin, directions, hole, r_s).escape_directions()
 
 
 def image_pixels(points, camera: Camera, hole, r_s, order: int) -> tuple[np.ndarray, np.ndarray]:
@@ -774,6 +1004,8 @@ def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, pair_chun
     idx = np.flatnonzero(hit)
     out.hit[:] = hit
     out.fell[:] = ~hit & rays.falls_in
+    if m:
+        out.sky[:] = np.where(hit[:, None], np.nan, rays.escape_directions())
     if idx.size:
         phi = best_phi[idx]
         tri = best_tri[idx]
