@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from grlens_addon.core import (axis_patch, culling, illumination, mapping, pipeline, rasterize, raytrace,
-                               silhouette, subdivision)
+from grlens_addon.core import (axis_patch, budget, culling, frame, illumination, mapping, pipeline, rasterize,
+                               raytrace, silhouette, subdivision, visibility)
 from lutgen import build_lut, connect
 from meshes import uv_sphere
 
@@ -46,9 +46,14 @@ def _grid(x, half, n, tilt=0.0, hole_radius=0.0):
 
 
 def _patches(pts, tris, lut, orders=(1, 2), closed=False, pixel=PIXEL):
-    edges = subdivision.mesh_edges(tris)
-    return axis_patch.build_patches(pts, tris, edges.of_tri, len(edges.verts), SCENE, lut, orders, pixel,
-                                    MAX_ERROR, closed=closed)
+    """axis_patch.build_patches of the mesh in a frame of SCENE (the stage as build_images calls it);
+    ``closed``: whether the mesh counts as a closed surface seen from outside."""
+    fr = frame.frame_context(SCENE, lut, pipeline.Settings(orders=tuple(orders), pixel_angle=pixel,
+                                                          max_error_px=MAX_ERROR))
+    source = frame.prepare_source(fr, pipeline.SourceMesh(pts, tris))
+    sight = visibility.see(fr, source)
+    sight._closed = bool(closed)
+    return axis_patch.build_patches(fr, source, sight)
 
 
 def _angle_from_hole(d):
@@ -92,7 +97,7 @@ def test_limit_images_are_the_einstein_ring(lut, x):
     u = mapping.any_perpendicular(SCENE.e1)
     v = np.cross(SCENE.e1, u)
     for order in axis_patch.ring_orders(cr, (1, 2)):
-        im = axis_patch.limit_images(cr, psi, SCENE, lut, order)
+        im = axis_patch.limit_images(cr, psi, mapping.Mapper(SCENE, lut), order)
         assert im.valid.all()
         exact = connect(20.0, abs(x), np.pi if x < 0 else 0.0, order)
         np.testing.assert_allclose(_angle_from_hole(im.direction), np.pi - exact.xi, atol=1e-9)
@@ -147,13 +152,13 @@ def test_patch_on_a_tilted_plane(lut):
         chord_mid = 0.5 * (ring + np.roll(ring, -1, axis=0))
         mid = _angle_from_hole(chord_mid / np.linalg.norm(chord_mid, axis=1)[:, None])
         sag = (theta - mid) / PIXEL
-        assert 0 < sag.max() <= axis_patch.EDGE_FACTOR * MAX_ERROR * 1.0001
+        assert 0 < sag.max() <= budget.PATCH_EDGE_FACTOR * budget.COVERAGE_FACTOR * MAX_ERROR * 1.0001
         exact = np.pi - connect(20.0, np.linalg.norm(p.crossing.point), np.pi, order).xi
-        np.testing.assert_allclose((theta - exact) / PIXEL, axis_patch.CHORD_OUTSET * sag, rtol=1e-3, atol=1e-6)
-        np.testing.assert_allclose((mid - exact) / PIXEL, (axis_patch.CHORD_OUTSET - 1.0) * sag, rtol=1e-3, atol=1e-6)
+        np.testing.assert_allclose((theta - exact) / PIXEL, budget.CHORD_OUTSET * sag, rtol=1e-3, atol=1e-6)
+        np.testing.assert_allclose((mid - exact) / PIXEL, (budget.CHORD_OUTSET - 1.0) * sag, rtol=1e-3, atol=1e-6)
         # the innermost circle is within BAND_FACTOR * max_error_px of the ring
         inner = _angle_from_hole(im.direction[n:2 * n])
-        assert np.abs(inner - theta[0]).max() / PIXEL <= axis_patch.BAND_FACTOR * MAX_ERROR * 1.5
+        assert np.abs(inner - theta[0]).max() / PIXEL <= budget.PATCH_BAND_FACTOR * budget.COVERAGE_FACTOR * MAX_ERROR * 1.5
 
 
 @pytest.mark.parametrize("theta_deg", [0.5, 8.0, 60.0, 120.0, 175.0])
@@ -187,7 +192,7 @@ def test_chord_sag_and_outset(theta_deg):
         return area - 2 * np.pi * (1 - math.cos(theta))
 
     exact = cap_error(xi)
-    moved = cap_error(xi - axis_patch.CHORD_OUTSET * axis_patch.chord_sag(xi, step))
+    moved = cap_error(xi - budget.CHORD_OUTSET * axis_patch.chord_sag(xi, step))
     assert np.sign(exact) == (-1 if theta_deg < 90 else 1)  # the chords bow towards the nearer pole
     assert abs(moved) < 0.01 * abs(exact)
 
@@ -207,10 +212,10 @@ def test_patch_circles_on_a_steep_plane(lut, monkeypatch, tilt_deg):
         return d.reshape(-1, n)[:, 0]
 
     (p,) = _patches(pts, tris, lut)
-    monkeypatch.setattr(axis_patch, "STEEP_RATIO", 0.0)
+    monkeypatch.setattr(budget, "STEEP_RATIO", 0.0)
     (plain,) = _patches(pts, tris, lut)
     parts = math.ceil(1.0 / (math.cos(tilt) * 2.0) - 1e-9)
-    assert axis_patch.STEEP_RATIO == 0.0 and p.complete and plain.complete
+    assert budget.STEEP_RATIO == 0.0 and p.complete and plain.complete
     fine, coarse = circles(p), circles(plain)
     assert len(fine) == parts * (len(coarse) - 1) + 1
     np.testing.assert_allclose(fine[::parts], coarse, rtol=1e-9)
@@ -262,7 +267,7 @@ def test_patch_stops_at_the_mesh(lut, monkeypatch):
     (full circles inside it, then the cells whose four corners are on it, into its corners); it
     replaces only triangles inside drawn cells. A plane with a hole around the axis (nothing crosses
     it) and a plane whose hole reaches the crossing's circles give no patch."""
-    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
+    monkeypatch.setattr(budget, "CLIP_TO_TRIANGLES", False)
     pts, tris = _grid(-4.0, 0.04, 2)
     (p,) = _patches(pts, tris, lut)
     assert 0.04 < p.radius <= 0.04 * math.sqrt(2) and not p.complete
@@ -310,8 +315,8 @@ def test_clipped_patch_covers_the_mesh_up_to_its_edge(lut, monkeypatch):
     (the only edges used once lie on the outer circle or the plane's border), and it replaces the
     triangles inside the outer circle. The crossing is a vertex of the plane, so edges of it run
     through the limit vertices."""
-    assert axis_patch.CLIP_TO_TRIANGLES
-    monkeypatch.setattr(axis_patch, "CLIP_REACH", 1.0)
+    assert budget.CLIP_TO_TRIANGLES
+    monkeypatch.setattr(budget, "CLIP_REACH", 1.0)
     pts, tris = _grid(-4.0, 0.04, 2)
     (p,) = _patches(pts, tris, lut)
     assert p.complete
@@ -334,8 +339,8 @@ def test_clipped_patch_leaves_out_a_hole_in_the_mesh(lut, monkeypatch):
     """A plane with a hole (two triangles missing) beside the axis, inside the patch: the clipped patch
     covers the plane but not the hole (its projected area is the plane's inside the outer circle less
     the hole's), and its edges used once lie on the outer circle, the plane's border or the hole's."""
-    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", True)
-    monkeypatch.setattr(axis_patch, "CLIP_REACH", 1.0)
+    monkeypatch.setattr(budget, "CLIP_TO_TRIANGLES", True)
+    monkeypatch.setattr(budget, "CLIP_REACH", 1.0)
     pts, tris = _grid(-4.0, 0.04, 4)  # 0.01 quads
     centre = pts[tris].mean(axis=1)
     hole = (np.abs(centre[:, 1] - 0.015) < 0.005) & (np.abs(centre[:, 2] - 0.005) < 0.005)
@@ -367,7 +372,7 @@ def test_clipped_patch_on_a_sphere_next_to_its_limb(lut, monkeypatch):
     a = math.radians(170.5)
     pts, tris = _sphere([3 * math.cos(a), 3 * math.sin(a), 0.01])
     with monkeypatch.context() as m:
-        m.setattr(axis_patch, "MAX_CLIP_PAIRS", 10)
+        m.setattr(budget, "MAX_CLIP_PAIRS", 10)
         plain = [p for p in _patches(pts, tris, lut, closed=True) if len(p.tris)]
     assert plain and not any(p.complete for p in plain)
     assert not any(p.crossing.tri in p.replaced for p in plain)
@@ -398,7 +403,7 @@ def test_touches_gap_finds_the_triangles_beside_undrawn_cells(lut, monkeypatch):
     are not drawn). touches_gap is True for the triangles whose projection meets such a cell, which
     are exactly those with a point beyond the largest full circle, and False for all of them on a
     complete patch."""
-    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
+    monkeypatch.setattr(budget, "CLIP_TO_TRIANGLES", False)
     pts, tris = _grid(-4.0, 0.04, 2)
     (p,) = _patches(pts, tris, lut)
     assert not p.complete
@@ -418,7 +423,7 @@ def test_open_distance_is_where_a_patch_stops_drawing(lut, monkeypatch):
     inside it and inf for the others; on an incomplete one (the plain grid on a small plane), the
     inner circle of the first row with an undrawn cell in the triangle's box (never beyond the outer
     circle)."""
-    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
+    monkeypatch.setattr(budget, "CLIP_TO_TRIANGLES", False)
     pts, tris = _grid(-4.0, 1.0, 10)
     (p,) = _patches(pts, tris, lut)
     x, y, _ = culling.axis_coordinates(pts, CAMERA, HOLE)
@@ -475,8 +480,8 @@ def test_patch_limits(lut, monkeypatch):
     pts = np.concatenate([p for p, _ in parts])
     tris = np.concatenate([t + 25 * k for k, (_, t) in enumerate(parts)])
     patches = _patches(pts, tris, lut)
-    assert len(patches) == axis_patch.MAX_PATCHES
-    monkeypatch.setattr(axis_patch, "MAX_GRID", 2000)
+    assert len(patches) == budget.MAX_PATCHES
+    monkeypatch.setattr(budget, "MAX_GRID", 2000)
     for p in _patches(*_grid(-4.0, 1.0, 10), lut, pixel=PIXEL / 8):
         assert len(p.source_position) <= 2000 + p.n_azimuths
 
@@ -553,13 +558,13 @@ def test_patch_hidden_but_at_its_rim_gets_no_grid(lut, monkeypatch):
                               len(subdivision.mesh_edges(tris).verts), x, y)
     kept = np.setdiff1d(sheet, far.replaced)
     assert 0 < len(far.replaced) < len(sheet) and len(kept) > 0
-    assert np.all(culling.axis_distance(x, y, tris[kept]) >= axis_patch.HIDDEN_CORE * far.radius)
-    monkeypatch.setattr(axis_patch, "HIDDEN_CORE", np.inf)
+    assert np.all(culling.axis_distance(x, y, tris[kept]) >= budget.HIDDEN_CORE * far.radius)
+    monkeypatch.setattr(budget, "HIDDEN_CORE", np.inf)
     far_grid, _ = sorted(_patches(pts, tris, lut, closed=True), key=lambda p: p.crossing.along)
     assert len(far_grid.tris) > 0 and 0 < far_grid.facing[1].sum() < 0.2 * len(far_grid.tris)
     b = math.radians(174.0)
     pts, tris = _sphere([3.0 * math.cos(b), 3.0 * math.sin(b), 0.01])
-    monkeypatch.setattr(axis_patch, "HIDDEN_CORE", 0.25)
+    monkeypatch.setattr(budget, "HIDDEN_CORE", 0.25)
     far174, _ = sorted(_patches(pts, tris, lut, closed=True), key=lambda p: p.crossing.along)
     assert len(far174.tris) > 0
 
@@ -645,7 +650,7 @@ def test_back_faces_are_skipped_without_changing_the_image(lut, monkeypatch, ang
     a = math.radians(angle)
     pts, tris = _sphere([3 * math.cos(a), 3 * math.sin(a), 0.01])
     out, img = _ring_view(lut, pts, tris)
-    monkeypatch.setattr(pipeline, "BACK_FACE_MIN_PIECES", 10**12)
+    monkeypatch.setattr(budget, "BACK_FACE_MIN_PIECES", 10**12)
     full, img_full = _ring_view(lut, pts, tris)
     skipped = {o: out[o].report.back_face for o in out}
     assert all(full[o].report.back_face == 0 for o in full)
@@ -668,7 +673,7 @@ def test_back_faces_are_kept_on_open_meshes_and_from_inside(lut):
     pts, tris = _sphere([3 * math.cos(a), 3 * math.sin(a), 0.01])
     open_out, _ = _ring_view(lut, pts, tris[1:])
     assert all(img.report.back_face == 0 for img in open_out.values())
-    assert max(len(img.tris) for img in open_out.values()) > pipeline.BACK_FACE_MIN_PIECES
+    assert max(len(img.tris) for img in open_out.values()) > budget.BACK_FACE_MIN_PIECES
     inside_pts, inside_tris = _sphere([0.0, 0.0, 0.0], radius=30.0, segments=48, rings=24)
     lut40 = build_lut(20.0, 1.05, 40.0, 128, 256)
     out = pipeline.build_images(pipeline.SourceMesh(inside_pts, inside_tris), SCENE, lut40,
@@ -695,7 +700,7 @@ def test_pipeline_ring_reaches_the_einstein_radius(lut):
     out = pipeline.build_images(pipeline.SourceMesh(pts, tris), SCENE, lut, settings)
     near = max(axis_patch.find_crossings(pts, tris, CAMERA, HOLE), key=lambda c: c.along)
     theta_e = np.pi - connect(20.0, abs(near.along), np.pi, 1).xi
-    most = axis_patch.CHORD_OUTSET * axis_patch.EDGE_FACTOR * settings.max_error_px * PIXEL
+    most = budget.CHORD_OUTSET * budget.PATCH_EDGE_FACTOR * budget.COVERAGE_FACTOR * settings.max_error_px * PIXEL
     outset = None
     for order in (1, 2):
         img = out[order]

@@ -499,9 +499,9 @@ def test_cull_with_precomputed_values_is_the_same(lut):
 
 
 def test_frustum_pre_cull_matches_brute_force(lut):
-    """pipeline._inside_frustum (corners first, midpoints only where the corners agree) keeps exactly
-    the source triangles a brute-force test of all corners and edge midpoints keeps."""
-    from grlens_addon.core import pipeline
+    """visibility.Sight.inside_frustum (corners first, midpoints only where the corners agree) keeps
+    exactly the source triangles a brute-force test of all corners and edge midpoints keeps."""
+    from grlens_addon.core import frame, pipeline, visibility
 
     rng = np.random.default_rng(9)
     scene = mapping.Scene(CAMERA, HOLE, R_S)
@@ -512,7 +512,9 @@ def test_frustum_pre_cull_matches_brute_force(lut):
     mids = 0.5 * (pts[edges.verts[probe, 0]] + pts[edges.verts[probe, 1]])
     img_m = mapping.map_vertices(mids, scene, lut, 1)
     planes = np.array([[0.0, 0.0, 1.0, -0.05], [0.0, 1.0, 0.0, -1.0]])
-    sel, out_v = pipeline._inside_frustum(img_v, img_m, probe, tris, edges, planes)
+    fr = frame.frame_context(scene, lut, pipeline.Settings(), frustum_planes=planes)
+    sight = visibility.see(fr, frame.prepare_source(fr, pipeline.SourceMesh(pts, tris)))
+    sel, out_v = sight.inside_frustum(img_v, img_m, probe)
     mid = 0.5 * (img_v.position[edges.verts[:, 0]] + img_v.position[edges.verts[:, 1]])
     mid[probe] = img_m.position
     pts_of = np.concatenate([img_v.position[tris], mid[edges.of_tri]], axis=1)  # (T, 6, 3)

@@ -1,0 +1,264 @@
+"""The error budget and the core's rules, measured: A/B comparisons in one process (issue 20).
+
+Two modes; both alternate the variants round by round in one process, so that the machine's drift
+hits them alike, and report per angle of the benchmark sphere's orbit (bench_accuracy's scene,
+640x360 by default) the time of build_images (min / median of --rounds), the image triangles and,
+against the reference ray tracer, the coverage mismatch and the screen error p99.
+
+* ``--base REV``: this checkout's core against the core of git revision REV (its grlens_addon/core
+  copied into a temporary package and imported beside this one). Prints the orbit's mean and median
+  time per frame and mean triangles of each, and the same for the 100k-triangle sphere
+  (bench_addon's sphere100k: 320 x 160 segments) every 10th angle.
+* ``--rules``: each rule of the budget (budget.py) against the core without it (the constant set to
+  its "off" value), at the angles where the rule acts. These are the comparisons that tests used to
+  make by patching constants; tests/test_stages.py checks what the shipped budget promises.
+* ``--errors``: what the single budget gives: per angle the pieces' measured edge error (the
+  distance on screen between a piece edge's midpoint and the exact image of its source midpoint),
+  p99 and max, and the share of pieces beyond the tolerance, split into pieces of magnified
+  (Einstein-ring) triangles and the others.
+
+Usage: ./dev python benchmarks/bench_budget.py --base 2acf9ba [--step 10] [--rounds 5] [--ref-cache DIR]
+       ./dev python benchmarks/bench_budget.py --rules [--ref-cache DIR]
+       ./dev python benchmarks/bench_budget.py --errors [--step 15]
+References are traced once per angle (slow: seconds each); --ref-cache DIR keeps them between runs.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+sys.path.insert(0, ROOT)
+sys.path.insert(0, HERE)
+
+import bench_accuracy as BA  # noqa: E402
+from bench_frame import uv_sphere  # noqa: E402
+from grlens_addon.core import (axis_patch, budget, culling, frame, level_plan, mapping, pipeline, rasterize,  # noqa: E402
+                               subdivision, visibility)
+from lutgen import LUTFamily  # noqa: E402
+
+
+def base_core(rev: str):
+    """The ``pipeline`` module of git revision ``rev``'s grlens_addon/core, imported from a temporary
+    package (its modules import each other relatively, and lutgen from this checkout)."""
+    files = subprocess.run(["git", "-C", ROOT, "ls-tree", "--name-only", rev, "grlens_addon/core/"],
+                           check=True, capture_output=True, text=True).stdout.split()
+    name = "grlens_core_" + rev.replace("-", "_")[:12]
+    root = tempfile.mkdtemp(prefix="grlens_base_")
+    pkg = os.path.join(root, name)
+    os.makedirs(pkg)
+    for f in files:
+        if f.endswith(".py"):
+            text = subprocess.run(["git", "-C", ROOT, "show", f"{rev}:{f}"], check=True, capture_output=True,
+                                  text=True).stdout
+            with open(os.path.join(pkg, os.path.basename(f)), "w") as fh:
+                fh.write(text)
+    sys.path.insert(0, root)
+    return importlib.import_module(name + ".pipeline")
+
+
+def _measure(variants, src, scene, table, settings, planes, rounds):
+    """{name: (times [s], image triangles, images)} of build_images per variant, alternated."""
+    times = {k: [] for k in variants}
+    out = {}
+    for r in range(rounds + 1):
+        for name, (build, make) in variants.items():
+            s = make(src)
+            t0 = time.perf_counter()
+            images = build(s, scene, table, settings, frustum_planes=planes)
+            dt = time.perf_counter() - t0
+            if r:  # the first round warms up
+                times[name].append(dt)
+            out[name] = images
+    return {k: (np.array(times[k]), sum(len(m.tris) for m in out[k].values()), out[k]) for k in variants}
+
+
+def _accuracy(images, cam, src, ref):
+    buf = rasterize.rasterize(rasterize.from_images(images), cam)
+    m = BA.compare(ref, buf, cam, src)["orders"]["all"]
+    return m["mismatch_frac"], m["screen_px"]["p99"]
+
+
+def _same_src(src):
+    return src
+
+
+def _base_src(mod):
+    return lambda s: mod.SourceMesh(s.positions, s.tris, s.corner_uv, s.material, s.corner_normals)
+
+
+def compare_revisions(rev, angles, rounds, cam, table, accuracy=True):
+    base = base_core(rev)
+    variants = {"base": (base.build_images, _base_src(base)), "this": (pipeline.build_images, _same_src)}
+    scene = mapping.Scene(cam.position, np.zeros(3), BA.R_S)
+    settings = BA.make_settings(cam)
+    planes = cam.frustum_planes()
+    rows = []
+    print(f"| angle [deg] | base: min / median [ms] | this: min / median [ms] | median ratio | triangles base / this"
+          + (" | mismatch base / this | screen p99 [px] base / this" if accuracy else "") + " |")
+    print("|---|---|---|---|---|" + ("---|---|" if accuracy else ""))
+    for a in angles:
+        src, tri_scene = BA.sphere_scene(a)
+        res = _measure(variants, src, scene, table, settings, planes, rounds)
+        (tb, nb, ib), (tt, nt, it) = res["base"], res["this"]
+        line = (f"| {a:g} | {1e3 * tb.min():.1f} / {1e3 * np.median(tb):.1f} | {1e3 * tt.min():.1f} / "
+                f"{1e3 * np.median(tt):.1f} | {np.median(tt) / np.median(tb):.2f} | {nb} / {nt}")
+        acc = None
+        if accuracy:
+            ref, _ = BA.reference_image(tri_scene, cam)
+            acc = (_accuracy(ib, cam, src, ref), _accuracy(it, cam, src, ref))
+            line += (f" | {100 * acc[0][0]:.2f}% / {100 * acc[1][0]:.2f}% | {acc[0][1]:.3f} / {acc[1][1]:.3f}")
+        print(line + " |", flush=True)
+        rows.append((a, np.median(tb), np.median(tt), nb, nt, acc))
+    mb, mt = np.mean([r[1] for r in rows]), np.mean([r[2] for r in rows])
+    print(f"\nsphere orbit ({len(rows)} angles): mean of the median times base {1e3 * mb:.2f} ms, this "
+          f"{1e3 * mt:.2f} ms (ratio {mt / mb:.3f}); median frame base {1e3 * np.median([r[1] for r in rows]):.2f} ms, "
+          f"this {1e3 * np.median([r[2] for r in rows]):.2f} ms; mean triangles base "
+          f"{np.mean([r[3] for r in rows]):.0f}, this {np.mean([r[4] for r in rows]):.0f}")
+    if accuracy:
+        worst = [max(r[5][k][0] for r in rows) for k in (0, 1)]
+        worst_p = [max(r[5][k][1] for r in rows) for k in (0, 1)]
+        print(f"worst mismatch base {100 * worst[0]:.2f}%, this {100 * worst[1]:.2f}%; worst screen p99 base "
+              f"{worst_p[0]:.3f} px, this {worst_p[1]:.3f} px")
+    # the 100k-triangle sphere (bench_addon's sphere100k), every 10th angle of its orbit
+    local, tris = uv_sphere(320, 160, BA.RADIUS)
+    big = []
+    for a in angles[::max(1, len(angles) // 36)]:
+        r = math.radians(a)
+        src = pipeline.SourceMesh(local + np.array([BA.ORBIT * math.cos(r), BA.ORBIT * math.sin(r), 0.01]), tris)
+        res = _measure(variants, src, scene, table, settings, planes, max(1, rounds // 2))
+        big.append((np.median(res["base"][0]), np.median(res["this"][0]), res["base"][1], res["this"][1]))
+    b, t = np.mean([x[0] for x in big]), np.mean([x[1] for x in big])
+    print(f"100k-triangle sphere ({len(big)} angles): mean base {1e3 * b:.1f} ms, this {1e3 * t:.1f} ms "
+          f"(ratio {t / b:.3f}); mean triangles base {np.mean([x[2] for x in big]):.0f}, "
+          f"this {np.mean([x[3] for x in big]):.0f}")
+
+
+RULES = [
+    # (name, module, attribute, off value, angles, what it should show)
+    ("strips (STRIP_BAND_PX)", budget, "STRIP_BAND_PX", 0.0, (170, 180, 0)),
+    ("second-order ring edge next to a patch (RING_EDGE_ORDERS)", budget, "RING_EDGE_ORDERS", (), (355, 5)),
+    ("thin images (THIN_FACTOR)", budget, "THIN_FACTOR", 1.0, (350, 355, 5, 10)),
+    ("patches clipped to the triangles (CLIP_TO_TRIANGLES)", budget, "CLIP_TO_TRIANGLES", False, (170.5, 172, 188)),
+    ("ring edge chords crossing the ring (CHORD_OUTSET)", budget, "CHORD_OUTSET", 0.0, (4, 356)),
+    ("pieces under complete patches (UNDER_PATCH_FACTOR)", budget, "UNDER_PATCH_FACTOR", None, (176, 180, 184)),
+    ("back faces (BACK_FACE_MIN_PIECES)", budget, "BACK_FACE_MIN_PIECES", 10 ** 12, (170, 180)),
+    ("hidden patch sheets (HIDDEN_CORE)", budget, "HIDDEN_CORE", np.inf, (175, 185)),
+    ("first split beside the axis (PRESPLIT_MIN)", budget, "PRESPLIT_MIN", np.inf, (165, 170, 190)),
+]
+
+
+def compare_rules(rounds, cam, table, only=None):
+    scene = mapping.Scene(cam.position, np.zeros(3), BA.R_S)
+    settings = BA.make_settings(cam)
+    planes = cam.frustum_planes()
+    print("| rule | angle [deg] | with: median [ms] / triangles / mismatch / screen p99 [px] | "
+          "without: median [ms] / triangles / mismatch / screen p99 [px] |")
+    print("|---|---|---|---|")
+    for name, mod, attr, off, angles in RULES:
+        if only and only not in name:
+            continue
+        on = getattr(mod, attr)
+        for a in angles:
+            src, tri_scene = BA.sphere_scene(a)
+            ref, _ = BA.reference_image(tri_scene, cam)
+            cells = []
+            for value in (on, off):
+                setattr(mod, attr, value)
+                try:
+                    res = _measure({"x": (pipeline.build_images, _same_src)}, src, scene, table, settings, planes,
+                                   rounds)["x"]
+                finally:
+                    setattr(mod, attr, on)
+                mis, p99 = _accuracy(res[2], cam, src, ref)
+                cells.append(f"{1e3 * np.median(res[0]):.1f} / {res[1]} / {100 * mis:.2f}% / {p99:.3f}")
+            print(f"| {name} | {a:g} | {cells[0]} | {cells[1]} |", flush=True)
+
+
+def piece_errors(angles, cam, table):
+    """What the budget gives: the measured edge error of the kept pieces per angle."""
+    scene = mapping.Scene(cam.position, np.zeros(3), BA.R_S)
+    settings = BA.make_settings(cam)
+    tol = settings.max_error_px
+    print(f"tolerance {tol} px; edge error = distance on screen between a kept piece edge's midpoint and the "
+          "exact image of its source midpoint (the largest of the piece's three edges)\n")
+    print("| angle [deg] | order | pieces (plain / magnified) | plain: p99 / max [px] / beyond | "
+          "magnified: p99 / max [px] / beyond |")
+    print("|---|---|---|---|---|")
+    for a in angles:
+        src = BA.sphere_scene(a)[0]
+        fr = frame.frame_context(scene, table, settings, None, cam.frustum_planes())
+        source = frame.prepare_source(fr, src)
+        coarse = frame.map_source(fr, source)
+        sight = visibility.see(fr, source)
+        levels = level_plan.presplit(fr, source, coarse, sight)
+        if levels is not None:
+            source = pipeline._split(fr, source, levels)
+            coarse = frame.map_source(fr, source)
+            sight = visibility.see(fr, source)
+        patches = axis_patch.build_patches(fr, source, sight)
+        probes = level_plan.probe_edges(fr, source, coarse)
+        for order in fr.orders:
+            plan = level_plan.plan_levels(fr, source, coarse, sight, patches, probes, order)
+            if plan.below_pixel:
+                continue
+            pieces = subdivision.cut(fr, source, plan, coarse.images[order])
+            keep, _, _ = culling.cull_pieces(fr, source, coarse, plan, pieces, patches, order)
+            sub, img, fs = pieces.sub, pieces.images, pieces.face_src
+            mag = (coarse.circumference[order][fs] > budget.RING_MAGNIFICATION * source.circumference[fs])[keep]
+            t = sub.tris[keep]
+            i, j = t.ravel(), np.roll(t, -1, axis=1).ravel()
+            mid = fr.map.images(0.5 * (sub.positions[i] + sub.positions[j]), (order,))[order]
+            chord = img.direction[i] + img.direction[j]
+            chord /= np.linalg.norm(chord, axis=1)[:, None]
+            err = subdivision.angle_of_chord(np.linalg.norm(mid.direction - chord, axis=1)) / settings.pixel_angle
+            err = np.nan_to_num(err).reshape(-1, 3).max(axis=1)
+            cells = []
+            for sel in (~mag, mag):
+                e = err[sel]
+                cells.append("-" if not len(e) else
+                             f"{np.percentile(e, 99):.3f} / {e.max():.3f} / {100 * (e > tol).mean():.1f}%")
+            print(f"| {a:g} | {order} | {int((~mag).sum())} / {int(mag.sum())} | {cells[0]} | {cells[1]} |", flush=True)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--base", default=None, metavar="REV", help="compare this checkout's core with REV's")
+    ap.add_argument("--rules", action="store_true", help="each rule of the budget with and without it")
+    ap.add_argument("--only", default=None, help="with --rules: only rules whose name contains this")
+    ap.add_argument("--errors", action="store_true", help="the kept pieces' measured edge errors")
+    ap.add_argument("--angles", default=None, help="orbit angles (deg), comma-separated (default: every --step)")
+    ap.add_argument("--step", type=float, default=10.0)
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--no-accuracy", action="store_true", help="with --base: times and triangles only")
+    ap.add_argument("--resolution", default="640x360")
+    ap.add_argument("--ref-cache", default=None, metavar="DIR", help="as bench_accuracy's --ref-cache")
+    args = ap.parse_args(argv)
+    warnings.simplefilter("ignore", RuntimeWarning)
+    BA.REF_CACHE = args.ref_cache
+    w, h = (int(x) for x in args.resolution.lower().split("x"))
+    cam = BA.camera(w, h)
+    table = LUTFamily().at(BA.R_OBS)
+    angles = ([BA._angle(a) for a in args.angles.split(",")] if args.angles
+              else [BA._angle(a) for a in np.arange(0.0, 360.0, args.step)])
+    print(f"bench_budget: {w}x{h}, {args.rounds} rounds, load average {os.getloadavg()[0]:.1f}\n")
+    if args.base:
+        compare_revisions(args.base, angles, args.rounds, cam, table, accuracy=not args.no_accuracy)
+    if args.rules:
+        compare_rules(args.rounds, cam, table, args.only)
+    if args.errors:
+        piece_errors(angles, cam, table)
+
+
+if __name__ == "__main__":
+    main()
