@@ -89,24 +89,15 @@ def rasterize(meshes, camera: Camera, *, near: float = 1e-6, chunk: int = 1_000_
         if not len(tris):
             continue
         pos = np.asarray(mesh.positions, np.float64)
-        col, row, depth = camera.project(pos)
         a, b, c = pos[tris[:, 0]], pos[tris[:, 1]], pos[tris[:, 2]]
-        front = np.all(depth[tris] > near, axis=1)
-        with np.errstate(invalid="ignore"):
-            c0 = np.floor(np.nanmin(col[tris], axis=1) - 0.5)
-            c1 = np.ceil(np.nanmax(col[tris], axis=1) - 0.5)
-            r0 = np.floor(np.nanmin(row[tris], axis=1) - 0.5)
-            r1 = np.ceil(np.nanmax(row[tris], axis=1) - 0.5)
-        finite = np.all(np.isfinite(pos[tris]), axis=(1, 2))
-        c0 = np.where(front, np.clip(c0, 0, W - 1), 0).astype(np.int64)
-        c1 = np.where(front, np.clip(c1, -1, W - 1), W - 1).astype(np.int64)
-        r0 = np.where(front, np.clip(r0, 0, H - 1), 0).astype(np.int64)
-        r1 = np.where(front, np.clip(r1, -1, H - 1), H - 1).astype(np.int64)
+        if camera.panoramic:
+            box_tri, c0, c1, r0, r1 = _panorama_boxes(camera, pos, tris)
+        else:
+            box_tri = np.arange(len(tris))
+            c0, c1, r0, r1 = _perspective_boxes(camera, pos, tris, near)
         nx = np.maximum(c1 - c0 + 1, 0)
         ny = np.maximum(r1 - r0 + 1, 0)
-        # triangles behind the camera entirely (all corners at depth <= near) are invisible
-        behind = np.all(depth[tris] <= near, axis=1)
-        count = np.where(finite & ~behind, nx * ny, 0)
+        count = nx * ny
         sel = np.flatnonzero(count)
         if not sel.size:
             continue
@@ -119,11 +110,12 @@ def rasterize(meshes, camera: Camera, *, near: float = 1e-6, chunk: int = 1_000_
             cnt = count[f]
             tot = int(cnt.sum())
             tests += tot
-            fi = np.repeat(f, cnt)
+            fb = np.repeat(f, cnt)
             k = group_offsets(cnt)
-            px = c0[fi] + k % nx[fi]
-            py = r0[fi] + k // nx[fi]
+            px = c0[fb] + k % nx[fb]
+            py = r0[fb] + k // nx[fb]
             pix = py * W + px
+            fi = box_tri[fb]
             t, u, v, ok = _moller_trumbore(o, dirs[pix], a[fi], b[fi], c[fi])
             ok &= t < best_t[pix]
             if ok.any():
@@ -173,6 +165,65 @@ def rasterize(meshes, camera: Camera, *, near: float = 1e-6, chunk: int = 1_000_
                 attributes[name][pix] = np.einsum("pk,pkx->px", bary, val[tri].reshape(len(pix), 3, -1))
     out.info = dict(tests=tests, attributes={k: v.reshape((H, W) + v.shape[1:]) for k, v in attributes.items()})
     return out.reshape((H, W))
+
+
+def _perspective_boxes(camera: Camera, pos, tris, near):
+    """(c0, c1, r0, r1) per triangle, inclusive pixel ranges to test for a perspective camera: the
+    screen bounding box of the projected corners, or every pixel for a triangle reaching behind the
+    camera's ``near`` distance (and none for one entirely behind it or with non-finite corners)."""
+    W, H = camera.width, camera.height
+    col, row, depth = camera.project(pos)
+    front = np.all(depth[tris] > near, axis=1)
+    with np.errstate(invalid="ignore"):
+        c0 = np.floor(np.nanmin(col[tris], axis=1) - 0.5)
+        c1 = np.ceil(np.nanmax(col[tris], axis=1) - 0.5)
+        r0 = np.floor(np.nanmin(row[tris], axis=1) - 0.5)
+        r1 = np.ceil(np.nanmax(row[tris], axis=1) - 0.5)
+    finite = np.all(np.isfinite(pos[tris]), axis=(1, 2))
+    c0 = np.where(front, np.clip(c0, 0, W - 1), 0).astype(np.int64)
+    c1 = np.where(front, np.clip(c1, -1, W - 1), W - 1).astype(np.int64)
+    r0 = np.where(front, np.clip(r0, 0, H - 1), 0).astype(np.int64)
+    r1 = np.where(front, np.clip(r1, -1, H - 1), H - 1).astype(np.int64)
+    # triangles behind the camera entirely (all corners at depth <= near) are invisible
+    behind = np.all(depth[tris] <= near, axis=1)
+    drop = ~(finite & ~behind)
+    return c0, np.where(drop, c0 - 1, c1), r0, r1
+
+
+CAP_PAD = 1e-9
+"""Relative widening (plus as many radians) of a triangle's bounding cap in a panorama."""
+
+
+def _panorama_boxes(camera: Camera, pos, tris):
+    """(triangle index, c0, c1, r0, r1): inclusive pixel ranges to test for a panoramic camera, one or
+    more per triangle. A triangle's image on the view sphere (the directions of its points seen from
+    the camera) is the spherical triangle of its corners' directions; it lies inside the cap about the
+    normalised mean of those directions through the farthest of them (a cap narrower than a
+    hemisphere is convex, so it holds every positive combination of the corners). The cap's pixels
+    are bounded by ``Camera.cap_pixel_boxes`` (longitude and latitude ranges, split at the
+    equirectangular seam; an annular sector of the fisheye image). Triangles whose cap is not
+    narrower than a hemisphere (e.g. around or next to the camera) test every pixel."""
+    W, H = camera.width, camera.height
+    n = len(tris)
+    finite = np.all(np.isfinite(pos[tris]), axis=(1, 2))
+    rel = pos - camera.position
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = rel / np.linalg.norm(rel, axis=1, keepdims=True)
+        ut = u[tris]                        # (T, 3, 3) unit corner directions
+        m = ut.sum(axis=1)
+        m_len = np.linalg.norm(m, axis=1)
+        centre = m / m_len[:, None]
+        cos_c = np.einsum("tk,tjk->tj", centre, ut)
+        sin_c = np.linalg.norm(np.cross(centre[:, None, :], ut), axis=2)
+        radius = np.max(np.arctan2(sin_c, cos_c), axis=1) * (1.0 + CAP_PAD) + CAP_PAD
+    capped = finite & np.isfinite(radius) & (radius < 0.5 * np.pi - 1e-3) & (m_len > 1e-6)
+    whole = np.flatnonzero(finite & ~capped)
+    sel = np.flatnonzero(capped)
+    idx, c0, c1, r0, r1 = camera.cap_pixel_boxes(centre[sel], radius[sel])
+    tri = np.concatenate([sel[idx], whole])
+    z = np.zeros(len(whole), np.int64)
+    return (tri, np.concatenate([c0, z]), np.concatenate([c1, z + W - 1]),
+            np.concatenate([r0, z]), np.concatenate([r1, z + H - 1]))
 
 
 def _moller_trumbore(o, d, a, b, c):
