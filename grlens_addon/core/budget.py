@@ -65,6 +65,12 @@ texture placement next to the axis (a square behind the hole crossed off its cen
 
 # --- the level plan -----------------------------------------------------------------------------
 
+HALF_PROBES = True
+"""The level plan maps the quarter points of every edge it cuts, so that an edge whose curvature is
+uneven along it is cut for the half that bends more (level_plan._half_sagitta), not for the
+average. Trades two map lookups per cut edge for pieces within the tolerance where an image bends
+unevenly (a floor's second-order image wrapping round the hole)."""
+
 RING_MAGNIFICATION = 2.0
 """Source triangles whose image circumference exceeds this many times their own are treated as lying
 in a strongly lensed (Einstein-ring) region: the level plan gives them ring levels (azimuth about

@@ -104,10 +104,15 @@ def plan_levels(frame: Frame, source: Source, coarse: SourceImages, sight, patch
     levels = np.ones(len(edges.verts), dtype=np.int64)  # edges not probed keep level 1
     levels[probe] = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
                                             chord[probe], budget.pixel_angle, tol)
+    sagitta = None
+    if budget.active and B.HALF_PROBES:
+        sagitta = _half_sagitta(frame, source, img_v, img_m, probe, rho, chord, levels, order)
+        levels[probe] = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
+                                                chord[probe], budget.pixel_angle, tol, sagitta)
     strip_tri = None
     if budget.active:
         strip_tri = _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, levels, rho, chord,
-                                         probe, tol, cov)
+                                         probe, tol, cov, sagitta)
     # the selection: the frustum, the patches' triangles, back faces
     selected, plan.outside_bits = sight.inside_frustum(img_v, img_m, probe)
     plan.set_aside["outside_frustum"] = len(tris) - len(selected)
@@ -132,7 +137,8 @@ def plan_levels(frame: Frame, source: Source, coarse: SourceImages, sight, patch
     return plan
 
 
-def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, levels, rho, chord, probe, tol, cov):
+def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, levels, rho, chord, probe, tol, cov,
+                         sagitta=None):
     """Steps 2-3 of the plan (see the module docstring), raising ``levels`` in place; returns the mask
     (T,) of the triangles cut into strips, or None."""
     settings, edges, tris = frame.settings, source.edges, source.tris
@@ -140,7 +146,7 @@ def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, lev
     # silhouette edges (and the ring levels of silhouette triangles) aim at the coverage tolerance;
     # the silhouette is found only around the edges whose level that would change
     tight = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
-                                    chord[probe], pixel_angle, cov)
+                                    chord[probe], pixel_angle, cov, sagitta)
     raise_edges = tight != levels[probe]
     replaced = cap = on_sheets = None
     if order_patches:
@@ -188,6 +194,31 @@ def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, lev
         strip_tri[cand[strip]] = True
     np.maximum.at(levels, edges.of_tri[cand[~strip]].ravel(), np.repeat(want[~strip], 3))
     return strip_tri
+
+
+def _half_sagitta(frame, source, img_v, img_m, probe, rho, chord, levels, order):
+    """(P,) pixels: the sagitta of the probed edges ``probe`` to plan their levels by. rho * chord from
+    the edge's midpoint assumes the curvature is even along the edge (a sub-edge of 1/n of it sags
+    1/n^2 as much); where it is not (a floor's second-order image wrapping round the hole), the half
+    that bends more decides. For the edges cut at least in two, the images of the quarter points
+    give each half's own sagitta s_h, and a sub-edge of 1/n of the edge sags about 4 s_h / n^2: the
+    larger of the two estimates is used."""
+    pixel_angle = frame.budget.pixel_angle
+    sag = rho * chord[probe] / pixel_angle
+    k = np.flatnonzero(levels[probe] >= 2)
+    if k.size == 0:
+        return sag
+    ev = source.edges.verts[probe[k]]
+    pa, pb = source.positions.take(ev[:, 0], axis=0), source.positions.take(ev[:, 1], axis=0)
+    quarter = frame.map.images(np.concatenate([0.75 * pa + 0.25 * pb, 0.25 * pa + 0.75 * pb]), (order,))[order]
+    d = img_v.direction
+    da, db, dm = d.take(ev[:, 0], axis=0), d.take(ev[:, 1], axis=0), img_m.direction.take(k, axis=0)
+    q1, q3 = quarter.direction[:k.size], quarter.direction[k.size:]
+    halves = [subdivision.rho(x, y, q) * subdivision.chord_angle(x, y) for x, y, q in ((da, dm, q1), (dm, db, q3))]
+    with np.errstate(invalid="ignore"):
+        half = np.fmax(halves[0], halves[1]) / pixel_angle
+        sag[k] = np.fmax(sag[k], 4.0 * half)
+    return sag
 
 
 def _ring_candidates(src_circ, img_circ) -> np.ndarray:
