@@ -1,5 +1,6 @@
 """core.frame_check: one frame of the polygon method against the reference ray tracer, its passes and
 their OpenEXR file (no bpy). Units: BU with r_s = 1; the paper's sphere at 160x90."""
+import dataclasses
 import math
 
 import numpy as np
@@ -152,3 +153,102 @@ def test_square_off_the_axis_shows_the_patch_not_coarse_pieces(lut, monkeypatch)
     assert rep.patch_covered > 0 and rep.kept == len(img.tris)
     monkeypatch.setattr(pipeline, "UNDER_PATCH_ERROR", None)
     assert screen_p99() > 0.6
+
+
+def _rotate_towards_z(d, angle):
+    """Each unit direction d (N, 3) turned by ``angle`` (rad) about unit(d x z): exactly that far."""
+    axis = np.cross(d, [0.0, 0.0, 1.0])
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    return d * math.cos(angle) + np.cross(axis, d) * math.sin(angle)
+
+
+def test_frame_check_of_the_sky(lut, tmp_path):
+    """check_frame(sky=...): a sky model equal to the reference's own curve (raytrace.escape_directions)
+    has no error; one turned by 0.7 px on every pixel reads 0.7 px and moves the checker edges; one
+    whose shadow is 2 px too wide differs on exactly the pixels of that ring (counted here from the
+    pixel directions and eq. 14). The sky directions go into the passes and the EXR file."""
+    from grlens_addon.core import image_metrics
+    from lutgen import shadow_half_angle
+    from lutgen.exr_io import read_exr
+
+    src, scene, settings, cam = _frame(90)
+    exact = lambda d, p: raytrace.escape_directions(p, d, scene.hole, scene.r_s)  # noqa: E731
+    check = frame_check.check_frame([src], scene, lut, settings, cam, sky=exact)
+    sky = check.metrics["sky"]
+    assert sky["fell_ref"] > 1000 and sky["compared"] > 10000 and sky["sky_angle_n"] > 8000
+    assert sky["sky_angle_px"]["max"] == 0 and sky["shadow_mismatch"] == 0 and sky["checker_mismatch"] == 0
+    assert sky["checker_edge"] > 300 and sky["checker_per_edge"] == 0
+    assert "sky off by 0 px" in check.summary() and check.sky.shape == (90, 160, 3)
+    ref = check.reference
+    esc = ~ref.hit & ~ref.fell
+    np.testing.assert_allclose(np.linalg.norm(ref.sky[esc], axis=-1), 1.0, atol=1e-13)
+    assert np.isnan(ref.sky[~esc]).all()
+
+    # off by a known angle
+    pa = cam.pixel_angle
+    off = np.full_like(check.sky, np.nan)
+    ok = np.all(np.isfinite(check.sky), axis=-1)
+    off[ok] = _rotate_towards_z(check.sky[ok], 0.7 * pa)
+    m = image_metrics.compare_sky(ref, off, pa)
+    for k in ("p50", "p99", "max"):
+        assert m["sky_angle_px"][k] == pytest.approx(0.7, rel=1e-6)
+    assert m["checker_per_edge"] > 0.01 and m["shadow_mismatch"] == 0  # edges move less where the sky is squeezed
+
+    # a shadow 2 px too wide: NaN where the ray's angle from e1 is above pi - xi_crit - 2 px
+    e1 = (scene.camera - scene.hole) / np.linalg.norm(scene.camera - scene.hole)
+    xi = np.arccos(np.clip(cam.pixel_directions() @ e1, -1, 1))
+    lim = math.pi - float(shadow_half_angle(scene.r_obs))
+    wide = np.where((xi > lim - 2 * pa)[..., None], np.nan, check.sky)
+    m = image_metrics.compare_sky(ref, wide, pa)
+    ring = ~ref.hit & (xi > lim - 2 * pa) & (xi <= lim)
+    assert m["shadow_mismatch"] == ring.sum() > 50 and m["fell_test"] == m["fell_ref"] + ring.sum()
+
+    # passes and file
+    bad = dataclasses.replace(check, sky=off, metrics=dict(check.metrics, sky=image_metrics.compare_sky(ref, off, pa)))
+    p = frame_check.passes(bad)
+    for layer in ("Reference", "grlens"):
+        assert {f"{layer}.sky_direction.{a}" for a in "XYZ"} <= set(p)
+    np.testing.assert_array_equal(p["Reference.sky_direction.Y"], ref.sky[..., 1].astype(np.float32))
+    err = p["Check.sky_error.V"]
+    assert np.nanmax(np.abs(err - 0.7)) < 1e-4 and np.isfinite(err).sum() == bad.metrics["sky"]["sky_angle_n"]
+    assert p["Check.shadow_mismatch.V"].sum() == 0
+    assert frame_check.passes(dataclasses.replace(check, sky=wide))["Check.shadow_mismatch.V"].sum() == ring.sum()
+    path = tmp_path / "sky.exr"
+    frame_check.write_passes(path, bad)
+    channels, meta = read_exr(path)
+    assert set(channels) == set(p) and meta["sky_error_p99_px"] == pytest.approx(0.7, rel=1e-6)
+    assert "Reference.sky_direction.X" in frame_check.passes(dataclasses.replace(check, sky=None))
+    assert "grlens.sky_direction.X" not in frame_check.passes(dataclasses.replace(check, sky=None))
+
+
+def test_checker_edges_moved_by_a_known_angle():
+    """In flat space (hole 1e6 r_s away), a sky model turned by 0.7 px in longitude and in latitude
+    moves every checker edge by 0.7 px across itself (a 30 deg view of the horizon: pixels within 7%
+    of pixel_angle): image_metrics.compare_sky's checker_per_edge reads about 0.7, sky_angle about
+    0.7 sqrt 2."""
+    from grlens_addon.core import image_metrics
+
+    cam = raytrace.Camera.look_at([0.0, 0.0, 0.0], [1.0, 0.3, 0.05], math.radians(30.0), 320, 180)
+    ref = raytrace.trace(raytrace.TriangleScene(np.zeros((0, 3)), np.zeros((0, 3))), cam, [0, 0, -10.0], 1e-5)
+    pa = cam.pixel_angle
+    d = ref.sky.reshape(-1, 3)
+    lon = np.arctan2(d[:, 1], d[:, 0]) + 0.7 * pa / np.sqrt(1 - d[:, 2] ** 2)
+    lat = np.arcsin(d[:, 2]) + 0.7 * pa
+    turned = np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], 1)
+    m = image_metrics.compare_sky(ref, turned.reshape(ref.sky.shape), pa)
+    assert m["checker_edge"] > 1000 and m["shadow_mismatch"] == 0 and m["fell_ref"] == 0
+    assert 0.6 < m["checker_per_edge"] < 0.8
+    assert m["sky_angle_px"]["p50"] == pytest.approx(0.7 * math.sqrt(2), rel=0.01)
+    exact = image_metrics.compare_sky(ref, ref.sky, pa)
+    assert exact["checker_per_edge"] == 0 and exact["sky_angle_px"]["max"] == 0
+
+
+def test_checker_world():
+    """image_metrics.checker: 10-degree checks in longitude (about world z) and latitude."""
+    from grlens_addon.core import image_metrics
+
+    lon = np.radians([5.0, 15.0, 5.0, 15.0, -5.0, 175.0, -175.0])
+    lat = np.radians([5.0, 5.0, 15.0, 15.0, 5.0, -85.0, 85.0])
+    d = np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], 1)
+    assert image_metrics.checker(d).tolist() == [0, 1, 1, 0, 1, (17 - 9) % 2, (-18 + 8) % 2]
+    assert image_metrics.checker(np.full((2, 3), np.nan)).tolist() == [-1, -1]

@@ -34,6 +34,14 @@ Per image order o (1, 2, and "all" = orders 1 and 2 together) the comparison rep
 
   each as p50 / p99 / max (NaN if there is nothing to measure).
 
+The sky (:func:`compare_sky`): on the pixels whose ray meets no object in the reference, a model of
+the lensed world (the direction each ray travels at infinity, NaN for rays that fall in) against the
+reference's ``PixelBuffers.sky``: ``sky_angle_px`` (angle between the two directions, in pixels of the
+camera's ``pixel_angle``), ``shadow_mismatch`` (pixels where exactly one says the ray falls in) and,
+for the checkered world :func:`checker` (checks of 10 degrees in longitude and latitude about the world
+z axis), ``checker_per_edge``: mismatched checker pixels per pixel along the reference's checker
+edges, about how many pixels the edges are off on average.
+
 Pixels where the reference sees an image of order 3 or more are counted separately
 (``higher_ref``; the polygon method builds orders 1 and 2 only) and enter the order keys only through
 the test buffer. UV coordinates listed in ``wrap_uv`` are periodic (differences taken modulo 1, e.g.
@@ -151,7 +159,8 @@ def uv_gradient(buf, wrap_uv=(False, False), seam: float = 0.25) -> np.ndarray:
 
 
 def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(False, False),
-            other_surface: float | None = None, image_pixels=None, uv_points=None) -> dict:
+            other_surface: float | None = None, image_pixels=None, uv_points=None,
+            column_period: float | None = None) -> dict:
     """Metrics between the reference buffers ``ref`` and ``test`` (see the module docstring).
 
     Returns {"orders": {1: {...}, 2: {...}, "all": {...}}, "higher_ref": int, "higher_test": int,
@@ -164,7 +173,9 @@ def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(Fals
     image of that order of each point truly appears (e.g. raytrace.image_pixels for the buffers'
     camera), also screen_px (p50, p99, max) and screen_px_n, of the texture points when
     ``uv_points`` (a function (uv (M, 2)) -> points (M, 3) BU, NaN where no surface point has that
-    UV) is given, else of the surface points: see the module docstring.
+    UV) is given, else of the surface points: see the module docstring. ``column_period`` (pixels,
+    e.g. ``Camera.column_period`` of an equirectangular panorama): column differences of the screen
+    error are taken modulo it (an image across the seam is next to its pixel, not a width away).
     """
     if ref.shape != test.shape:
         raise ValueError(f"buffers of different shapes: {ref.shape} vs {test.shape}")
@@ -179,7 +190,10 @@ def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(Fals
             m = ref.hit & test.hit & (ref.order == o) & (test.order == o) & (ref.object_id == test.object_id)
             shown = uv_points(test.uv[m]) if uv_points is not None else test.point[m]
             col, row = image_pixels(shown, o)
-            screen[o] = np.hypot(np.asarray(col) - (cols[m] + 0.5), np.asarray(row) - (rows[m] + 0.5))
+            dc = np.asarray(col) - (cols[m] + 0.5)
+            if column_period:
+                dc = dc - column_period * np.round(dc / column_period)
+            screen[o] = np.hypot(dc, np.asarray(row) - (rows[m] + 0.5))
     for o in list(orders) + ["all"]:
         sel = list(orders) if o == "all" else [o]
         kr, kt = pixel_keys(ref, sel), pixel_keys(test, sel)
@@ -214,6 +228,73 @@ def compare(ref, test, *, texture_size: int = 1024, orders=(1, 2), wrap_uv=(Fals
             res["other_surface"] = int(np.count_nonzero(far))
         out["orders"][o] = res
     return out
+
+
+CHECKER_SIZE = np.radians(10.0)
+"""Size of the checks of :func:`checker` (rad): 10 degrees in longitude and latitude."""
+
+
+def checker(directions, size: float = CHECKER_SIZE) -> np.ndarray:
+    """The checkered world: (N,) int, 0 or 1 per unit world direction (N, 3), the parity of
+    floor(longitude / size) + floor(latitude / size), longitude atan2(y, x) and latitude asin(z) about
+    the world z axis (rad); -1 for non-finite directions (no sky)."""
+    d = np.asarray(directions, np.float64).reshape(-1, 3)
+    ok = np.all(np.isfinite(d), axis=1)
+    with np.errstate(invalid="ignore"):
+        lon = np.arctan2(d[:, 1], d[:, 0])
+        lat = np.arcsin(np.clip(d[:, 2] / np.linalg.norm(d, axis=1), -1.0, 1.0))
+        k = np.floor(lon / size) + np.floor(lat / size)
+    return np.where(ok, np.mod(np.nan_to_num(k), 2), -1).astype(np.int64)
+
+
+def angle_between(a, b) -> np.ndarray:
+    """Angle (rad) between direction vectors a and b (..., 3) (atan2 of |a x b| and a . b: accurate
+    for tiny angles); NaN where either is NaN."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.einsum("...k,...k->...", a, b))
+
+
+def compare_sky(ref, sky, pixel_angle: float, rays=None, checker_size: float = CHECKER_SIZE) -> dict:
+    """A lensed-sky model against the reference's sky (see the module docstring).
+
+    ref: the reference :class:`raytrace.PixelBuffers` (shape S); sky: (S, 3) the model's unit world
+    directions at infinity per pixel (NaN: the model says the ray falls in); pixel_angle: rad per pixel
+    (``Camera.pixel_angle``); rays: (S,) bool, the pixels that have a ray (default all; a fisheye's
+    pixels outside its circle have none). Compared are the pixels with a ray that meets no object in
+    the reference (``compared``). Returns sky_angle_px (p50, p99, max) and sky_angle_n over the pixels
+    where both say the ray escapes; shadow_mismatch (pixels where exactly one says it falls in),
+    fell_ref, fell_test; checker_mismatch (escaping pixels whose :func:`checker` values differ),
+    checker_edge (reference pixels with a right or lower neighbour, both escaping, of the other
+    checker value: the length of the checker edges in pixels) and checker_per_edge (their ratio, NaN
+    without edges)."""
+    sky = np.asarray(sky, np.float64).reshape(ref.shape + (3,))
+    rays = np.ones(ref.shape, bool) if rays is None else np.asarray(rays, bool)
+    cmp_ = rays & ~ref.hit
+    fell_ref = cmp_ & ref.fell
+    fell_test = cmp_ & ~np.all(np.isfinite(sky), axis=-1)
+    both = cmp_ & ~fell_ref & ~fell_test
+    ang = angle_between(ref.sky[both], sky[both]) / pixel_angle
+    out = {"compared": int(cmp_.sum()), "sky_angle_px": _stats(ang), "sky_angle_n": int(np.isfinite(ang).sum()),
+           "shadow_mismatch": int((fell_ref != fell_test).sum()), "fell_ref": int(fell_ref.sum()),
+           "fell_test": int(fell_test.sum())}
+    esc_ref = cmp_ & ~fell_ref
+    c_ref = np.where(esc_ref, checker(ref.sky.reshape(-1, 3), checker_size).reshape(ref.shape), -1)
+    c_test = np.where(both, checker(sky.reshape(-1, 3), checker_size).reshape(ref.shape), -1)
+    out["checker_mismatch"] = int((both & (c_ref != c_test)).sum())
+    edge = np.zeros(ref.shape, bool)
+    if len(ref.shape) == 2:
+        edge[:, :-1] |= (c_ref[:, :-1] >= 0) & (c_ref[:, 1:] >= 0) & (c_ref[:, :-1] != c_ref[:, 1:])
+        edge[:-1, :] |= (c_ref[:-1, :] >= 0) & (c_ref[1:, :] >= 0) & (c_ref[:-1, :] != c_ref[1:, :])
+    out["checker_edge"] = int(edge.sum())
+    out["checker_per_edge"] = out["checker_mismatch"] / out["checker_edge"] if out["checker_edge"] else float("nan")
+    return out
+
+
+def sky_error_px(ref, sky, pixel_angle: float) -> np.ndarray:
+    """(S,) per pixel the angle (pixels of ``pixel_angle``) between the reference's sky and the model's
+    ``sky`` (S, 3), NaN where either has none (hit, fell in, no ray)."""
+    sky = np.asarray(sky, np.float64).reshape(ref.shape + (3,))
+    return angle_between(ref.sky, sky) / pixel_angle
 
 
 def markdown_rows(metrics: dict, label: str = "") -> list[str]:

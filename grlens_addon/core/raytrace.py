@@ -159,6 +159,15 @@ class Camera:
         """True for the panoramic kinds (no perspective frustum, nothing 'behind' the camera)."""
         return self.kind != "PERSP"
 
+    @property
+    def column_period(self) -> float | None:
+        """Equirectangular: the number of columns per full turn of longitude, 2 pi width /
+        (longitude_max - longitude_min) (the width for the full panorama; column differences are
+        periodic in it); None for the other kinds."""
+        if self.kind != "EQUIRECTANGULAR":
+            return None
+        return TWO_PI * self.width / (self.longitude_max - self.longitude_min)
+
     @classmethod
     def look_at(cls, position, target, fov_y, width, height, up=(0.0, 0.0, 1.0), **lens) -> "Camera":
         """Camera at ``position`` looking at ``target`` (BU) with the image's up close to ``up``;
