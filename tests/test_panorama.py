@@ -267,3 +267,48 @@ def test_frame_check_in_a_panorama(lut, lens):
     assert m["covered_ref"] > 100
     assert m["mismatch_frac"] < 0.05 and m["screen_px"]["p99"] < 0.5
     assert check.metrics["orders"][2]["covered_ref"] > 0
+
+
+def test_blender_panoramic_cameras_become_reference_cameras():
+    """blender.check.check_camera (bpy): a PANO camera of type equirectangular or fisheye equidistant
+    becomes the raytrace.Camera of that kind with the camera's ranges / field of view and position,
+    looking along the object's -Z; other panorama types and orthographic cameras are refused."""
+    bpy = pytest.importorskip("bpy")
+    from grlens_addon.blender import check
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    try:
+        scene = bpy.context.scene
+        scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 400, 200, 50
+        data = bpy.data.cameras.new("Pano")
+        obj = bpy.data.objects.new("Pano", data)
+        scene.collection.objects.link(obj)
+        obj.location = (3.0, -2.0, 1.0)
+        obj.rotation_euler = (1.2, 0.1, 0.7)
+        bpy.context.view_layer.update()
+        data.type = "PANO"
+        data.panorama_type = "EQUIRECTANGULAR"
+        data.latitude_min, data.latitude_max = -1.0, 1.2
+        data.longitude_min, data.longitude_max = -2.5, 2.0
+        cam = check.check_camera(scene, obj, 50)
+        assert (cam.kind, cam.width, cam.height) == ("EQUIRECTANGULAR", 100, 50)
+        assert (cam.latitude_min, cam.latitude_max, cam.longitude_min, cam.longitude_max) == pytest.approx((-1, 1.2, -2.5, 2))
+        mw = np.array(obj.matrix_world)
+        np.testing.assert_allclose(cam.position, mw[:3, 3], atol=1e-6)
+        # the direction at longitude 0, latitude 0 is the object's -Z
+        col, row, _ = cam.project(cam.position[None] - mw[:3, 2][None])
+        assert col[0] == pytest.approx(2.5 / 4.5 * 100, abs=1e-4) and row[0] == pytest.approx(1.2 / 2.2 * 50, abs=1e-4)
+        data.panorama_type = "FISHEYE_EQUIDISTANT"
+        data.fisheye_fov = math.radians(200)
+        cam = check.check_camera(scene, obj, 50)
+        assert cam.kind == "FISHEYE_EQUIDISTANT" and cam.fisheye_fov == pytest.approx(math.radians(200))
+        np.testing.assert_allclose(cam.pixel_directions()[25, 50], -mw[:3, 2] / np.linalg.norm(mw[:3, 2]), atol=0.05)
+        for other in ("MIRRORBALL", "FISHEYE_EQUISOLID"):
+            data.panorama_type = other
+            with pytest.raises(ValueError, match="equirectangular and fisheye equidistant, not " + other.replace("_", " ").lower()):
+                check.check_camera(scene, obj, 50)
+        data.type = "ORTHO"
+        with pytest.raises(ValueError, match="perspective or panoramic"):
+            check.check_camera(scene, obj, 50)
+    finally:
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)

@@ -2,8 +2,9 @@
 
 Renders the lensed sources of the scene twice at a fraction of the render resolution, with the exact
 per-pixel ray tracer and with the polygon method the add-on uses (core.frame_check), compares them
-and writes both renders' passes (light travel time, image order, object index, UV) and the mismatch
-to an OpenEXR file. Geometry only: materials, GR illumination and disc colours are not compared.
+and writes both renders' passes (light travel time, image order, object index, UV, the reference's
+sky direction) and the mismatch to an OpenEXR file. The observer camera may be perspective or one of
+Cycles' panoramas equirectangular and fisheye equidistant (:func:`check_camera`). Geometry only: materials, GR illumination and disc colours are not compared.
 Units: Blender units; times in seconds; errors in pixels of the check's resolution.
 """
 from __future__ import annotations
@@ -18,12 +19,30 @@ from ..core import frame_check, raytrace
 from . import gather, lutcache, rebuild
 
 
+PANORAMA_TYPES = ("EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT")
+"""Cycles' panorama types the check models (``cam.data.panorama_type``, Blender 4.x and 5.x)."""
+
+
 def check_camera(scene, cam, percentage) -> raytrace.Camera:
-    """The reference tracer's pinhole camera for the observer camera ``cam`` (evaluated) at
-    ``percentage`` of the scene's render resolution; ValueError for what the tracer cannot model."""
-    if cam.type != "CAMERA" or cam.data.type != "PERSP":
-        raise ValueError("the check needs a perspective observer camera")
-    if cam.data.shift_x or cam.data.shift_y:
+    """The reference tracer's camera for the observer camera ``cam`` (evaluated) at ``percentage`` of
+    the scene's render resolution; ValueError for what the tracer cannot model.
+
+    Perspective cameras (sensor fit and aspect ratio from the camera's frame) and Cycles' panoramas
+    of type equirectangular (``latitude_min/max``, ``longitude_min/max``) and fisheye equidistant
+    (``fisheye_fov``), read from ``cam.data`` (where Blender 4.x and 5.x keep them) into
+    ``raytrace.Camera`` kinds of the same names; Cycles' projection conventions (panoramas render
+    in Cycles only). Orthographic cameras, the other panorama types, lens shift and non-square pixels
+    are refused."""
+    if cam.type != "CAMERA" or cam.data.type not in ("PERSP", "PANO"):
+        raise ValueError("the check needs a perspective or panoramic (equirectangular, fisheye equidistant) "
+                         "observer camera")
+    data = cam.data
+    if data.type == "PANO":
+        ptype = getattr(data, "panorama_type", None)
+        if ptype not in PANORAMA_TYPES:
+            raise ValueError(f"the check models the panorama types equirectangular and fisheye equidistant, "
+                             f"not {str(ptype).replace('_', ' ').lower()}")
+    if data.shift_x or data.shift_y:
         raise ValueError("the check does not model lens shift (camera shift x/y must be 0)")
     r = scene.render
     if abs(r.pixel_aspect_x - r.pixel_aspect_y) > 1e-6 * max(r.pixel_aspect_x, r.pixel_aspect_y):
@@ -31,9 +50,15 @@ def check_camera(scene, cam, percentage) -> raytrace.Camera:
     scale = r.resolution_percentage / 100.0 * percentage / 100.0
     width = max(1, round(r.resolution_x * scale))
     height = max(1, round(r.resolution_y * scale))
+    position = np.array(cam.matrix_world.translation, dtype=np.float64)
+    rotation = rebuild.camera_rotation(cam)
+    if data.type == "PANO":
+        lens = dict(kind=data.panorama_type, fisheye_fov=data.fisheye_fov, latitude_min=data.latitude_min,
+                    latitude_max=data.latitude_max, longitude_min=data.longitude_min,
+                    longitude_max=data.longitude_max)
+        return raytrace.Camera(position, rotation, 0.0, width, height, **lens)
     _, half_y = rebuild.half_tangents(scene, cam)
-    return raytrace.Camera(np.array(cam.matrix_world.translation, dtype=np.float64), rebuild.camera_rotation(cam),
-                           2.0 * np.arctan(half_y), width, height)
+    return raytrace.Camera(position, rotation, 2.0 * np.arctan(half_y), width, height)
 
 
 def output_path(filepath, frame) -> str:
