@@ -2,11 +2,21 @@
 of the polygon method with the reference tracer (``raytrace``) without Blender.
 
 Units: positions and light travel times in Blender units (BU), c = 1. The camera is a
-:class:`raytrace.Camera` (pinhole, Blender's axes). Every pixel is sampled once, at its centre, like
-the reference: for each triangle the pixels of its screen bounding box are tested with an exact
-ray-triangle intersection (Moeller-Trumbore) of the straight pixel ray, which is what a rasterizer's
-perspective-correct interpolation computes; triangles that reach behind the camera's near distance
-are tested against every pixel instead of being clipped. Depth is the distance from the camera
+:class:`raytrace.Camera` (Blender's axes): perspective, or Cycles' equirectangular or fisheye
+equidistant panorama. Every pixel is sampled once, at its centre, like the reference: for each
+triangle a set of candidate pixels is tested with an exact ray-triangle intersection
+(Moeller-Trumbore) of the straight pixel ray, which is what a rasterizer's perspective-correct
+interpolation computes. Perspective: the candidates are the pixels of the triangle's screen bounding
+box; triangles that reach behind the camera's near distance are tested against every pixel instead of
+being clipped. Panoramas, where a triangle's image has curved edges and may wrap around the
+equirectangular seam: the triangle's image on the view sphere (the spherical triangle of its corners'
+directions) lies inside the cap about their normalised mean through the farthest corner direction;
+the candidates are the pixels whose centres can lie in that cap (its latitude range and longitude
+half-width asin(sin radius / cos latitude), split into two boxes across the seam, every longitude
+around a pole; for the fisheye the annular sector of angles from the view axis and azimuths), and
+triangles whose cap is not narrower than a hemisphere are tested against every pixel. The
+intersection test is the same, so the result is exact whatever the projection (tested against brute
+force). Depth is the distance from the camera
 along the pixel ray (the image meshes sit at distance c*dt along their apparent directions, so this is
 the order in which a renderer's z-buffer keeps them). Attributes (UV, light travel time, source
 position) are interpolated with the hit's barycentric coordinates, as Blender interpolates corner and
@@ -72,7 +82,7 @@ def from_images(images, object_id: int = 0) -> list[RasterMesh]:
 def rasterize(meshes, camera: Camera, *, near: float = 1e-6, chunk: int = 1_000_000) -> PixelBuffers:
     """Per-pixel buffers (shape (camera.height, camera.width)) of the nearest triangle of ``meshes``
     (a sequence of :class:`RasterMesh`) along each straight pixel ray; ``near`` (BU) is the view depth
-    below which a triangle corner counts as behind the camera. ``info`` holds the number of
+    below which a triangle corner counts as behind a perspective camera (panoramas have no behind). ``info`` holds the number of
     (triangle, pixel) tests ("tests") and the interpolated extra attributes ("attributes", a dict,
     empty if no mesh has any). See the module docstring."""
     H, W = camera.height, camera.width

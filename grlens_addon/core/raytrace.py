@@ -55,6 +55,25 @@ and, for the curve itself, against lutgen.reference's DOP853 integrator).
 Light travel time: lutgen.orbit.travel_time from u_obs to u_hit, or, for a hit after the periapsis,
 from u_obs to the periapsis plus from there to u_hit (as lutgen.solver._finish does).
 
+Sky
+---
+A ray that hits nothing and does not fall in (b > b_crit or leaving outwards, i.e. xi below
+pi - the shadow's half angle of eq. 14) reaches r = infinity at the swept angle Phi_inf = ``phi_end``,
+where the closed-form curve has u(Phi) = 0: F(u_obs) - F(0) for rays leaving outwards,
+2 F(e2) - F(u_obs) - F(0) for rays passing the periapsis (F = lutgen.orbit.sweep; flat limit
+Phi_inf = xi). There its direction is parallel to its position, so it travels in the world direction
+cos(Phi_inf) e1 + sin(Phi_inf) e2: the sky it shows (``PixelBuffers.sky``, :func:`escape_directions`;
+no lutgen table and no emitter-observer solver involved). Accurate to ~1e-13 rad, except near
+xi = pi/2 (a turning point next to the camera: ~1e-9 rad) and next to the critical angle, where
+Phi_inf grows like -ln(xi_crit - xi) and the rounding of xi (4e-16 rad) is amplified accordingly.
+
+Cameras
+-------
+:class:`Camera` is Blender's perspective camera or one of Cycles' panoramas, equirectangular (the
+full sphere or a longitude / latitude range) and fisheye equidistant (``Camera.kind``); the tracer
+only needs its pixel directions (a fisheye's pixels outside its circle have no ray: no hit, not
+fallen, no sky), the rasterizer and the metrics its projection.
+
 Cuts whose line passes through the hole (to 1e-10 of their length; every cut of a planar mesh whose
 plane contains the hole, such as an equatorial disc) are radial: the ray meets them where Phi equals
 their polar angle (+ 2 pi k), if r(Phi) lies within the cut.
