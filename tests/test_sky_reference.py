@@ -163,3 +163,16 @@ def test_pixel_buffers_keep_the_sky():
     fields = {k: getattr(buf, k) for k in ("hit", "object_id", "face", "bary", "uv", "order", "light_time",
                                            "fell", "point", "phi", "depth")}
     assert np.isnan(raytrace.PixelBuffers(**fields).sky).all()
+
+
+@pytest.mark.parametrize("r_obs", [20.0, 2.5, 1e5])
+def test_agrees_with_lutgen_escape(r_obs):
+    """lutgen.escape.escape_angle (the add-on's lensed-world model: Carlson's form next to the turning
+    point) against this module's phi_end (differences of the orbit integral along the curve), over
+    xi from 0 to 1e-3 rad short of the shadow: within 5e-9 rad."""
+    from lutgen import escape
+
+    xc = math.pi - float(shadow_half_angle(r_obs))
+    xi = np.linspace(0.0, xc - 1e-3, 2001)
+    rays, _ = _rays(xi, r_obs)
+    np.testing.assert_allclose(rays.phi_end, escape.escape_angle(r_obs, xi), rtol=0, atol=5e-9)
