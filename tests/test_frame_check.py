@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from grlens_addon.core import frame_check, mapping, pipeline, raytrace
+from grlens_addon.core import budget, frame_check, mapping, pipeline, raytrace
 from lutgen import build_lut
 from lutgen.exr_io import read_exr
 from meshes import uv_sphere
@@ -151,7 +151,7 @@ def test_square_off_the_axis_shows_the_patch_not_coarse_pieces(lut, monkeypatch)
                                 frustum_planes=cam.frustum_planes())[1]
     rep = img.report  # the dropped pieces are counted (culling.CullReport.patch_covered), not kept
     assert rep.patch_covered > 0 and rep.kept == len(img.tris)
-    monkeypatch.setattr(pipeline, "UNDER_PATCH_ERROR", None)
+    monkeypatch.setattr(budget, "UNDER_PATCH_FACTOR", None)
     assert screen_p99() > 0.6
 
 

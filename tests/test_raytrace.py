@@ -13,7 +13,7 @@ import os
 import numpy as np
 import pytest
 
-from grlens_addon.core import axis_patch, image_metrics, mapping, pipeline, rasterize, raytrace
+from grlens_addon.core import axis_patch, budget, image_metrics, level_plan, mapping, pipeline, rasterize, raytrace
 from lutgen import build_lut, connect, shadow_half_angle
 from lutgen import reference as numeric
 
@@ -519,7 +519,7 @@ def test_ring_strips_cut_the_pieces_at_the_same_coverage(lut, monkeypatch):
 
     with_strips = pieces()
     assert image_metrics.compare(ref, render())["orders"]["all"]["mismatch_frac"] < 0.008
-    monkeypatch.setattr(pipeline, "STRIP_BAND_PX", 0.0)
+    monkeypatch.setattr(budget, "STRIP_BAND_PX", 0.0)
     assert with_strips < 0.67 * pieces()
 
 
@@ -535,8 +535,8 @@ def test_second_order_ring_edge_next_to_a_patch(lut, monkeypatch, angle):
         return image_metrics.compare(ref, render())["orders"]["all"]["mismatch_frac"]
 
     assert mismatch() < 0.002
-    monkeypatch.setattr(pipeline, "RING_EDGE_ORDERS", ())
-    monkeypatch.setattr(pipeline, "THIN_FACTOR", 1.0)
+    monkeypatch.setattr(budget, "RING_EDGE_ORDERS", ())
+    monkeypatch.setattr(budget, "THIN_FACTOR", 1.0)
     assert mismatch() > 0.004
 
 
@@ -547,7 +547,7 @@ def test_first_order_ring_edge_next_to_an_incomplete_patch(lut, monkeypatch):
     (pipeline.RING_EDGE_REACH): 0.44% of the covered pixels differ. Treating the patch as complete
     leaves 0.70% different (2.05% before the patch's circles followed the steep surface there,
     axis_patch.STEEP_RATIO)."""
-    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
+    monkeypatch.setattr(budget, "CLIP_TO_TRIANGLES", False)
     _, _, ref, render = _ring_view(lut, 171, (640, 360))
 
     def mismatch():
@@ -571,7 +571,7 @@ def test_patch_circles_follow_a_steep_surface(lut, monkeypatch):
     off): the axis passes just inside its limb, where the surface turns towards the axis' direction.
     With the circles axis_patch.STEEP_RATIO adds there, 0.42% of the covered pixels differ and the
     texture is within 0.43 px (p99 of the screen error); without them 0.78% and 0.88 px."""
-    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
+    monkeypatch.setattr(budget, "CLIP_TO_TRIANGLES", False)
     bench = _bench_accuracy()
     cam, src, ref, render = _ring_view(lut, 170.5, (640, 360))
 
@@ -581,7 +581,7 @@ def test_patch_circles_follow_a_steep_surface(lut, monkeypatch):
 
     mismatch, uv = errors()
     assert mismatch < 0.005 and uv < 0.5
-    monkeypatch.setattr(axis_patch, "STEEP_RATIO", 0.0)
+    monkeypatch.setattr(budget, "STEEP_RATIO", 0.0)
     mismatch, uv = errors()
     assert mismatch > 0.006 and uv > 0.7
 
@@ -618,7 +618,7 @@ def test_patches_clipped_to_the_triangles_next_to_the_limb(lut, monkeypatch, ang
         return m["mismatch_frac"], m["screen_px"]["p99"], counts["tris"]
 
     clipped = errors()
-    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
+    monkeypatch.setattr(budget, "CLIP_TO_TRIANGLES", False)
     plain = errors()
     assert clipped[0] < 0.0035 and clipped[1] < 0.3
     assert clipped[0] < plain[0] and clipped[1] < plain[1] and clipped[2] < 0.6 * plain[2]
@@ -630,12 +630,12 @@ def test_ring_levels_stop_where_the_patch_draws(lut, monkeypatch):
     the whole turn about the axis, but their pieces need to be narrow only beyond the patches' drawn
     cells (pipeline._span_cap): 100k image triangles instead of 129k, and 0.39% of the covered pixels
     differ either way."""
-    monkeypatch.setattr(axis_patch, "CLIP_TO_TRIANGLES", False)
+    monkeypatch.setattr(budget, "CLIP_TO_TRIANGLES", False)
     _, _, ref, render = _ring_view(lut, 172, (640, 360))
     counts = _count_triangles(monkeypatch)
     capped = image_metrics.compare(ref, render())["orders"]["all"]["mismatch_frac"]
     n_capped = counts["tris"]
-    monkeypatch.setattr(pipeline, "_span_cap", lambda patches, tris, xy: np.full(len(tris), np.inf))
+    monkeypatch.setattr(level_plan, "_span_cap", lambda patches, tris, xy: np.full(len(tris), np.inf))
     plain = image_metrics.compare(ref, render())["orders"]["all"]["mismatch_frac"]
     assert capped < 0.005 and plain < 0.005
     assert n_capped < 0.85 * counts["tris"]
@@ -697,5 +697,5 @@ def test_second_order_ring_edge_crosses_the_ring(lut, monkeypatch, angle):
         return image_metrics.compare(ref, render())["orders"]["all"]["mismatch_frac"]
 
     assert mismatch() < 0.002
-    monkeypatch.setattr(axis_patch, "CHORD_OUTSET", 0.0)
+    monkeypatch.setattr(budget, "CHORD_OUTSET", 0.0)
     assert mismatch() > 0.004
