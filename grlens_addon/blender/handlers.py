@@ -1,6 +1,9 @@
 """Handlers: rebuild on frame changes (viewport, F12, animation renders, background mode) and after
 interactive edits of lensed objects, the camera or the hole. Updates of the interactive viewport are
 built to ``scene.grlens.tess_max_error_viewport`` (wants_preview); renders to ``tess_max_error``.
+The lensed world (world.py) follows the camera on every frame change and edit even when auto update
+is off (it costs a few milliseconds); files are saved with the user's own world (save_pre restores
+it, save_post lenses it again) and lensed again on load.
 
 Thin and @persistent (they survive file loads); a re-entrancy flag (reset in finally) keeps our own
 mesh updates from triggering another rebuild. Never calls bpy.ops.
@@ -41,16 +44,40 @@ def _run(scene, depsgraph=None):
         _busy = False
 
 
+def update_world(scene, depsgraph=None):
+    """Bring the lensed world of ``scene`` up to date (world.refresh); errors are printed in
+    background mode, like the rebuild's."""
+    global _busy
+    if _busy or scene is None or not hasattr(scene, "grlens"):
+        return None
+    _busy = True
+    try:
+        from . import world
+
+        line, error = world.refresh(scene, depsgraph)
+        if error and bpy.app.background:
+            print(f"grlens: {error}")
+        return line, error
+    finally:
+        _busy = False
+
+
 def request_rebuild(scene):
-    """Called by property updates: rebuild now if auto update is on."""
-    if scene is not None and scene.grlens.auto_update:
+    """Called by property updates: rebuild now if auto update is on (the world in any case)."""
+    if scene is None:
+        return
+    if scene.grlens.auto_update:
         _run(scene)
+    else:
+        update_world(scene)
 
 
 @persistent
 def on_frame_change(scene, depsgraph=None):
     if scene.grlens.auto_update:
-        _run(scene, depsgraph)
+        _run(scene, depsgraph)  # rebuild_scene updates the world too
+    else:
+        update_world(scene, depsgraph)
 
 
 def _relevant(scene, update):
@@ -65,24 +92,63 @@ def _relevant(scene, update):
     return isinstance(idb, bpy.types.Mesh) and not idb.get("grlens_topology")
 
 
+def _world_relevant(scene, update):
+    """Whether a depsgraph update can change the lensed world: the camera or hole moved, or the
+    world's node tree was edited (new nodes are hooked; our own value writes find nothing to do)."""
+    idb = update.id
+    g = scene.grlens
+    if isinstance(idb, bpy.types.Object):
+        return idb in (scene.camera, g.observer, g.black_hole)
+    return isinstance(idb, bpy.types.World) and scene.world is not None and idb.original == scene.world
+
+
 @persistent
 def on_depsgraph_update(scene, depsgraph):
-    if _busy or not scene.grlens.auto_update or depsgraph.mode == "RENDER":
+    if _busy or depsgraph.mode == "RENDER":
         return
-    if any(_relevant(scene, u) for u in depsgraph.updates):
+    ups = list(depsgraph.updates)
+    if scene.grlens.auto_update and any(_relevant(scene, u) for u in ups):
         _run(scene, depsgraph)
+    elif scene.grlens.lens_world and any(_world_relevant(scene, u) for u in ups):
+        update_world(scene, depsgraph)
 
 
 @persistent
 def on_load_pre(*_args):
+    from . import world
     from .rebuild import forget_all
 
     forget_all()
+    world.forget_all()
+
+
+@persistent
+def on_load_post(*_args):
+    """Lens the worlds of the loaded file (their tables are written again)."""
+    for scene in bpy.data.scenes:
+        if scene.grlens.lens_world and scene.grlens.black_hole is not None:
+            update_world(scene)
+
+
+@persistent
+def on_save_pre(*_args):
+    """Save the user's own worlds: grlens' nodes, node groups and tables are removed first."""
+    from . import world
+
+    world.restore_all()
+
+
+@persistent
+def on_save_post(*_args):
+    on_load_post()
 
 
 HANDLERS = ((bpy.app.handlers.frame_change_post, on_frame_change),
             (bpy.app.handlers.depsgraph_update_post, on_depsgraph_update),
-            (bpy.app.handlers.load_pre, on_load_pre))
+            (bpy.app.handlers.load_pre, on_load_pre),
+            (bpy.app.handlers.load_post, on_load_post),
+            (bpy.app.handlers.save_pre, on_save_pre),
+            (bpy.app.handlers.save_post, on_save_post))
 
 
 def attach():

@@ -63,6 +63,9 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         sub.enabled = g.use_gr_illumination
         sub.prop(g, "light")
         sub.prop(g, "light_intensity")
+        layout.prop(g, "lens_world")
+        if g.world_status:
+            layout.label(text=g.world_status, icon="ERROR" if g.world_status.startswith("grlens:") else "WORLD")
         layout.prop(g, "auto_update")
         row = layout.row(align=True)
         row.operator("grlens.rebuild", icon="FILE_REFRESH")

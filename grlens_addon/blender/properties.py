@@ -23,6 +23,13 @@ def _gr_illumination_changed(self, context):
     _changed(self, context)
 
 
+def _world_changed(self, context):
+    """Lens World switched: lens or restore the world at once (whatever auto update says)."""
+    from . import handlers
+
+    handlers.update_world(context.scene if context else None)
+
+
 class GRLENS_SceneSettings(bpy.types.PropertyGroup):
     black_hole: PointerProperty(
         name="Black Hole", type=bpy.types.Object, update=_changed,
@@ -90,6 +97,14 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
                            description="Point light (any object; its location is used) for GR illumination")
     light_intensity: FloatProperty(name="Light Intensity", default=1000.0, min=0.0, update=_changed,
                                    description="I0 of eq. 21: irradiance = I0 max(0, n.d) / (c dt)^2, c dt in scene units")
+    lens_world: BoolProperty(
+        name="Lens World", default=True, update=_world_changed,
+        description="While a black hole is set, show the world (sky) as the observer camera sees it past the hole: "
+                    "every world direction replaced by the direction its ray leaves in, black where rays fall in. "
+                    "Changes the world's node tree in place (restored exactly when switched off; saved files "
+                    "hold the original world)")
+    world_status: StringProperty(name="World Status", default="", options={"SKIP_SAVE"},
+                                 description="Outcome of the last world update (read only)")
     auto_update: BoolProperty(name="Auto Update", default=True,
                               description="Rebuild the images on frame changes and edits")
     status: StringProperty(name="Status", default="", options={"SKIP_SAVE"},

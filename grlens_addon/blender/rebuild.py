@@ -15,13 +15,17 @@ import bpy
 import numpy as np
 
 from ..core import culling, losses, mapping, pipeline
-from . import gather, lutcache, shading, upload
+from . import gather, lutcache, shading, upload, world
 
 COLLECTION = "grlens"
 
 
 class RebuildError(Exception):
     """A scene-level problem that prevents any image (missing hole or camera, camera inside...)."""
+
+
+class _WorldOnly(Exception):
+    """No object is marked but the world is lensed: the rebuild's status is the world's."""
 
 
 def _collection(scene):
@@ -320,9 +324,16 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
     warn = report["warnings"]
     srcs = sources(scene)
     wanted = set()
+    world_line, world_error = world.refresh(scene, depsgraph)
+    if world_error and srcs:
+        warn.append(f"sky: {world_error}")
     try:
         if not srcs:
-            raise RebuildError("no object is marked for lensing (obj.grlens.enabled)")
+            if world_error:
+                raise RebuildError(world_error)
+            if world_line is None:
+                raise RebuildError("no object is marked for lensing (obj.grlens.enabled)")
+            raise _WorldOnly(f"no object marked; {world_line}")
         geo, settings, cam = scene_geometry(scene, depsgraph, preview)
         planes = frustum_planes(scene, cam)
         g = scene.grlens
@@ -368,6 +379,10 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
         report["status"] += f", r_obs = {geo.r_obs:.4g} r_s"
         if settings.max_error_px != max_error_px(g):
             report["status"] += f" (viewport preview: {settings.max_error_px:.3g} px)"
+        if world_line:
+            report["status"] += "; sky lensed"
+    except _WorldOnly as exc:
+        report["status"] = str(exc)
     except RebuildError as exc:
         report["status"] = f"grlens: {exc}"
     except ValueError as exc:  # bad numbers from the scene (r_s, NaN transforms, LUT parameters)

@@ -23,6 +23,9 @@ def unregister():
     if not _registered:
         return
     handlers.detach()
+    from . import world
+
+    world.restore_all()  # the user's worlds come back when the add-on is disabled
     properties.detach()
     for cls in reversed(_CLASSES):
         bpy.utils.unregister_class(cls)

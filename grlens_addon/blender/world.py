@@ -1,0 +1,493 @@
+"""The lensed world (sky): every direction in which the world is looked up is replaced by the
+direction in which that ray, leaving the observer camera, goes to infinity; rays that fall into the
+hole see black (the shadow). ``scene.grlens.lens_world``; design and limits in docs/sky.md.
+
+How: the user's world node tree is modified IN PLACE and restorably. Two kinds of nodes are added,
+each marked with the custom property ``grlens_own``:
+
+* one node group instance (``grlens_own == "group"``) whose tree, per shading sample, takes the
+  world ray direction D (the Geometry node's Incoming, negated: in Cycles' background and in Eevee's
+  world shader Incoming = -D), computes xi = atan2(|D x e1|, D . e1) from the outward radial
+  direction e1 (hole -> camera), the table coordinate s = ln(xi_lim / (xi_lim - xi)), the
+  deflection phi_inf - xi from a float image of ``lutgen.escape_table`` (linear interpolation), and
+  outputs ``Vector`` = cos(phi_inf) e1 + sin(phi_inf) e2, e2 = unit(D - (D . e1) e1), and
+  ``Escapes`` = (xi < xi_lim);
+* one Mix Shader per World Output (``grlens_own == "shadow"``) between the output's Surface and
+  the user's shader: Fac = Escapes, the first shader socket empty (black).
+
+The group's Vector feeds every input of the user's tree that reads the view direction: the Vector
+input of Environment, Sky and procedural textures when unlinked (their default coordinates), and
+every link from a Texture Coordinate node's Generated or Object output. Each user node changed
+records what it had in its custom property ``grlens_hooked`` ({input identifier: "" (unlinked) or
+"<from node name>\\t<from output identifier>"}), so :func:`restore` puts the tree back exactly.
+:func:`apply` is idempotent: nodes the user adds while lensing is on are hooked at the next update.
+
+Per frame only values change (never the tree): e1 and xi_lim inside the group, and the table's
+pixels when the camera's radius changes (r_obs rounded to 7 digits, as the LUTs). Saving stores
+the user's own world: the file is restored before it is written and lensed again after
+(save_pre / save_post), so a .blend never holds grlens' nodes or its table.
+
+Units: positions in Blender units, r_s in Blender units (scene.grlens.r_s); the table in units of
+r_s and radians.
+"""
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+
+OWN = "grlens_own"
+HOOKED = "grlens_hooked"
+R_OBS_KEY = "grlens_r_obs"
+GROUP_PREFIX = "grlens Lensed Sky"
+TABLE_PREFIX = "grlens Sky Table"
+
+DIRECTION_TEXTURES = ("ShaderNodeTexEnvironment", "ShaderNodeTexSky", "ShaderNodeTexNoise",
+                      "ShaderNodeTexVoronoi", "ShaderNodeTexWave", "ShaderNodeTexMagic",
+                      "ShaderNodeTexGradient", "ShaderNodeTexChecker", "ShaderNodeTexBrick",
+                      "ShaderNodeTexMusgrave", "ShaderNodeTexWhiteNoise", "ShaderNodeTexGabor")
+"""Nodes whose unlinked Vector input means the world's view direction (their default coordinates)."""
+
+TEXCOORD_OUTPUTS = ("Generated", "Object")
+"""Texture Coordinate outputs that are the view direction in a world shader."""
+
+_written: dict = {}
+"""as_pointer() of a table image -> the radius (r_s, rounded) whose table its pixels hold in this
+session (generated images lose their pixels on reload; a load clears this)."""
+
+
+class WorldError(Exception):
+    """The world cannot be lensed for this frame (camera inside the horizon, ...)."""
+
+
+def _math(nodes, op, x=0.0, label=None):
+    n = nodes.new("ShaderNodeMath")
+    n.operation = op
+    n.location = (x, 0.0)
+    if label:
+        n.label = label
+    return n
+
+
+def _vmath(nodes, op, x=0.0):
+    n = nodes.new("ShaderNodeVectorMath")
+    n.operation = op
+    n.location = (x, 0.0)
+    return n
+
+
+def _build_group(name: str, image) -> bpy.types.NodeTree:
+    """The node group of one world: outputs Vector (the escape direction) and Escapes (1/0)."""
+    ng = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    ng.interface.new_socket(name="Vector", in_out="OUTPUT", socket_type="NodeSocketVector")
+    ng.interface.new_socket(name="Escapes", in_out="OUTPUT", socket_type="NodeSocketFloat")
+    N, L = ng.nodes, ng.links
+    out = N.new("NodeGroupOutput")
+    out.location = (2400, 0)
+    geo = N.new("ShaderNodeNewGeometry")
+    e1 = N.new("ShaderNodeCombineXYZ")
+    e1.name = e1.label = "e1"
+    e1.location = (0, -300)
+    lim = N.new("ShaderNodeValue")
+    lim.name = lim.label = "xi_lim"
+    lim.location = (0, -500)
+    # D = unit(-Incoming)
+    neg = _vmath(N, "SCALE", 200)
+    neg.inputs["Scale"].default_value = -1.0
+    L.new(geo.outputs["Incoming"], neg.inputs[0])
+    d = _vmath(N, "NORMALIZE", 400)
+    L.new(neg.outputs["Vector"], d.inputs[0])
+    # xi = atan2(|D x e1|, D . e1)
+    cos = _vmath(N, "DOT_PRODUCT", 600)
+    L.new(d.outputs["Vector"], cos.inputs[0])
+    L.new(e1.outputs[0], cos.inputs[1])
+    cross = _vmath(N, "CROSS_PRODUCT", 600)
+    L.new(d.outputs["Vector"], cross.inputs[0])
+    L.new(e1.outputs[0], cross.inputs[1])
+    sin = _vmath(N, "LENGTH", 800)
+    L.new(cross.outputs["Vector"], sin.inputs[0])
+    xi = _math(N, "ARCTAN2", x=1000, label="xi")
+    L.new(sin.outputs["Value"], xi.inputs[0])
+    L.new(cos.outputs["Value"], xi.inputs[1])
+    # s = ln(xi_lim / (xi_lim - xi)); table position j = s (n - 1) / s_max, clamped to [0, n - 1]
+    gap = _math(N, "SUBTRACT", x=1200)
+    L.new(lim.outputs[0], gap.inputs[0])
+    L.new(xi.outputs[0], gap.inputs[1])
+    ratio = _math(N, "DIVIDE", x=1400)
+    L.new(lim.outputs[0], ratio.inputs[0])
+    L.new(gap.outputs[0], ratio.inputs[1])
+    s = _math(N, "LOGARITHM", x=1600, label="s")
+    s.inputs[1].default_value = math.e
+    L.new(ratio.outputs[0], s.inputs[0])
+    from lutgen.escape import S_MAX, TABLE_SIZE
+
+    j = _math(N, "MULTIPLY", x=1700, label="j")
+    j.inputs[1].default_value = (TABLE_SIZE - 1) / S_MAX
+    j.use_clamp = False
+    L.new(s.outputs[0], j.inputs[0])
+    jc = _math(N, "MINIMUM", x=1750)
+    jc.inputs[1].default_value = TABLE_SIZE - 1.001
+    L.new(j.outputs[0], jc.inputs[0])
+    jc2 = _math(N, "MAXIMUM", x=1800)
+    jc2.inputs[1].default_value = 0.0
+    L.new(jc.outputs[0], jc2.inputs[0])
+    # linear interpolation done here between two texel-centre ('Closest') lookups: GPU filtering
+    # would pick a coarse mipmap level where the table position changes fast between pixels
+    # (next to the shadow) and interpolates with 8-bit weights
+    j0 = _math(N, "FLOOR", x=1850)
+    L.new(jc2.outputs[0], j0.inputs[0])
+    w = _math(N, "SUBTRACT", x=1900, label="weight")
+    L.new(jc2.outputs[0], w.inputs[0])
+    L.new(j0.outputs[0], w.inputs[1])
+    vals = []
+    for k, name in enumerate(("table", "table+1")):
+        u = _math(N, "MULTIPLY_ADD", x=1950)
+        u.inputs[1].default_value = 1.0 / TABLE_SIZE
+        u.inputs[2].default_value = (0.5 + k) / TABLE_SIZE
+        L.new(j0.outputs[0], u.inputs[0])
+        uv = N.new("ShaderNodeCombineXYZ")
+        uv.location = (2000, -200 - 300 * k)
+        uv.inputs[1].default_value = 0.5
+        L.new(u.outputs[0], uv.inputs[0])
+        tex = N.new("ShaderNodeTexImage")
+        tex.name = tex.label = name
+        tex.location = (2100, -200 - 300 * k)
+        tex.image = image
+        tex.interpolation = "Closest"
+        tex.extension = "EXTEND"
+        L.new(uv.outputs[0], tex.inputs["Vector"])
+        sep = N.new("ShaderNodeSeparateColor")
+        sep.location = (2200, -200 - 300 * k)
+        L.new(tex.outputs["Color"], sep.inputs[0])
+        vals.append(sep.outputs[0])
+    lerp = N.new("ShaderNodeMix")  # float mix: a + w (b - a)
+    lerp.data_type = "FLOAT"
+    lerp.clamp_factor = False
+    lerp.location = (2300, -300)
+    L.new(w.outputs[0], lerp.inputs[0])
+    L.new(vals[0], lerp.inputs[2])
+    L.new(vals[1], lerp.inputs[3])
+    phi = _math(N, "ADD", x=2400, label="phi_inf")
+    L.new(xi.outputs[0], phi.inputs[0])
+    L.new(lerp.outputs[0], phi.inputs[1])
+    # e2 = unit(D - (D . e1) e1); out = cos(phi) e1 + sin(phi) e2
+    along = _vmath(N, "SCALE", 800)
+    L.new(e1.outputs[0], along.inputs[0])
+    L.new(cos.outputs["Value"], along.inputs["Scale"])
+    perp = _vmath(N, "SUBTRACT", 1000)
+    L.new(d.outputs["Vector"], perp.inputs[0])
+    L.new(along.outputs["Vector"], perp.inputs[1])
+    e2 = _vmath(N, "NORMALIZE", 1200)
+    L.new(perp.outputs["Vector"], e2.inputs[0])
+    c_phi = _math(N, "COSINE", x=2300)
+    L.new(phi.outputs[0], c_phi.inputs[0])
+    s_phi = _math(N, "SINE", x=2300)
+    L.new(phi.outputs[0], s_phi.inputs[0])
+    a = _vmath(N, "SCALE", 2400)
+    L.new(e1.outputs[0], a.inputs[0])
+    L.new(c_phi.outputs[0], a.inputs["Scale"])
+    b = _vmath(N, "SCALE", 2400)
+    L.new(e2.outputs["Vector"], b.inputs[0])
+    L.new(s_phi.outputs[0], b.inputs["Scale"])
+    res = _vmath(N, "ADD", 2600)
+    L.new(a.outputs["Vector"], res.inputs[0])
+    L.new(b.outputs["Vector"], res.inputs[1])
+    esc = _math(N, "LESS_THAN", x=1200, label="escapes")
+    L.new(xi.outputs[0], esc.inputs[0])
+    L.new(lim.outputs[0], esc.inputs[1])
+    out.location = (2800, 0)
+    L.new(res.outputs["Vector"], out.inputs["Vector"])
+    L.new(esc.outputs[0], out.inputs["Escapes"])
+    return ng
+
+
+def _new_table_image(name: str):
+    from lutgen.escape import TABLE_SIZE
+
+    img = bpy.data.images.new(name, width=TABLE_SIZE, height=1, alpha=False, float_buffer=True, is_data=True)
+    img.use_half_precision = False  # Eevee would upload 16-bit floats (an error of ~1e-2 rad at phi ~ 20)
+    img.colorspace_settings.name = "Non-Color"
+    return img
+
+
+def _own(tree, kind):
+    return [n for n in tree.nodes if n.get(OWN) == kind]
+
+
+def _group_node(tree):
+    found = _own(tree, "group")
+    return found[0] if found else None
+
+
+def is_lensed(world) -> bool:
+    """Whether ``world``'s node tree holds grlens' nodes or records."""
+    tree = getattr(world, "node_tree", None) if world is not None else None
+    if tree is None:
+        return False
+    return any(n.get(OWN) or n.get(HOOKED) is not None for n in tree.nodes)
+
+
+def _ensure_group_node(world):
+    tree = world.node_tree
+    node = _group_node(tree)
+    if node is not None and node.node_tree is not None and "table" in node.node_tree.nodes:
+        return node
+    if node is not None:
+        tree.nodes.remove(node)
+    image = _new_table_image(f"{TABLE_PREFIX} ({world.name})")
+    group = _build_group(f"{GROUP_PREFIX} ({world.name})", image)
+    node = tree.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    node[OWN] = "group"
+    node.name = "grlens Lensed Sky"
+    node.label = "grlens: lensed sky (remove: switch Lens World off)"
+    xs = [n.location.x for n in tree.nodes if n != node] or [0.0]
+    node.location = (min(xs) - 300.0, 300.0)
+    return node
+
+
+def _record(node, ident, value):
+    rec = node.get(HOOKED)
+    if rec is None:
+        node[HOOKED] = {}
+        rec = node[HOOKED]
+    if ident not in rec:
+        rec[ident] = value
+
+
+def _socket(sockets, ident):
+    for s in sockets:
+        if s.identifier == ident:
+            return s
+    return None
+
+
+def apply(world) -> bool:
+    """Hook ``world``'s node tree up to the lensed sky (idempotent). Returns whether it changed
+    anything. Worlds without a node tree are left alone."""
+    tree = world.node_tree if world is not None else None
+    if tree is None:
+        return False
+    changed = _group_node(tree) is None
+    grp = _ensure_group_node(world)
+    vec, esc = grp.outputs["Vector"], grp.outputs["Escapes"]
+    links = tree.links
+    # inputs the user relinked by hand since they were hooked: the user's link wins (forget the record)
+    for node in tree.nodes:
+        rec = node.get(HOOKED)
+        if rec is None:
+            continue
+        for ident in list(rec.keys()):
+            sock = _socket(node.inputs, ident)
+            if sock is None or (sock.is_linked and sock.links[0].from_node.get(OWN) is None):
+                del rec[ident]
+        if not rec.keys():
+            del node[HOOKED]
+    for node in list(tree.nodes):
+        if node.get(OWN):
+            continue
+        if node.bl_idname in DIRECTION_TEXTURES:
+            sock = _socket(node.inputs, "Vector")
+            if sock is not None and sock.enabled and not sock.is_linked:
+                _record(node, sock.identifier, "")
+                links.new(vec, sock)
+                changed = True
+        for sock in node.inputs:
+            for lk in list(sock.links):
+                fn = lk.from_node
+                if fn.bl_idname == "ShaderNodeTexCoord" and lk.from_socket.identifier in TEXCOORD_OUTPUTS:
+                    _record(node, sock.identifier, f"{fn.name}\t{lk.from_socket.identifier}")
+                    links.remove(lk)
+                    links.new(vec, sock)
+                    changed = True
+        if node.bl_idname == "ShaderNodeOutputWorld":
+            surf = node.inputs["Surface"]
+            if surf.is_linked and surf.links[0].from_node.get(OWN) != "shadow":
+                lk = surf.links[0]
+                src = lk.from_socket
+                _record(node, surf.identifier, f"{lk.from_node.name}\t{src.identifier}")
+                links.remove(lk)
+                mix = tree.nodes.new("ShaderNodeMixShader")
+                mix[OWN] = "shadow"
+                mix.name = "grlens Shadow"
+                mix.label = "grlens: shadow (black where rays fall in)"
+                mix.location = (node.location.x - 200.0, node.location.y - 200.0)
+                links.new(esc, mix.inputs[0])
+                links.new(src, mix.inputs[2])
+                links.new(mix.outputs[0], surf)
+                changed = True
+    return changed
+
+
+def unhooked(world) -> list:
+    """Names of the user's direction textures that cannot be lensed because Blender disables their
+    Vector input (the Nishita Sky Texture with Sun Disc on)."""
+    tree = world.node_tree if world is not None else None
+    if tree is None:
+        return []
+    # (inputs["Vector"] does not find a disabled socket: look it up by identifier)
+    return [n.name for n in tree.nodes if n.bl_idname in DIRECTION_TEXTURES
+            and getattr(_socket(n.inputs, "Vector"), "enabled", True) is False]
+
+
+def restore(world) -> None:
+    """Put ``world``'s node tree back as it was before :func:`apply` (every recorded input relinked
+    as it was, grlens' nodes, node group and table image removed)."""
+    tree = world.node_tree if world is not None else None
+    if tree is None:
+        return
+    links = tree.links
+    for node in tree.nodes:
+        rec = node.get(HOOKED)
+        if rec is None:
+            continue
+        for ident, was in rec.items():
+            sock = _socket(node.inputs, ident)
+            if sock is None:
+                continue
+            for lk in list(sock.links):
+                if lk.from_node.get(OWN):
+                    links.remove(lk)
+            if was and not sock.is_linked:
+                from_name, from_ident = was.split("\t")
+                fn = tree.nodes.get(from_name)
+                out = _socket(fn.outputs, from_ident) if fn is not None else None
+                if out is not None:
+                    links.new(out, sock)
+        del node[HOOKED]
+    groups, images = [], []
+    for node in list(tree.nodes):
+        if node.get(OWN):
+            if node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None:
+                groups.append(node.node_tree)
+            tree.nodes.remove(node)
+    for g in groups:
+        tex = g.nodes.get("table")
+        if tex is not None and tex.image is not None:
+            images.append(tex.image)
+        if g.users == 0:
+            bpy.data.node_groups.remove(g)
+    for img in images:
+        if img.users == 0:
+            _written.pop(img.as_pointer(), None)
+            bpy.data.images.remove(img)
+
+
+def restore_all() -> None:
+    """Restore every world in the file (add-on disabled, file about to be saved)."""
+    for w in bpy.data.worlds:
+        if is_lensed(w):
+            restore(w)
+
+
+def wants_lensing(scene) -> bool:
+    """lens_world is on and a black hole is set."""
+    g = scene.grlens
+    return bool(g.lens_world) and g.black_hole is not None
+
+
+def _set(sock_owner, value):
+    """Write a socket default value only when it differs (every write is a depsgraph update)."""
+    if sock_owner.default_value != value:
+        sock_owner.default_value = value
+
+
+def write_table(image, r_obs: float) -> bool:
+    """Fill ``image`` with lutgen.escape_table(r_obs) (deflection in every colour channel) unless it
+    holds that radius's table already in this session. Returns whether it wrote."""
+    from lutgen.escape import escape_table
+
+    from .lutcache import round_radius
+
+    key = round_radius(r_obs)
+    if _written.get(image.as_pointer()) == key and image.get(R_OBS_KEY) == key:
+        return False
+    t = escape_table(key)
+    px = np.zeros((t.size, 4), np.float32)
+    px[:, :3] = t.deflection[:, None]
+    px[:, 3] = 1.0
+    image.pixels.foreach_set(px.ravel())
+    image.update()
+    image[R_OBS_KEY] = key
+    image.update_tag()
+    _written[image.as_pointer()] = key
+    return True
+
+
+def update(scene, depsgraph=None) -> str | None:
+    """Bring the lensed world of ``scene`` up to date for its current frame: hook the world's nodes
+    (idempotent), set the camera's e1 and escape limit and, when its radius changed, the table.
+    Restores the world when lensing is off. Returns a status line ("sky lensed, r_obs = ...") or
+    None when the world is not lensed; raises WorldError for a scene that cannot be lensed (the
+    world is then black)."""
+    world = scene.world
+    if not wants_lensing(scene):
+        if is_lensed(world):
+            restore(world)
+        return None
+    if world is None:
+        raise WorldError("lens world is on but the scene has no world")
+    if world.node_tree is None:
+        raise WorldError(f"the world '{world.name}' uses no nodes (switch Use Nodes on to lens it)")
+    from .rebuild import observer_camera
+
+    g = scene.grlens
+    cam = observer_camera(scene)
+    if cam is None:
+        raise WorldError("the scene has no camera (set scene.camera or scene.grlens.observer)")
+    if depsgraph is None and bpy.context.scene == scene:
+        depsgraph = bpy.context.evaluated_depsgraph_get()  # (after a load, matrix_world is not evaluated yet)
+    if depsgraph is not None:
+        cam, hole = cam.evaluated_get(depsgraph), g.black_hole.evaluated_get(depsgraph)
+    else:
+        hole = g.black_hole
+    p_cam = np.array(cam.matrix_world.translation, dtype=np.float64)
+    p_hole = np.array(hole.matrix_world.translation, dtype=np.float64)
+    if not (g.r_s > 0 and np.all(np.isfinite(p_cam)) and np.all(np.isfinite(p_hole))):
+        raise WorldError("bad camera or hole position, or r_s")
+    d = p_cam - p_hole
+    r_obs = float(np.linalg.norm(d) / g.r_s)
+    apply(world)
+    grp = _group_node(world.node_tree).node_tree
+    lim_sock = grp.nodes["xi_lim"].outputs[0]
+    if r_obs <= 1.0:
+        _set(lim_sock, 0.0)  # every ray falls in: the world is black
+        raise WorldError(f"the camera is inside the event horizon (r = {r_obs:.4g} r_s): the sky is black")
+    from lutgen.escape import escape_limit
+
+    from .lutcache import round_radius
+
+    e1 = d / np.linalg.norm(d)
+    write_table(grp.nodes["table"].image, r_obs)
+    e1_node = grp.nodes["e1"]
+    for k in range(3):
+        _set(e1_node.inputs[k], float(e1[k]))
+    _set(lim_sock, float(escape_limit(round_radius(r_obs))))
+    line = f"sky lensed, r_obs = {r_obs:.4g} r_s"
+    skipped = unhooked(world)
+    if skipped:
+        line += f"; not lensed (no Vector input, e.g. a Sky Texture with Sun Disc on): {', '.join(skipped)}"
+    return line
+
+
+def refresh(scene, depsgraph=None):
+    """:func:`update` with its outcome in ``scene.grlens.world_status`` (written only when it
+    changes). Returns (status line or None, error message or None)."""
+    line = error = None
+    try:
+        line = update(scene, depsgraph)
+    except WorldError as exc:
+        error = str(exc)
+    except ValueError as exc:  # bad numbers from the scene
+        error = str(exc)
+    text = f"grlens: {error}" if error else (line or "")
+    g = scene.grlens
+    if g.world_status != text:
+        g.world_status = text
+    return line, error
+
+
+def forget_all() -> None:
+    """A new file is being loaded: its table images must be written again."""
+    _written.clear()

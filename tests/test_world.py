@@ -1,0 +1,547 @@
+"""The lensed world (grlens_addon/blender/world.py) on the pip bpy module: the user's world node tree
+restored exactly (switched off, add-on disabled, save/reload), new nodes hooked, the per-frame
+values following the camera, and renders checked per pixel against the exact escape directions of
+lutgen.escape (Cycles: perspective, a 2-frame animation with a camera that changes its distance,
+an equirectangular panorama, a procedural checker; Eevee: one smoke render in a subprocess).
+
+Units: Blender units, r_s = 2 BU; the camera at about 20 r_s.
+"""
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+if __name__ == "__main__":  # the Eevee smoke render's subprocess (see test_eevee_smoke)
+    sys.path[:0] = [os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."),
+                    os.path.dirname(os.path.abspath(__file__))]
+
+import bpy  # noqa: E402
+
+import grlens_addon  # noqa: E402
+from blender_session import empty_file, registered  # noqa: E402,F401  (autouse fixtures)
+from lutgen.escape import escape_angle, escape_limit, escape_table  # noqa: E402
+
+R_S = 2.0
+
+
+# ---------------------------------------------------------------------------------------------
+# scene helpers
+# ---------------------------------------------------------------------------------------------
+def _world(scene):
+    w = bpy.data.worlds.new("Sky")
+    scene.world = w
+    if bpy.app.version < (5, 0, 0):
+        w.use_nodes = True
+    w.cycles.sampling_method = "NONE"  # no importance map: tiny test renders stay fast
+    return w
+
+
+def _direction_world(scene):
+    """Background colour 0.5 D + 0.5 from Texture Coordinate Generated (the world ray direction D)."""
+    w = _world(scene)
+    nt = w.node_tree
+    tc = nt.nodes.new("ShaderNodeTexCoord")
+    ma = nt.nodes.new("ShaderNodeVectorMath")
+    ma.operation = "MULTIPLY_ADD"
+    ma.inputs[1].default_value = (0.5, 0.5, 0.5)
+    ma.inputs[2].default_value = (0.5, 0.5, 0.5)
+    nt.links.new(tc.outputs["Generated"], ma.inputs[0])
+    nt.links.new(ma.outputs[0], nt.nodes["Background"].inputs["Color"])
+    return w
+
+
+def _checker_world(scene):
+    """A Checker texture with its Vector unlinked (the world's default coordinates)."""
+    w = _world(scene)
+    nt = w.node_tree
+    ch = nt.nodes.new("ShaderNodeTexChecker")
+    ch.inputs["Scale"].default_value = 3.0
+    ch.inputs["Color1"].default_value = (1.0, 1.0, 1.0, 1.0)
+    ch.inputs["Color2"].default_value = (0.25, 0.25, 0.25, 1.0)
+    nt.links.new(ch.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+    return w
+
+
+def _busy_world(scene):
+    """Every kind of hook: Environment and Sky textures and a Noise unlinked, Generated -> Mapping ->
+    Voronoi, Object -> Checker, Normal -> Wave (not a view direction: left alone), two World Outputs
+    (Cycles and Eevee targets), plus a node group of the user's."""
+    w = _world(scene)
+    nt = w.node_tree
+    bg = nt.nodes["Background"]
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    sky = nt.nodes.new("ShaderNodeTexSky")
+    sky.sun_disc = False  # with the sun disc Blender disables the Vector input (see the test below)
+    noise = nt.nodes.new("ShaderNodeTexNoise")
+    tc = nt.nodes.new("ShaderNodeTexCoord")
+    tc.name = "My Coordinates"
+    mp = nt.nodes.new("ShaderNodeMapping")
+    mp.inputs["Scale"].default_value = (2.0, 1.0, 0.5)
+    vor = nt.nodes.new("ShaderNodeTexVoronoi")
+    chk = nt.nodes.new("ShaderNodeTexChecker")
+    wave = nt.nodes.new("ShaderNodeTexWave")
+    mix = nt.nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    nt.links.new(tc.outputs["Generated"], mp.inputs["Vector"])
+    nt.links.new(mp.outputs["Vector"], vor.inputs["Vector"])
+    nt.links.new(tc.outputs["Object"], chk.inputs["Vector"])
+    nt.links.new(tc.outputs["Normal"], wave.inputs["Vector"])
+    nt.links.new(env.outputs["Color"], mix.inputs[6])
+    nt.links.new(sky.outputs["Color"], mix.inputs[7])
+    nt.links.new(noise.outputs["Fac"], mix.inputs[0])
+    nt.links.new(mix.outputs[2], bg.inputs["Color"])
+    nt.links.new(vor.outputs["Distance"], bg.inputs["Strength"])
+    out2 = nt.nodes.new("ShaderNodeOutputWorld")
+    out2.target = "EEVEE"
+    nt.nodes["World Output"].target = "CYCLES"
+    em = nt.nodes.new("ShaderNodeBackground")
+    nt.links.new(chk.outputs["Color"], em.inputs["Color"])
+    nt.links.new(wave.outputs["Fac"], em.inputs["Strength"])
+    nt.links.new(em.outputs[0], out2.inputs["Surface"])
+    grp = bpy.data.node_groups.new("User Group", "ShaderNodeTree")
+    gn = nt.nodes.new("ShaderNodeGroup")
+    gn.node_tree = grp
+    return w
+
+
+def _scene(location=(40.0, 3.0, 1.0), rotation_deg=(90.0, 0.0, 95.0), fov_deg=90.0, size=(48, 32)):
+    scene = bpy.context.scene
+    hole = bpy.data.objects.new("BlackHole", None)
+    scene.collection.objects.link(hole)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    cam.location = location
+    cam.rotation_euler = [math.radians(a) for a in rotation_deg]
+    cam.data.angle = math.radians(fov_deg)
+    r = scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = size[0], size[1], 100
+    r.engine = "CYCLES"
+    r.filter_size = 0.01  # samples at the pixel centres (to 0.005 px)
+    scene.cycles.samples = 1
+    scene.cycles.use_denoising = False
+    r.image_settings.file_format = "OPEN_EXR"
+    r.image_settings.color_depth = "32"
+    g = scene.grlens
+    g.r_s = R_S
+    g.black_hole = hole
+    return scene, cam, hole
+
+
+def _snapshot(tree):
+    """Everything a user can see of a node tree: every node's RNA properties (data-blocks by name,
+    nested structs such as texture_mapping by their own properties), input default values, custom
+    properties, and the set of links. Plain Python values only (bpy objects go stale on reload)."""
+    skip = ("rna_type", "inputs", "outputs", "internal_links", "dimensions", "interface", "select")
+
+    def val(v, depth=0):
+        if isinstance(v, bpy.types.ID):
+            return ("ID", v.name)
+        if isinstance(v, bpy.types.bpy_struct):
+            if isinstance(v, bpy.types.Node):
+                return ("Node", v.name)
+            if depth > 2:
+                return ("struct", type(v).__name__)
+            return tuple((p.identifier, val(getattr(v, p.identifier), depth + 1)) for p in v.bl_rna.properties
+                         if p.identifier not in skip and p.type != "COLLECTION")
+        if isinstance(v, (str, int, float, bool)) or v is None:
+            return v
+        try:
+            return tuple(val(x, depth) for x in v)
+        except TypeError:
+            return repr(v)
+
+    nodes = {}
+    for n in tree.nodes:
+        props = {p.identifier: val(getattr(n, p.identifier)) for p in n.bl_rna.properties
+                 if p.identifier not in skip and p.type != "COLLECTION"}
+        ins = {s.identifier: val(getattr(s, "default_value", None)) for s in n.inputs}
+        custom = {k: val(n[k].to_dict() if hasattr(n[k], "to_dict") else n[k]) for k in n.keys()}
+        nodes[n.name] = (props, ins, custom)
+    links = {(lk.from_node.name, lk.from_socket.identifier, lk.to_node.name, lk.to_socket.identifier,
+              lk.is_muted) for lk in tree.links}
+    return nodes, links
+
+
+def _own_nodes(tree):
+    return [n for n in tree.nodes if n.get("grlens_own")]
+
+
+def _render(scene, path):
+    import OpenEXR
+
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    f = OpenEXR.File(str(path), separate_channels=True)
+    ch = f.parts[0].channels
+    return np.stack([np.asarray(ch[c].pixels, dtype=np.float64) for c in ("R", "G", "B")], -1)
+
+
+def _pixel_dirs(scene, cam, du=0.0, dv=0.0):
+    """(H, W, 3) world directions of a perspective camera's pixels (row 0 at the top) through the
+    points (du, dv) pixels off their centres."""
+    tr, br, bl, tl = (np.array(v) for v in cam.data.view_frame(scene=scene))
+    w, h = scene.render.resolution_x, scene.render.resolution_y
+    u = (np.arange(w) + 0.5 + du) / w
+    v = (np.arange(h) + 0.5 + dv) / h
+    top = tl[None, :] + u[:, None] * (tr - tl)[None, :]
+    bot = bl[None, :] + u[:, None] * (br - bl)[None, :]
+    p = top[None] + v[:, None, None] * (bot - top)[None]
+    d = p @ np.array(cam.matrix_world.to_3x3()).T
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def _equirect_dirs(scene, cam, du=0.0, dv=0.0):
+    """(H, W, 3) world directions of a full equirectangular panorama's pixels, Cycles' convention:
+    longitude from -pi (left) to pi, latitude from pi/2 (top) to -pi/2, direction
+    (cos lat sin lon, sin lat, -cos lat cos lon) in the camera's axes."""
+    w, h = scene.render.resolution_x, scene.render.resolution_y
+    lon = -np.pi + (np.arange(w) + 0.5 + du) / w * 2 * np.pi
+    lat = 0.5 * np.pi - (np.arange(h) + 0.5 + dv) / h * np.pi
+    local = np.stack([np.cos(lat)[:, None] * np.sin(lon)[None, :],
+                      np.sin(lat)[:, None] + 0 * lon[None, :],
+                      -np.cos(lat)[:, None] * np.cos(lon)[None, :]], -1)
+    return local @ np.array(cam.matrix_world.to_3x3()).T
+
+
+def escape_directions(d, cam_pos, hole_pos, r_s):
+    """Exact directions (H, W, 3) in which the camera rays d leave to infinity (lutgen.escape), NaN
+    where they fall in."""
+    rel = np.asarray(cam_pos, float) - np.asarray(hole_pos, float)
+    r_obs = np.linalg.norm(rel) / r_s
+    e1 = rel / np.linalg.norm(rel)
+    c = d @ e1
+    xi = np.arctan2(np.linalg.norm(np.cross(d, e1), axis=-1), c)
+    phi = escape_angle(r_obs, xi)
+    e2 = d - c[..., None] * e1
+    e2 /= np.linalg.norm(e2, axis=-1, keepdims=True)
+    return np.cos(phi)[..., None] * e1 + np.sin(phi)[..., None] * e2
+
+
+def _direction_colours(out):
+    return np.where(np.isnan(out), 0.0, 0.5 * out + 0.5)
+
+
+def _check_per_pixel(img, want_at, tol=2e-4):
+    """Rendered colours against ``want_at(du, dv)`` (the exact colours through points du, dv px off
+    the pixel centres): the error may exceed ``tol`` only by what the colour changes within the
+    samples' 0.01 px footprint. Returns the fraction of pixels whose error is below ``tol``."""
+    want = want_at(0.0, 0.0)
+    spread = np.zeros(want.shape[:2])
+    for du, dv in ((0.01, 0), (-0.01, 0), (0, 0.01), (0, -0.01)):
+        spread = np.maximum(spread, np.abs(want_at(du, dv) - want).max(-1))
+    err = np.abs(img - want).max(-1)
+    bad = err > tol + spread
+    assert not bad.any(), (np.argwhere(bad)[:10].tolist(), err[bad][:10], spread[bad][:10])
+    return float(np.mean(err <= tol))
+
+
+# ---------------------------------------------------------------------------------------------
+# the node tree
+# ---------------------------------------------------------------------------------------------
+def test_switching_off_restores_the_world_exactly():
+    scene = bpy.context.scene
+    w = _busy_world(scene)
+    before = _snapshot(w.node_tree)
+    n_groups, n_images = len(bpy.data.node_groups), len(bpy.data.images)
+    _scene()
+    nt = w.node_tree
+    assert scene.grlens.world_status.startswith("sky lensed, r_obs = 20.")
+    own = _own_nodes(nt)
+    assert sorted(n.get("grlens_own") for n in own) == ["group", "shadow", "shadow"]
+    grp = next(n for n in own if n.get("grlens_own") == "group")
+    hooked = {(lk.to_node.name, lk.to_socket.name) for lk in nt.links if lk.from_node == grp
+              and lk.from_socket.name == "Vector"}
+    assert hooked == {("Environment Texture", "Vector"), ("Sky Texture", "Vector"), ("Noise Texture", "Vector"),
+                      ("Mapping", "Vector"), ("Checker Texture", "Vector")}
+    assert nt.nodes["Wave Texture"].inputs["Vector"].links[0].from_socket.name == "Normal"
+    for out in [n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputWorld"]:
+        assert out.inputs["Surface"].links[0].from_node.get("grlens_own") == "shadow"
+    assert grlens_addon.blender.world.apply(w) is False  # idempotent
+    scene.grlens.lens_world = False
+    assert _snapshot(nt) == before
+    assert (len(bpy.data.node_groups), len(bpy.data.images)) == (n_groups, n_images)
+    scene.grlens.lens_world = True
+    assert len(_own_nodes(nt)) == 3
+    scene.grlens.black_hole = None  # no hole, no lensing
+    assert _snapshot(nt) == before and scene.grlens.world_status == ""
+
+
+def test_a_sky_texture_with_sun_disc_is_named_as_not_lensed():
+    scene = bpy.context.scene
+    w = _world(scene)
+    sky = w.node_tree.nodes.new("ShaderNodeTexSky")
+    sky.sun_disc = True
+    nt = w.node_tree
+    nt.links.new(sky.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+    _scene()
+    vec = next(s for s in sky.inputs if s.identifier == "Vector")  # inputs["Vector"] skips a disabled one
+    if vec.enabled:  # a Blender that keeps the input: it is hooked
+        assert vec.links[0].from_node.get("grlens_own") == "group"
+    else:
+        assert "not lensed" in scene.grlens.world_status and "Sky Texture" in scene.grlens.world_status
+        sky.sun_disc = False
+        scene.frame_set(2)
+        assert sky.inputs["Vector"].links[0].from_node.get("grlens_own") == "group"
+        assert "not lensed" not in scene.grlens.world_status
+
+
+def test_new_nodes_are_hooked_at_the_next_update_and_the_users_links_win():
+    scene = bpy.context.scene
+    w = _world(scene)
+    _scene()
+    nt = w.node_tree
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env_name = env.name
+    scene.frame_set(2)
+    grp = next(n for n in _own_nodes(nt) if n.get("grlens_own") == "group")
+    assert nt.nodes[env_name].inputs["Vector"].links[0].from_node == grp
+    # the user links their own coordinates into a hooked input: theirs stays, and stays on restore
+    tc = nt.nodes.new("ShaderNodeTexCoord")
+    nt.links.new(tc.outputs["Window"], nt.nodes[env_name].inputs["Vector"])
+    scene.frame_set(3)
+    assert nt.nodes[env_name].inputs["Vector"].links[0].from_socket.name == "Window"
+    scene.grlens.lens_world = False
+    assert nt.nodes[env_name].inputs["Vector"].links[0].from_socket.name == "Window"
+    assert not _own_nodes(nt) and "grlens_hooked" not in nt.nodes[env_name].keys()
+    assert {n.name for n in nt.nodes} == {"Background", "World Output", env_name, tc.name}
+
+
+def test_disabling_the_add_on_restores_the_world():
+    scene = bpy.context.scene
+    w = _busy_world(scene)
+    before = _snapshot(w.node_tree)
+    _scene()
+    assert _own_nodes(w.node_tree)
+    grlens_addon.unregister()
+    try:
+        assert _snapshot(w.node_tree) == before
+        assert not any(g.name.startswith("grlens") for g in bpy.data.node_groups)
+        assert not any(i.name.startswith("grlens") for i in bpy.data.images)
+    finally:
+        grlens_addon.register()
+
+
+def test_saved_files_hold_the_users_world_and_reload_lenses_it(tmp_path):
+    scene = bpy.context.scene
+    w = _busy_world(scene)
+    before = _snapshot(w.node_tree)
+    _, cam, _ = _scene()
+    r_obs = float(f"{np.linalg.norm(cam.location) / R_S:.7g}")
+    assert _own_nodes(w.node_tree)
+    path = str(tmp_path / "sky.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    assert _own_nodes(bpy.data.worlds["Sky"].node_tree)  # lensed again after saving
+    # the file itself, opened without the add-on: the user's world, no grlens data-blocks
+    grlens_addon.unregister()
+    try:
+        bpy.ops.wm.open_mainfile(filepath=path)
+        assert _snapshot(bpy.data.worlds["Sky"].node_tree) == before
+        assert not any(g.name.startswith("grlens") for g in bpy.data.node_groups)
+        assert not any(i.name.startswith("grlens") for i in bpy.data.images)
+    finally:
+        grlens_addon.register()
+    # with the add-on: lensed on load (table written), and switching off gives the user's world
+    bpy.ops.wm.open_mainfile(filepath=path)
+    nt = bpy.data.worlds["Sky"].node_tree
+    assert len(_own_nodes(nt)) == 3
+    grp = next(n for n in _own_nodes(nt) if n.get("grlens_own") == "group").node_tree
+    px = np.empty(4 * grp.nodes["table"].image.size[0], np.float32)
+    grp.nodes["table"].image.pixels.foreach_get(px)
+    assert np.allclose(px[0::4], escape_table(r_obs).deflection, atol=1e-6, rtol=1e-6)
+    bpy.context.scene.grlens.lens_world = False
+    assert _snapshot(nt) == before
+
+
+# ---------------------------------------------------------------------------------------------
+# per-frame values
+# ---------------------------------------------------------------------------------------------
+def test_values_and_table_follow_the_camera_every_frame():
+    import time
+
+    scene = bpy.context.scene
+    w = _direction_world(scene)
+    scene_, cam, hole = _scene()
+    cam.animation_data_clear()
+    for f, x in ((1, 40.0), (2, 10.0), (3, 2.6)):  # 20, 5 and 1.3 r_s (inside the photon sphere)
+        cam.location = (x, 1.0, 0.5)
+        cam.keyframe_insert("location", frame=f)
+    grp = next(n for n in _own_nodes(w.node_tree) if n.get("grlens_own") == "group").node_tree
+    times = []
+    for f in (1, 2, 3, 2, 1):
+        t0 = time.perf_counter()
+        scene.frame_set(f)
+        times.append(time.perf_counter() - t0)
+        p = np.array(cam.matrix_world.translation)
+        r_obs = np.linalg.norm(p) / R_S
+        e1 = [grp.nodes["e1"].inputs[k].default_value for k in range(3)]
+        assert np.allclose(e1, p / np.linalg.norm(p), atol=1e-7)
+        assert grp.nodes["xi_lim"].outputs[0].default_value == pytest.approx(escape_limit(r_obs), abs=1e-6)
+        px = np.empty(4 * grp.nodes["table"].image.size[0], np.float32)
+        grp.nodes["table"].image.pixels.foreach_get(px)
+        want = escape_table(float(f"{r_obs:.7g}")).deflection
+        assert np.allclose(px[0::4], want, atol=2e-6, rtol=1e-6), f
+    assert "r_obs = 1.3" in scene.grlens.world_status or "r_obs = 20" in scene.grlens.world_status
+    assert min(times) < 0.05  # a frame change with a new table (benchmarks/bench_sky.py: a few ms)
+
+
+def test_rebuild_without_marked_objects_lenses_the_world():
+    scene = bpy.context.scene
+    w = _world(scene)
+    _, cam, _ = _scene()
+    scene.grlens.lens_world = False
+    assert not _own_nodes(w.node_tree)
+    with pytest.raises(RuntimeError, match="no object is marked"):
+        bpy.ops.grlens.rebuild()
+    scene.grlens.lens_world = True
+    assert bpy.ops.grlens.rebuild() == {"FINISHED"}
+    assert scene.grlens.status.startswith("no object marked; sky lensed, r_obs = 20.")
+    cam.location = (1.0, 0.5, 0.0)  # inside the horizon (r = 0.56 r_s)
+    with pytest.raises(RuntimeError, match="inside the event horizon"):
+        bpy.ops.grlens.rebuild()
+    assert scene.grlens.world_status.startswith("grlens: the camera is inside the event horizon")
+    grp = next(n for n in _own_nodes(w.node_tree) if n.get("grlens_own") == "group").node_tree
+    assert grp.nodes["xi_lim"].outputs[0].default_value == 0.0  # every ray falls in: black
+
+
+# ---------------------------------------------------------------------------------------------
+# renders
+# ---------------------------------------------------------------------------------------------
+def test_cycles_render_matches_the_exact_escape_directions(tmp_path):
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene()
+    scene.grlens.lens_world = False
+    plain = _render(scene, tmp_path / "plain.exr")
+    # the conventions first: unlensed, the colour is 0.5 D + 0.5 of the pixel's own ray
+    assert np.abs(plain - (0.5 * _pixel_dirs(scene, cam) + 0.5)).max() < 1e-4
+    scene.grlens.lens_world = True
+    img = _render(scene, tmp_path / "lensed.exr")
+
+    def want(du, dv):
+        d = _pixel_dirs(scene, cam, du, dv)
+        return _direction_colours(escape_directions(d, cam.location, hole.location, R_S))
+
+    assert _check_per_pixel(img, want) > 0.98
+    dark = np.isnan(escape_directions(_pixel_dirs(scene, cam), cam.location, hole.location, R_S)).any(-1)
+    assert 10 < dark.sum() < 60 and np.all(img[dark] == 0.0)  # the shadow, black
+
+
+def test_cycles_animation_follows_the_camera_and_its_distance(tmp_path):
+    """A render of two frames (the `blender -b -a` loop) with the camera moving from 20 to 8 r_s:
+    each frame's sky is the exact one of that frame's camera (the table rewritten in the frame
+    handler is the one rendered)."""
+    import OpenEXR
+
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene(size=(32, 24))
+    cam.animation_data_clear()
+    cam.location = (40.0, 3.0, 1.0)
+    cam.keyframe_insert("location", frame=1)
+    cam.location = (16.0, 1.0, 0.5)
+    cam.keyframe_insert("location", frame=2)
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.render.filepath = str(tmp_path / "anim_")
+    bpy.ops.render.render(animation=True)
+    for f in (1, 2):
+        scene.frame_set(f)
+        ch = OpenEXR.File(str(tmp_path / f"anim_{f:04d}.exr"), separate_channels=True).parts[0].channels
+        img = np.stack([np.asarray(ch[c].pixels, dtype=np.float64) for c in ("R", "G", "B")], -1)
+        pos = np.array(cam.matrix_world.translation)
+
+        def want(du, dv, pos=pos):
+            d = _pixel_dirs(scene, cam, du, dv)
+            return _direction_colours(escape_directions(d, pos, hole.location, R_S))
+
+        assert _check_per_pixel(img, want) > 0.95, f
+
+
+def test_cycles_equirectangular_panorama(tmp_path):
+    """The node group works from the ray direction, so panoramic cameras are lensed too."""
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene(size=(48, 24))
+    cam.data.type = "PANO"
+    if hasattr(cam.data, "panorama_type"):
+        cam.data.panorama_type = "EQUIRECTANGULAR"
+    else:  # Blender < 4.0 kept it in Cycles' settings
+        cam.data.cycles.panorama_type = "EQUIRECTANGULAR"
+    scene.grlens.lens_world = False
+    plain = _render(scene, tmp_path / "plain.exr")
+    assert np.abs(plain - (0.5 * _equirect_dirs(scene, cam) + 0.5)).max() < 1e-4
+    scene.grlens.lens_world = True
+    img = _render(scene, tmp_path / "pano.exr")
+
+    def want(du, dv):
+        return _direction_colours(escape_directions(_equirect_dirs(scene, cam, du, dv), cam.location,
+                                                    hole.location, R_S))
+
+    assert _check_per_pixel(img, want) > 0.95
+
+
+def _checker(p, scale=3.0):
+    """Cycles' checker texture (svm_checker): colour 1 or 2 of the point p * scale."""
+    p = (p * scale + 0.000001) * 0.999999
+    i = np.abs(np.floor(p)).astype(np.int64) % 2
+    return np.where(((i[..., 0] == i[..., 1]) == (i[..., 2] == 1))[..., None] & True, 1.0, 0.25)
+
+
+def test_cycles_procedural_checker_world(tmp_path):
+    """A procedural texture with its default coordinates is lensed: each pixel shows the checker
+    colour of its exact escape direction (black in the shadow), but where the 0.01 px footprint of
+    its samples crosses a checker edge."""
+    scene = bpy.context.scene
+    _checker_world(scene)
+    _, cam, hole = _scene()
+    img = _render(scene, tmp_path / "checker.exr")
+
+    def want(du, dv):
+        out = escape_directions(_pixel_dirs(scene, cam, du, dv), cam.location, hole.location, R_S)
+        col = _checker(np.nan_to_num(out))
+        return np.where(np.isnan(out).any(-1, keepdims=True), 0.0, np.repeat(col, 3, -1))
+
+    assert _check_per_pixel(img, want, tol=1e-5) > 0.95
+
+
+# ---------------------------------------------------------------------------------------------
+# Eevee: one smoke render in a subprocess (bpy 4.2 may crash at exit after a GPU-engine render)
+# ---------------------------------------------------------------------------------------------
+def test_eevee_smoke(tmp_path):
+    out = tmp_path / "eevee.exr"
+    p = subprocess.run([sys.executable, __file__, "eevee", str(out)], capture_output=True, text=True, timeout=600,
+                       cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    assert "GRLENS_EEVEE_ERR" in p.stdout, p.stdout[-3000:] + p.stderr[-3000:]
+    line = next(ln for ln in p.stdout.splitlines() if ln.startswith("GRLENS_EEVEE_ERR"))
+    p99, frac = (float(v) for v in line.split()[1:3])
+    # Eevee samples across the pixel (no filter control): the 99th percentile of the colour error
+    # against the exact directions, and the shadow's pixels black
+    assert p99 < 3e-3 and frac > 0.95, line
+
+
+def _eevee_main(out):
+    grlens_addon.register()
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene(size=(48, 32))
+    scene.render.engine = "BLENDER_EEVEE" if bpy.app.version >= (5, 0, 0) else "BLENDER_EEVEE_NEXT"
+    scene.eevee.taa_render_samples = 1
+    scene.view_settings.view_transform = "Standard"
+    img = _render(scene, out)
+    d = _pixel_dirs(scene, cam)
+    exact = escape_directions(d, cam.location, hole.location, R_S)
+    want = _direction_colours(exact)
+    err = np.abs(img - want).max(-1)
+    dark = np.isnan(exact).any(-1)
+    print("GRLENS_EEVEE_ERR", np.percentile(err, 99), np.mean(err < 2e-3), int(dark.sum()),
+          float(np.abs(img[dark]).max()) if dark.any() else 0.0, flush=True)
+
+
+if __name__ == "__main__" and len(sys.argv) == 3 and sys.argv[1] == "eevee":
+    _eevee_main(sys.argv[2])
+    sys.stdout.flush()
+    os._exit(0)
