@@ -45,7 +45,7 @@ sys.path.insert(0, HERE)
 
 from bench_frame import uv_sphere  # noqa: E402
 from provenance import code_version  # noqa: E402
-from grlens_addon.core import axis_patch, image_metrics, mapping, pipeline, rasterize, raytrace  # noqa: E402
+from grlens_addon.core import budget, image_metrics, mapping, pipeline, rasterize, raytrace  # noqa: E402
 from lutgen import LUTFamily, build_lut  # noqa: E402
 
 R_S = 1.0
@@ -314,9 +314,9 @@ def ring_notes(angles, results):
             "pixel wide, so nearly all their pixels are edge pixels: a boundary that is off by a tenth of a "
             "pixel changes the coverage by tens of percent. The ring's edge at the Einstein radius is drawn "
             "by the axis patches (grlens_addon/core/axis_patch.py: chords sagging by max_error_px * "
-            f"{axis_patch.EDGE_FACTOR:g} between points {axis_patch.CHORD_OUTSET:.3g} of that sag outside the "
+            f"{budget.PATCH_EDGE_FACTOR * budget.COVERAGE_FACTOR:g} between points {budget.CHORD_OUTSET:.3g} of that sag outside the "
             "ring, so that they cross it); the other edge is the sphere's silhouette "
-            f"along the rays, subdivided to max_error_px * {pipeline.SILHOUETTE_FACTOR:g} (core/silhouette.py); "
+            f"along the rays, subdivided to max_error_px * {budget.COVERAGE_FACTOR:g} (core/budget.py); "
             "what is left is the straight sides of "
             "the pieces, within those tolerances of the curved edges, which the Pareto sweep below "
             "trades against time.", ""]

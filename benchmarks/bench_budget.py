@@ -146,6 +146,7 @@ def compare_revisions(rev, angles, rounds, cam, table, accuracy=True):
 
 RULES = [
     # (name, module, attribute, off value, angles, what it should show)
+    ("half probes (HALF_PROBES)", budget, "HALF_PROBES", False, (45, 90, 135, 170, 180, 0)),
     ("strips (STRIP_BAND_PX)", budget, "STRIP_BAND_PX", 0.0, (170, 180, 0)),
     ("second-order ring edge next to a patch (RING_EDGE_ORDERS)", budget, "RING_EDGE_ORDERS", (), (355, 5)),
     ("thin images (THIN_FACTOR)", budget, "THIN_FACTOR", 1.0, (350, 355, 5, 10)),

@@ -1,4 +1,4 @@
-"""Axis patches next to the limb: clipped to the source triangles (axis_patch.CLIP_TO_TRIANGLES, the
+"""Axis patches next to the limb: clipped to the source triangles (budget.CLIP_TO_TRIANGLES, the
 default) against the plain grid, on the accuracy benchmark's sphere scene (640x360).
 
 For each orbit angle the two are timed alternately in one process (core.pipeline.build_images, both
@@ -20,7 +20,7 @@ sys.path.insert(0, os.path.join(HERE, ".."))
 sys.path.insert(0, HERE)
 
 import bench_accuracy as BA  # noqa: E402
-from grlens_addon.core import axis_patch, mapping, pipeline  # noqa: E402
+from grlens_addon.core import budget, mapping, pipeline  # noqa: E402
 from lutgen import build_lut  # noqa: E402
 
 LIMB = "170.5,171,172,173,174,186,187,188,189,189.5"
@@ -37,7 +37,7 @@ def main(argv=None):
     settings = BA.make_settings(cam)
     planes = cam.frustum_planes()
     scene = mapping.Scene(cam.position, np.zeros(3), BA.R_S)
-    default = axis_patch.CLIP_TO_TRIANGLES
+    default = budget.CLIP_TO_TRIANGLES
     print(f"sphere scene of bench_accuracy, 640x360; {args.rounds} alternating rounds per angle\n")
     print("| angle [deg] | clipped: min / median [ms] | plain: min / median [ms] | median ratio | "
           "clipped / plain image triangles |")
@@ -49,7 +49,7 @@ def main(argv=None):
             tris = {}
             for _ in range(args.rounds + 1):
                 for clip in (True, False):
-                    axis_patch.CLIP_TO_TRIANGLES = clip
+                    budget.CLIP_TO_TRIANGLES = clip
                     t0 = time.perf_counter()
                     out = pipeline.build_images(src, scene, lut, settings, frustum_planes=planes)
                     times[clip].append(time.perf_counter() - t0)
@@ -58,7 +58,7 @@ def main(argv=None):
             print(f"| {a:g} | {c.min():.1f} / {np.median(c):.1f} | {p.min():.1f} / {np.median(p):.1f} | "
                   f"{np.median(c) / np.median(p):.2f} | {tris[True]} / {tris[False]} |")
     finally:
-        axis_patch.CLIP_TO_TRIANGLES = default
+        budget.CLIP_TO_TRIANGLES = default
 
 
 if __name__ == "__main__":

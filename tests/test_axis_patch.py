@@ -115,7 +115,7 @@ def test_limit_images_are_the_einstein_ring(lut, x):
 def test_patch_on_a_tilted_plane(lut):
     """Grid points lie on the surface at their circle's distance from the axis and their azimuth; faces
     are wound like the source; the triangles inside the patch are replaced, the ones reaching out are
-    not; the ring's edge is drawn by chords sagging by at most EDGE_FACTOR * max_error_px, between
+    not; the ring's edge is drawn by chords sagging by at most budget.Budget.patch_edge_px, between
     points moved CHORD_OUTSET of that sag off the exact ring (lutgen.connect), so that they cross it."""
     pts, tris = _grid(-4.0, 1.0, 10, tilt=0.5)
     (p,) = _patches(pts, tris, lut)

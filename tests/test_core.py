@@ -402,7 +402,7 @@ def test_fine_mesh_behind_the_hole_keeps_its_ring(lut):
     """Behind the hole a fine mesh is magnified everywhere: the triangles at the axis are replaced by
     the axis patch (axis_patch.py), few or none are culled, the ring stays closed, and no kept triangle
     spans a wide arc (its straight sides would cut into the ring: culling allows
-    SAGITTA_CULL_FACTOR * 0.25 px, about 6.4 degrees at this size)."""
+    the tolerance, 0.25 px, about 6.4 degrees at this size)."""
     from grlens_addon.core import pipeline
 
     scene = mapping.Scene(CAMERA, HOLE, R_S)

@@ -25,9 +25,9 @@ keeps at least one face):
 i.e. ``>= T``, with equality exactly when nothing is split (max_tess_level = 1, which also means no
 Einstein-ring patches: ``patch_replaced`` source triangles are drawn by ``patch_faces`` faces of
 axis_patch.py instead of being subdivided). ``presplit``: triangles that a first split next to the
-axis added (pipeline._presplit_levels); the counts are then of the split mesh, whose S and F are
+axis added (level_plan.presplit); the counts are then of the split mesh, whose S and F are
 those of the second subdivide call. ``back_face`` (part of total_culled()) counts source triangles
-of a closed surface that are hidden behind its front and not subdivided (pipeline.BACK_FACE_MARGIN).
+of a closed surface that are hidden behind its front and not subdivided (budget.BACK_FACE_MARGIN).
 The report alone
 does not give F - S (nor how many of outside_frustum are source triangles); the tests get it by
 wrapping subdivision.subdivide.

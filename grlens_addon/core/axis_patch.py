@@ -18,7 +18,7 @@ connected to the crossing (nearest to P along the axis when several are hit). Th
 quads (two triangles each) between consecutive circles, so:
 
 * the ring's edge is drawn by chords between points of the circle theta_E, N per turn, chosen so
-  they sag by at most ``EDGE_FACTOR * max_error_px`` pixels; the points are moved off the circle by
+  they sag by at most budget.Budget.patch_edge_px pixels; the points are moved off the circle by
   B.CHORD_OUTSET of that sag, so that the chords cross it (limit_images);
 * the ratio q keeps the tangential error of the linear interpolation inside a piece (a point of the
   surface is drawn at the azimuth of its corners' mean, not its own) within ``max_error_px``;

@@ -67,7 +67,9 @@ class LevelPlan:
     (indices); ``strips`` a mask over ``selected`` of those cut into strips (None: none); and what was
     set aside before cutting (``set_aside``: counts by culling.CullReport field), with the vertices'
     frustum bits (``outside_bits`` (N,), culling.outside_bits, or None without a frustum).
-    ``below_pixel``: the whole image is within a pixel and is not built."""
+    ``below_pixel``: the whole image is within a pixel and is not built. ``known``: (keys (K,) sorted,
+    mapping.Images) the images of the points the plan mapped (edge midpoints, quarter points) that
+    are vertices of the cut at these levels, under their welding keys (subdivision.Subdivided)."""
 
     order: int
     levels: np.ndarray | None = None
@@ -76,6 +78,7 @@ class LevelPlan:
     outside_bits: np.ndarray | None = None
     set_aside: dict = field(default_factory=dict)
     below_pixel: bool = False
+    known: tuple | None = None
 
 
 def plan_levels(frame: Frame, source: Source, coarse: SourceImages, sight, patches, probes: Probes,
@@ -95,7 +98,7 @@ def plan_levels(frame: Frame, source: Source, coarse: SourceImages, sight, patch
     settings = frame.settings
     tol = budget.tolerance_px
     if budget.active and B.THIN_FACTOR != 1.0 and _thin_image(coarse.hole_angle(order), budget.pixel_angle):
-        tol = tol * B.THIN_FACTOR  # an image that is all edges (see THIN_FACTOR)
+        tol = tol * B.THIN_FACTOR  # an image that is all edges: the whole budget scaled (see THIN_FACTOR)
     cov = None if tol is None else B.COVERAGE_FACTOR * tol
     chord = probes.chord[order]
     d = img_v.direction
@@ -104,9 +107,10 @@ def plan_levels(frame: Frame, source: Source, coarse: SourceImages, sight, patch
     levels = np.ones(len(edges.verts), dtype=np.int64)  # edges not probed keep level 1
     levels[probe] = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
                                             chord[probe], budget.pixel_angle, tol)
-    sagitta = None
+    sagitta = quarters = None
     if budget.active and B.HALF_PROBES:
-        sagitta = _half_sagitta(frame, source, img_v, img_m, probe, rho, chord, levels, order)
+        sagitta, quarters = _half_sagitta(frame, source, img_v, img_m, probe, rho, chord, levels, order,
+                                          coarse.circumference[order])
         levels[probe] = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
                                                 chord[probe], budget.pixel_angle, tol, sagitta)
     strip_tri = None
@@ -132,6 +136,7 @@ def plan_levels(frame: Frame, source: Source, coarse: SourceImages, sight, patch
         drop[away] = True
         selected = selected[~drop[selected]]
     plan.levels, plan.selected = levels, selected
+    plan.known = _known_points(len(source.positions), levels, probe, img_m, quarters)
     if strip_tri is not None:
         plan.strips = strip_tri[selected]
     return plan
@@ -157,8 +162,8 @@ def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, lev
             on_sheets[p.face_src] = on_sheets[p.vertex_tri] = on_sheets[p.replaced] = True
         cap = lambda t: _span_cap(order_patches, tris.take(t, axis=0), source.xy)  # noqa: E731
     hole_r = coarse.hole_angle(order)
-    cand, want, sharp, gap_want, r_px = _ring_levels(
-        frame, source, coarse.circumference[order], hole_r, order, tol, replaced, cap, on_sheets,
+    cand, want, sharp, r_px = _ring_levels(
+        frame, source, coarse.circumference[order], hole_r, order, tol, cov, replaced, cap, on_sheets,
         lambda t: sight.hidden(t, (order,)))
     maybe = sharp != want
     if raise_edges.any() or maybe.any():
@@ -174,14 +179,12 @@ def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, lev
         reach = B.RING_EDGE_REACH * max(p.radius for p in order_patches)
         xy, cand_tris = source.xy, tris.take(cand, axis=0)
         near = culling.within_axis_distance(xy[:, 0], xy[:, 1], cand_tris, reach)
-        raised = sharp
         if order not in B.RING_EDGE_ORDERS:  # only where an incomplete patch leaves a gap
             gap = np.zeros(cand.size, bool)
             for p in order_patches:
                 gap |= axis_patch.touches_gap(p, cand_tris, xy[:, 0], xy[:, 1])
             near &= gap
-            raised = gap_want
-        want = np.where(near, np.maximum(want, raised), want)
+        want = np.where(near, np.maximum(want, sharp), want)
     strip = np.zeros(cand.size, bool)
     if B.STRIP_BAND_PX and cand.size:
         strip = _strip_candidates(frame, source, sight, cand, want, r_px, order)
@@ -196,18 +199,33 @@ def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, lev
     return strip_tri
 
 
-def _half_sagitta(frame, source, img_v, img_m, probe, rho, chord, levels, order):
+def _half_sagitta(frame, source, img_v, img_m, probe, rho, chord, levels, order, circumference):
     """(P,) pixels: the sagitta of the probed edges ``probe`` to plan their levels by. rho * chord from
     the edge's midpoint assumes the curvature is even along the edge (a sub-edge of 1/n of it sags
     1/n^2 as much); where it is not (a floor's second-order image wrapping round the hole), the half
     that bends more decides. For the edges cut at least in two, the images of the quarter points
     give each half's own sagitta s_h, and a sub-edge of 1/n of the edge sags about 4 s_h / n^2: the
-    larger of the two estimates is used."""
+    larger of the two estimates is used. Only the edges whose level the tolerance decides are probed
+    (the others are capped by their curvature level or their size on screen), and not those of
+    magnified triangles only (``circumference``: this order's image circumferences of the triangles)."""
     pixel_angle = frame.budget.pixel_angle
+    settings = frame.settings
     sag = rho * chord[probe] / pixel_angle
-    k = np.flatnonzero(levels[probe] >= 2)
+    # only where the tolerance decides the level: not where the curvature level of eq. (19) or the
+    # edge's size in pixels is lower (a larger sagitta would not change the level there)
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        other = np.minimum(np.ceil(settings.max_tess_level * np.clip(settings.tess_a * np.power(np.maximum(rho, 0.0),
+                                                                                                  settings.tess_b), 0, 1)),
+                           np.ceil(chord[probe] / pixel_angle))
+    # and not on magnified triangles: next to the Einstein ring the ring levels and the ring sagitta (the
+    # culling's measure) plan the pieces
+    of_tri, n_e = source.edges.of_tri, len(source.edges.verts)
+    magnified = np.bincount(of_tri[_ring_candidates(source.circumference, circumference)].ravel(), minlength=n_e)
+    only_magnified = magnified == np.bincount(of_tri.ravel(), minlength=n_e)  # every triangle of the edge
+    k = np.flatnonzero((levels[probe] >= 2) & (levels[probe] < np.minimum(other, subdivision.GRID))
+                       & ~only_magnified[probe])
     if k.size == 0:
-        return sag
+        return sag, None
     ev = source.edges.verts[probe[k]]
     pa, pb = source.positions.take(ev[:, 0], axis=0), source.positions.take(ev[:, 1], axis=0)
     quarter = frame.map.images(np.concatenate([0.75 * pa + 0.25 * pb, 0.25 * pa + 0.75 * pb]), (order,))[order]
@@ -218,7 +236,30 @@ def _half_sagitta(frame, source, img_v, img_m, probe, rho, chord, levels, order)
     with np.errstate(invalid="ignore"):
         half = np.fmax(halves[0], halves[1]) / pixel_angle
         sag[k] = np.fmax(sag[k], 4.0 * half)
-    return sag
+    return sag, (k, quarter)
+
+
+def _known_points(n_pts, levels, probe, mids, quarters):
+    """(keys, images) of the mapped probe points that are vertices of the cut: the midpoint of a probed
+    edge cut at an even level, the quarter points of one cut at a multiple of 4 (keys as
+    subdivision.subdivide welds them: n_pts + edge (GRID + 1) + index on the edge's own grid from its
+    lower vertex); None when there are none."""
+    lev = levels.take(probe)
+    base = n_pts + probe * (subdivision.GRID + 1)
+    even = np.flatnonzero(lev % 2 == 0)
+    keys, parts = [base[even] + lev[even] // 2], [mapping.take(mids, even)]
+    if quarters is not None:
+        k, img = quarters
+        four = np.flatnonzero(lev[k] % 4 == 0)
+        if four.size:
+            kk = k[four]
+            keys += [base[kk] + lev[kk] // 4, base[kk] + 3 * lev[kk] // 4]
+            parts += [mapping.take(img, four), mapping.take(img, four + len(k))]
+    keys = np.concatenate(keys)
+    if keys.size == 0:
+        return None
+    order = np.argsort(keys, kind="stable")
+    return keys[order], mapping.take(mapping.concatenate(parts), order)
 
 
 def _ring_candidates(src_circ, img_circ) -> np.ndarray:
@@ -227,7 +268,7 @@ def _ring_candidates(src_circ, img_circ) -> np.ndarray:
         return np.flatnonzero(img_circ > B.RING_MAGNIFICATION * src_circ)
 
 
-def _ring_levels(frame, source, img_circ, hole_r, order, tol, skip=None, cap=None, on_sheets=None, hidden=None):
+def _ring_levels(frame, source, img_circ, hole_r, order, tol, cov, skip=None, cap=None, on_sheets=None, hidden=None):
     """The levels that strongly magnified source triangles near the axis need so that their pieces are
     narrow enough on screen (culling.ring_sagitta: a piece covering an azimuth d at an angular radius R
     from the hole's direction has straight sides R (1 - cos(d/2)) inside the ring): a triangle
@@ -235,7 +276,8 @@ def _ring_levels(frame, source, img_circ, hole_r, order, tol, skip=None, cap=Non
     on all its edges (levels are per edge, so neighbours stay crack-free), capped at max_tess_level.
 
     ``img_circ``: the triangles' image circumferences of this order; ``hole_r`` (N,): the angles
-    (radians) of the vertices' images from the hole's direction; ``tol``: the tolerance (pixels);
+    (radians) of the vertices' images from the hole's direction; ``tol``, ``cov``: the tolerance and
+    the coverage tolerance (pixels);
     ``skip`` (T,) bool: triangles left alone (replaced by an axis patch); ``cap``: None, or a function
     of the candidates' indices giving the most azimuth (radians) each must be cut into pieces narrow in
     (:func:`_span_cap`); ``on_sheets`` (T,) bool: the triangles axis patches draw parts of. A candidate
@@ -244,9 +286,8 @@ def _ring_levels(frame, source, img_circ, hole_r, order, tol, skip=None, cap=Non
     counts that (EDGE_ON_RATIO); ``hidden``: a function of triangle indices giving those hidden in
     this order (back faces), which do not need it.
 
-    Returns (cand, want, sharp, gap, corner_px): the candidates (indices), their levels for ``tol``,
-    for the coverage tolerance and for GAP_FACTOR * ``tol``, and the angular radii (pixels) of their
-    corners' images (len(cand), 3)."""
+    Returns (cand, want, sharp, corner_px): the candidates (indices), their levels for ``tol`` and for
+    ``cov``, and the angular radii (pixels) of their corners' images (len(cand), 3)."""
     settings = frame.settings
     top = int(np.clip(settings.max_tess_level, 1, subdivision.GRID))
     tris = source.tris
@@ -254,7 +295,7 @@ def _ring_levels(frame, source, img_circ, hole_r, order, tol, skip=None, cap=Non
     if skip is not None:
         cand = cand[~skip[cand]]
     if cand.size == 0:
-        return cand, np.ones(0, np.int64), np.ones(0, np.int64), np.ones(0, np.int64), np.zeros((0, 3))
+        return cand, np.ones(0, np.int64), np.ones(0, np.int64), np.zeros((0, 3))
     scene = frame.scene
     _, span = culling.axis_geometry(source.positions, tris[cand], scene.camera, scene.hole, order,
                                     axis_xyz=source.axis_xyz)
@@ -281,9 +322,8 @@ def _ring_levels(frame, source, img_circ, hole_r, order, tol, skip=None, cap=Non
         radius = hole_r / frame.budget.pixel_angle  # px
         corner_px = radius.take(tris.take(cand, axis=0))
         r_px = np.maximum(np.maximum(corner_px[:, 0], corner_px[:, 1]), corner_px[:, 2])
-        out = [_azimuth_levels(span, culling.max_ring_span(r_px, t), top)
-               for t in (tol, B.COVERAGE_FACTOR * tol, tol * B.GAP_FACTOR)]
-    return cand, out[0], out[1], out[2], corner_px
+        out = [_azimuth_levels(span, culling.max_ring_span(r_px, t), top) for t in (tol, cov)]
+    return cand, out[0], out[1], corner_px
 
 
 def _azimuth_levels(span, d_max, top) -> np.ndarray:

@@ -187,14 +187,24 @@ class Mapper:
         looks = self.rays(plane.r, plane.phi, orders, ("dt", "ux", "uy"))
         return {o: (leaving_direction(plane, self.scene, looks[o].ux, looks[o].uy), looks[o].dt) for o in orders}
 
-    def extend(self, coarse: Images, positions, vertex_key, n_pts, order) -> Images:
+    def extend(self, coarse: Images, positions, vertex_key, n_pts, order, known=None) -> Images:
         """Images of order ``order`` of subdivided vertices ``positions`` (V, 3; BU) whose welding keys
         ``vertex_key`` (V,) below ``n_pts`` are source vertices: those reuse ``coarse`` (the source
-        vertices' images), only the new ones are looked up."""
+        vertices' images); ``known``: (keys (K,) sorted, Images) of points mapped already under their
+        keys (the level plan's probes), reused too; only the others are looked up."""
         is_corner = vertex_key < n_pts
         if is_corner.all():
             return take(coarse, vertex_key)
-        new = self.images(positions[~is_corner], (order,))[order]
+        rest = np.flatnonzero(~is_corner)
+        reuse = None
+        if known is not None:
+            keys, known_img = known
+            at = np.minimum(np.searchsorted(keys, vertex_key[rest]), len(keys) - 1)
+            hit = keys[at] == vertex_key[rest]
+            if hit.any():
+                reuse = (rest[hit], at[hit])
+                rest = rest[~hit]
+        new = self.images(positions[rest], (order,))[order]
         n = len(positions)
         out = Images(position=np.empty((n, 3)), direction=np.empty((n, 3)), distance=np.empty(n),
                      valid=np.empty(n, dtype=bool), plane=None, xi=np.empty(n), dt=np.empty(n), ux=None, uy=None)
@@ -202,7 +212,9 @@ class Mapper:
         for name in ("position", "direction", "distance", "valid", "xi", "dt"):
             dst = getattr(out, name)
             dst[is_corner] = getattr(coarse, name)[idx]
-            dst[~is_corner] = getattr(new, name)
+            dst[rest] = getattr(new, name)
+            if reuse is not None:
+                dst[reuse[0]] = getattr(known_img, name)[reuse[1]]
         return out
 
 
@@ -211,6 +223,16 @@ def take(img: Images, rows) -> Images:
     return Images(position=img.position.take(rows, axis=0), direction=img.direction.take(rows, axis=0),
                   distance=img.distance.take(rows), valid=img.valid.take(rows), plane=None,
                   xi=img.xi.take(rows), dt=img.dt.take(rows), ux=None, uy=None)
+
+
+def concatenate(parts) -> Images:
+    """The images of several point sets one after another (positions, directions, distances,
+    validity, table values)."""
+    return Images(position=np.concatenate([p.position for p in parts]),
+                  direction=np.concatenate([p.direction for p in parts]),
+                  distance=np.concatenate([p.distance for p in parts]), valid=np.concatenate([p.valid for p in parts]),
+                  plane=None, xi=np.concatenate([p.xi for p in parts]), dt=np.concatenate([p.dt for p in parts]),
+                  ux=None, uy=None)
 
 
 def leaving_direction(plane, scene: Scene, ux, uy) -> np.ndarray:

@@ -5,7 +5,7 @@ The outline of an image on screen is made of the images of these edges and of th
 edges: everywhere else a triangle's image borders another's, so where their shared edge is drawn
 does not change which pixels are covered. Coverage therefore follows the silhouette's straight
 pieces, and the pipeline subdivides these edges to a tighter screen-space tolerance
-(pipeline.SILHOUETTE_FACTOR).
+(budget.COVERAGE_FACTOR).
 
 A source triangle with geometric normal n (from its winding) faces the camera at a corner when
 n . d > 0, with d the direction in which that corner's connecting ray leaves it

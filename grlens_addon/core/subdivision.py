@@ -25,7 +25,7 @@ do: the triangle is cut by joining the grid points of its sides in order of thei
 given centre (the observer-hole axis), so that only the sides' own points are used. That keeps the
 shared-edge rule above (crack-free against uniform neighbours) and adds no interior vertex. The
 pieces are straight across the triangle, so the caller uses strips only where the image is that
-narrow (pipeline.STRIP_BAND_PX).
+narrow (budget.STRIP_BAND_PX).
 
 Units: positions in Blender units; barycentric coordinates are dimensionless.
 """
@@ -518,7 +518,8 @@ class Pieces:
 def cut(frame, source, plan, coarse_images) -> Pieces:
     """The subdivide stage: the selected source triangles of a level plan (level_plan.LevelPlan) cut at
     its levels (strips where it says so), and the new vertices mapped (frame.map; the source's own
-    corners keep ``coarse_images``, their images of the plan's order)."""
+    corners keep ``coarse_images``, their images of the plan's order, and the points the plan mapped
+    already keep theirs, LevelPlan.known)."""
     sel = plan.selected
     edges = source.edges
     strips = None if plan.strips is None else (plan.strips, source.xy)
@@ -526,5 +527,6 @@ def cut(frame, source, plan, coarse_images) -> Pieces:
     if sub.identity:  # the source's own vertices, in order
         images = coarse_images
     else:
-        images = frame.map.extend(coarse_images, sub.positions, sub.vertex_key, len(source.positions), plan.order)
+        images = frame.map.extend(coarse_images, sub.positions, sub.vertex_key, len(source.positions), plan.order,
+                                  plan.known)
     return Pieces(sub, sel[sub.source_tri], sel, images)
