@@ -387,8 +387,10 @@ def wants_lensing(scene) -> bool:
     return bool(g.lens_world) and g.black_hole is not None
 
 
-def _set(sock_owner, value):
-    """Write a socket default value only when it differs (every write is a depsgraph update)."""
+def _set(sock_owner, value: float):
+    """Write a (float32) socket default value only when it differs after rounding to float32 (every
+    write propagates a node tree update, ~0.2 ms, and tags the world for the depsgraph)."""
+    value = float(np.float32(value))
     if sock_owner.default_value != value:
         sock_owner.default_value = value
 

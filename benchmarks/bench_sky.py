@@ -1,0 +1,150 @@
+"""Lensed world (sky) benchmark, in the pip bpy of the dev environment: ``./dev bench sky``.
+
+Prints
+* the escape table's build time (lutgen.escape_table, 2048 nodes), best of 20;
+* the per-frame cost of the world update for a camera that moves and changes its distance every
+  frame (grlens_addon.blender.world.update: values and a new table each frame), and the extra
+  time of a whole frame change (scene.frame_set) with lens_world on against off, medians over
+  100 frames;
+* the Cycles render time of one scene with and without the lensed world, alternated in one process
+  (CPU, 320x180, 16 samples, a diffuse sphere lit by a procedural world), best of 3 each: with the
+  world's importance sampling map at its default resolution (1024), at 256, and off (so the
+  per-sample cost of the world shader is seen apart from the map's bake, a fixed cost per frame).
+
+Units: milliseconds and seconds as printed; the scene in Blender units with r_s = 2 BU.
+"""
+import math
+import os
+import statistics
+import sys
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+
+import grlens_addon  # noqa: E402
+from lutgen.escape import escape_table  # noqa: E402
+
+
+def scene_with_sky(resolution=(320, 180), samples=16):
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    w = bpy.data.worlds.new("Sky")
+    scene.world = w
+    if bpy.app.version < (5, 0, 0):
+        w.use_nodes = True
+    nt = w.node_tree
+    noise = nt.nodes.new("ShaderNodeTexNoise")  # a cloudy sky from the world's default coordinates
+    noise.inputs["Scale"].default_value = 4.0
+    ramp = nt.nodes.new("ShaderNodeValToRGB")
+    nt.links.new(noise.outputs["Fac"], ramp.inputs["Fac"])
+    nt.links.new(ramp.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+    hole = bpy.data.objects.new("BlackHole", None)
+    scene.collection.objects.link(hole)
+    mesh = bpy.data.meshes.new("Ball")
+    import bmesh
+
+    bm = bmesh.new()
+    bmesh.ops.create_uvsphere(bm, u_segments=32, v_segments=16, radius=2.0)
+    bm.to_mesh(mesh)
+    bm.free()
+    ball = bpy.data.objects.new("Ball", mesh)
+    ball.location = (10.0, 8.0, 0.0)
+    scene.collection.objects.link(ball)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.location = (40.0, 0.5, 0.5)
+    cam.rotation_euler = (math.radians(90), 0.0, math.radians(100))
+    cam.data.angle = math.radians(70)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    r = scene.render
+    r.engine = "CYCLES"
+    r.resolution_x, r.resolution_y, r.resolution_percentage = resolution[0], resolution[1], 100
+    scene.cycles.samples = samples
+    scene.cycles.use_denoising = False
+    scene.cycles.device = "CPU"
+    g = scene.grlens
+    g.r_s = 2.0
+    g.black_hole = hole
+    return scene, cam
+
+
+def per_frame(n=100):
+    from grlens_addon.blender import world
+
+    scene, cam = scene_with_sky()
+    cam.animation_data_clear()
+    cam.location = (40.0, 0.5, 0.5)
+    cam.keyframe_insert("location", frame=1)
+    cam.location = (8.0, 0.5, 0.5)  # 20 -> 4 r_s: a new radius (and table) every frame
+    cam.keyframe_insert("location", frame=n)
+    out = {}
+    for on in (True, False, True, False):
+        scene.grlens.lens_world = on
+        times = []
+        for f in range(1, n + 1):
+            t0 = time.perf_counter()
+            scene.frame_set(f)
+            times.append(time.perf_counter() - t0)
+        out.setdefault(on, []).extend(times)
+    scene.grlens.lens_world = True
+    dg = bpy.context.evaluated_depsgraph_get()
+    upd = []
+    for f in range(1, n + 1):
+        scene.frame_set(f)
+        cam.location.x += 1e-3  # a new radius for the update below
+        dg.update()
+        t0 = time.perf_counter()
+        world.update(scene, dg)
+        upd.append(time.perf_counter() - t0)
+    return out, upd
+
+
+def render_times(repeats=3, method="AUTOMATIC", map_resolution=1024):
+    scene, cam = scene_with_sky()
+    scene.world.cycles.sampling_method = "MANUAL" if method == "AUTOMATIC" and map_resolution != 1024 else method
+    scene.world.cycles.sample_map_resolution = map_resolution
+    path = os.path.join(bpy.app.tempdir or "/tmp", "bench_sky.png")
+    scene.render.filepath = path
+    times = {True: [], False: []}
+    for on in (False, True):  # warm-up (kernel, first shader compile), not counted
+        scene.grlens.lens_world = on
+        bpy.ops.render.render(write_still=False)
+    for _ in range(repeats):
+        for on in (False, True):
+            scene.grlens.lens_world = on
+            t0 = time.perf_counter()
+            bpy.ops.render.render(write_still=False)
+            times[on].append(time.perf_counter() - t0)
+    return times
+
+
+def main():
+    grlens_addon.register()
+    t = []
+    for _ in range(20):
+        t0 = time.perf_counter()
+        escape_table(20.0 + 1e-3 * len(t))
+        t.append(time.perf_counter() - t0)
+    print(f"escape table (2048 nodes): {min(t) * 1e3:.2f} ms best of 20, median {statistics.median(t) * 1e3:.2f} ms")
+    frames, upd = per_frame()
+    on, off = statistics.median(frames[True]), statistics.median(frames[False])
+    print(f"world.update per frame, new radius each frame: median {statistics.median(upd) * 1e3:.2f} ms, "
+          f"p90 {np.percentile(upd, 90) * 1e3:.2f} ms, max {max(upd) * 1e3:.2f} ms")
+    print(f"frame_set, moving camera (no marked object): lens_world on {on * 1e3:.2f} ms, off {off * 1e3:.2f} ms "
+          f"(medians of 200 frames each): +{(on - off) * 1e3:.2f} ms per frame")
+    for method, res, what in (("AUTOMATIC", 1024, "importance map 1024 (default)"),
+                              ("AUTOMATIC", 256, "importance map 256"), ("NONE", 1024, "no importance map")):
+        rt = render_times(method=method, map_resolution=res)
+        a, b = min(rt[False]), min(rt[True])
+        print(f"Cycles 320x180, 16 samples, CPU, {what}: without lensed world {a:.2f} s, with {b:.2f} s "
+              f"(best of 3, alternated): ratio {b / a:.2f}")
+    print(f"bpy {bpy.app.version_string}, {os.cpu_count()} CPUs")
+
+
+if __name__ == "__main__":
+    main()
+    sys.stdout.flush()
+    os._exit(0)
