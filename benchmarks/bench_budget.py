@@ -28,6 +28,7 @@ import argparse
 import importlib
 import math
 import os
+import platform
 import subprocess
 import sys
 import tempfile
@@ -43,9 +44,19 @@ sys.path.insert(0, HERE)
 
 import bench_accuracy as BA  # noqa: E402
 from bench_frame import uv_sphere  # noqa: E402
-from grlens_addon.core import (axis_patch, budget, culling, frame, level_plan, mapping, pipeline, rasterize,  # noqa: E402
-                               subdivision, visibility)
+from provenance import code_version  # noqa: E402
+from grlens_addon.core import (axis_patch, budget, culling, frame, level_plan, mapping, pipeline,  # noqa: E402
+                               rasterize, subdivision, visibility)
 from lutgen import LUTFamily  # noqa: E402
+
+
+LINES: list = []
+
+
+def emit(text=""):
+    """Print ``text`` and keep it for --write."""
+    print(text, flush=True)
+    LINES.append(text)
 
 
 def base_core(rev: str):
@@ -104,9 +115,9 @@ def compare_revisions(rev, angles, rounds, cam, table, accuracy=True):
     settings = BA.make_settings(cam)
     planes = cam.frustum_planes()
     rows = []
-    print(f"| angle [deg] | base: min / median [ms] | this: min / median [ms] | median ratio | triangles base / this"
+    emit(f"| angle [deg] | base: min / median [ms] | this: min / median [ms] | median ratio | triangles base / this"
           + (" | mismatch base / this | screen p99 [px] base / this" if accuracy else "") + " |")
-    print("|---|---|---|---|---|" + ("---|---|" if accuracy else ""))
+    emit("|---|---|---|---|---|" + ("---|---|" if accuracy else ""))
     for a in angles:
         src, tri_scene = BA.sphere_scene(a)
         res = _measure(variants, src, scene, table, settings, planes, rounds)
@@ -118,17 +129,17 @@ def compare_revisions(rev, angles, rounds, cam, table, accuracy=True):
             ref, _ = BA.reference_image(tri_scene, cam)
             acc = (_accuracy(ib, cam, src, ref), _accuracy(it, cam, src, ref))
             line += (f" | {100 * acc[0][0]:.2f}% / {100 * acc[1][0]:.2f}% | {acc[0][1]:.3f} / {acc[1][1]:.3f}")
-        print(line + " |", flush=True)
+        emit(line + " |")
         rows.append((a, np.median(tb), np.median(tt), nb, nt, acc))
     mb, mt = np.mean([r[1] for r in rows]), np.mean([r[2] for r in rows])
-    print(f"\nsphere orbit ({len(rows)} angles): mean of the median times base {1e3 * mb:.2f} ms, this "
+    emit(f"\nsphere orbit ({len(rows)} angles): mean of the median times base {1e3 * mb:.2f} ms, this "
           f"{1e3 * mt:.2f} ms (ratio {mt / mb:.3f}); median frame base {1e3 * np.median([r[1] for r in rows]):.2f} ms, "
           f"this {1e3 * np.median([r[2] for r in rows]):.2f} ms; mean triangles base "
           f"{np.mean([r[3] for r in rows]):.0f}, this {np.mean([r[4] for r in rows]):.0f}")
     if accuracy:
         worst = [max(r[5][k][0] for r in rows) for k in (0, 1)]
         worst_p = [max(r[5][k][1] for r in rows) for k in (0, 1)]
-        print(f"worst mismatch base {100 * worst[0]:.2f}%, this {100 * worst[1]:.2f}%; worst screen p99 base "
+        emit(f"worst mismatch base {100 * worst[0]:.2f}%, this {100 * worst[1]:.2f}%; worst screen p99 base "
               f"{worst_p[0]:.3f} px, this {worst_p[1]:.3f} px")
     # the 100k-triangle sphere (bench_addon's sphere100k), every 10th angle of its orbit
     local, tris = uv_sphere(320, 160, BA.RADIUS)
@@ -139,51 +150,77 @@ def compare_revisions(rev, angles, rounds, cam, table, accuracy=True):
         res = _measure(variants, src, scene, table, settings, planes, max(1, rounds // 2))
         big.append((np.median(res["base"][0]), np.median(res["this"][0]), res["base"][1], res["this"][1]))
     b, t = np.mean([x[0] for x in big]), np.mean([x[1] for x in big])
-    print(f"100k-triangle sphere ({len(big)} angles): mean base {1e3 * b:.1f} ms, this {1e3 * t:.1f} ms "
+    emit(f"100k-triangle sphere ({len(big)} angles): mean base {1e3 * b:.1f} ms, this {1e3 * t:.1f} ms "
           f"(ratio {t / b:.3f}); mean triangles base {np.mean([x[2] for x in big]):.0f}, "
           f"this {np.mean([x[3] for x in big]):.0f}")
 
 
 RULES = [
-    # (name, module, attribute, off value, angles, what it should show)
-    ("half probes (HALF_PROBES)", budget, "HALF_PROBES", False, (45, 90, 135, 170, 180, 0)),
-    ("strips (STRIP_BAND_PX)", budget, "STRIP_BAND_PX", 0.0, (170, 180, 0)),
-    ("second-order ring edge next to a patch (RING_EDGE_ORDERS)", budget, "RING_EDGE_ORDERS", (), (355, 5)),
-    ("thin images (THIN_FACTOR)", budget, "THIN_FACTOR", 1.0, (350, 355, 5, 10)),
-    ("patches clipped to the triangles (CLIP_TO_TRIANGLES)", budget, "CLIP_TO_TRIANGLES", False, (170.5, 172, 188)),
-    ("ring edge chords crossing the ring (CHORD_OUTSET)", budget, "CHORD_OUTSET", 0.0, (4, 356)),
-    ("pieces under complete patches (UNDER_PATCH_FACTOR)", budget, "UNDER_PATCH_FACTOR", None, (176, 180, 184)),
-    ("back faces (BACK_FACE_MIN_PIECES)", budget, "BACK_FACE_MIN_PIECES", 10 ** 12, (170, 180)),
-    ("hidden patch sheets (HIDDEN_CORE)", budget, "HIDDEN_CORE", np.inf, (175, 185)),
-    ("first split beside the axis (PRESPLIT_MIN)", budget, "PRESPLIT_MIN", np.inf, (165, 170, 190)),
+    # (name, attribute of budget, its "off" value, angles where the rule acts, other attributes set for both)
+    ("half probes (HALF_PROBES)", "HALF_PROBES", False, (45, 90, 135, 170, 180, 0), {}),
+    ("strips (STRIP_BAND_PX)", "STRIP_BAND_PX", 0.0, (170, 180, 0), {}),
+    ("second-order ring edge next to a patch (RING_EDGE_ORDERS)", "RING_EDGE_ORDERS", (), (355, 5), {}),
+    ("thin images (THIN_FACTOR)", "THIN_FACTOR", 1.0, (350, 355, 5, 10), {}),
+    ("patches clipped to the triangles (CLIP_TO_TRIANGLES)", "CLIP_TO_TRIANGLES", False, (170.5, 172, 188), {}),
+    ("steep circles of plain patches (STEEP_RATIO)", "STEEP_RATIO", 0.0, (170.5, 171),
+     {"CLIP_TO_TRIANGLES": False}),
+    ("ring edge chords crossing the ring (CHORD_OUTSET)", "CHORD_OUTSET", 0.0, (4, 356), {}),
+    ("pieces under complete patches (UNDER_PATCH_FACTOR)", "UNDER_PATCH_FACTOR", None, (176, 180, 184), {}),
+    ("back faces (BACK_FACE_MIN_PIECES)", "BACK_FACE_MIN_PIECES", 10 ** 12, (170, 180), {}),
+    ("hidden patch sheets (HIDDEN_CORE)", "HIDDEN_CORE", np.inf, (175, 185), {}),
+    ("first split beside the axis (PRESPLIT_MIN)", "PRESPLIT_MIN", np.inf, (165, 170, 190), {}),
+    ("silhouette ring levels up to (SILHOUETTE_RING_LEVEL_MAX)", "SILHOUETTE_RING_LEVEL_MAX", 0, (171, 180), {}),
 ]
 
 
 def compare_rules(rounds, cam, table, only=None):
+    """Each rule of RULES with and without it (its budget constant set to the "off" value), alternated
+    round by round, at the angles where it acts."""
     scene = mapping.Scene(cam.position, np.zeros(3), BA.R_S)
     settings = BA.make_settings(cam)
     planes = cam.frustum_planes()
-    print("| rule | angle [deg] | with: median [ms] / triangles / mismatch / screen p99 [px] | "
+    emit("| rule | angle [deg] | with: median [ms] / triangles / mismatch / screen p99 [px] | "
           "without: median [ms] / triangles / mismatch / screen p99 [px] |")
-    print("|---|---|---|---|")
-    for name, mod, attr, off, angles in RULES:
+    emit("|---|---|---|---|")
+    for name, attr, off, angles, fixed in RULES:
         if only and only not in name:
             continue
-        on = getattr(mod, attr)
+        saved = {k: getattr(budget, k) for k in [attr, *fixed]}
+        on = saved[attr]
+
+        def variant(value):
+            def build(*a, **k):
+                for key, v in fixed.items():
+                    setattr(budget, key, v)
+                setattr(budget, attr, value)
+                try:
+                    return pipeline.build_images(*a, **k)
+                finally:
+                    for key, v in saved.items():
+                        setattr(budget, key, v)
+            return build, _same_src
+
         for a in angles:
             src, tri_scene = BA.sphere_scene(a)
             ref, _ = BA.reference_image(tri_scene, cam)
+            res = _measure({"with": variant(on), "without": variant(off)}, src, scene, table, settings, planes, rounds)
             cells = []
-            for value in (on, off):
-                setattr(mod, attr, value)
-                try:
-                    res = _measure({"x": (pipeline.build_images, _same_src)}, src, scene, table, settings, planes,
-                                   rounds)["x"]
-                finally:
-                    setattr(mod, attr, on)
-                mis, p99 = _accuracy(res[2], cam, src, ref)
-                cells.append(f"{1e3 * np.median(res[0]):.1f} / {res[1]} / {100 * mis:.2f}% / {p99:.3f}")
-            print(f"| {name} | {a:g} | {cells[0]} | {cells[1]} |", flush=True)
+            for k in ("with", "without"):
+                times, n, images = res[k]
+                mis, p99 = _accuracy(images, cam, src, ref)
+                cells.append(f"{1e3 * np.median(times):.1f} / {n} / {100 * mis:.2f}% / {p99:.3f}")
+            emit(f"| {name} | {a:g} | {cells[0]} | {cells[1]} |")
+
+
+def sagitta_px(d_a, d_b, d_mid, pixel_angle):
+    """(E,) pixels: how far the exact image ``d_mid`` (unit directions) of an edge's source midpoint lies
+    off the straight edge between the images ``d_a``, ``d_b`` of its ends (the great circle through
+    them on the view sphere): the sagitta the budget bounds. (Its offset along the edge is a texture
+    placement error, measured on screen by bench_accuracy.)"""
+    n = np.cross(d_a, d_b)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n /= np.linalg.norm(n, axis=1)[:, None]
+        return np.arcsin(np.clip(np.abs(np.einsum("ij,ij->i", d_mid, n)), 0.0, 1.0)) / pixel_angle
 
 
 def piece_errors(angles, cam, table):
@@ -191,11 +228,13 @@ def piece_errors(angles, cam, table):
     scene = mapping.Scene(cam.position, np.zeros(3), BA.R_S)
     settings = BA.make_settings(cam)
     tol = settings.max_error_px
-    print(f"tolerance {tol} px; edge error = distance on screen between a kept piece edge's midpoint and the "
-          "exact image of its source midpoint (the largest of the piece's three edges)\n")
-    print("| angle [deg] | order | pieces (plain / magnified) | plain: p99 / max [px] / beyond | "
+    emit(f"Tolerance {tol} px. Per kept piece the largest sagitta of its three edges: how far the exact image "
+         "of the edge's source midpoint lies off the straight edge on screen (sagitta_px). Plain: pieces of "
+         "triangles the lensing magnifies less than budget.RING_MAGNIFICATION; magnified: the others (next "
+         "to the Einstein ring). Beyond: the share of pieces whose sagitta exceeds the tolerance.\n")
+    emit("| angle [deg] | order | pieces (plain / magnified) | plain: p99 / max [px] / beyond | "
           "magnified: p99 / max [px] / beyond |")
-    print("|---|---|---|---|---|")
+    emit("|---|---|---|---|---|")
     for a in angles:
         src = BA.sphere_scene(a)[0]
         fr = frame.frame_context(scene, table, settings, None, cam.frustum_planes())
@@ -220,16 +259,14 @@ def piece_errors(angles, cam, table):
             t = sub.tris[keep]
             i, j = t.ravel(), np.roll(t, -1, axis=1).ravel()
             mid = fr.map.images(0.5 * (sub.positions[i] + sub.positions[j]), (order,))[order]
-            chord = img.direction[i] + img.direction[j]
-            chord /= np.linalg.norm(chord, axis=1)[:, None]
-            err = subdivision.angle_of_chord(np.linalg.norm(mid.direction - chord, axis=1)) / settings.pixel_angle
+            err = sagitta_px(img.direction[i], img.direction[j], mid.direction, settings.pixel_angle)
             err = np.nan_to_num(err).reshape(-1, 3).max(axis=1)
             cells = []
             for sel in (~mag, mag):
                 e = err[sel]
                 cells.append("-" if not len(e) else
                              f"{np.percentile(e, 99):.3f} / {e.max():.3f} / {100 * (e > tol).mean():.1f}%")
-            print(f"| {a:g} | {order} | {int((~mag).sum())} / {int(mag.sum())} | {cells[0]} | {cells[1]} |", flush=True)
+            emit(f"| {a:g} | {order} | {int((~mag).sum())} / {int(mag.sum())} | {cells[0]} | {cells[1]} |")
 
 
 def main(argv=None):
@@ -244,6 +281,8 @@ def main(argv=None):
     ap.add_argument("--no-accuracy", action="store_true", help="with --base: times and triangles only")
     ap.add_argument("--resolution", default="640x360")
     ap.add_argument("--ref-cache", default=None, metavar="DIR", help="as bench_accuracy's --ref-cache")
+    ap.add_argument("--write", default=None, metavar="SECTION",
+                    help="write the output into docs/budget.md under the heading SECTION (replacing it)")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore", RuntimeWarning)
     BA.REF_CACHE = args.ref_cache
@@ -252,13 +291,40 @@ def main(argv=None):
     table = LUTFamily().at(BA.R_OBS)
     angles = ([BA._angle(a) for a in args.angles.split(",")] if args.angles
               else [BA._angle(a) for a in np.arange(0.0, 360.0, args.step)])
-    print(f"bench_budget: {w}x{h}, {args.rounds} rounds, load average {os.getloadavg()[0]:.1f}\n")
+    load0 = os.getloadavg()[0]
+    emit(f"`./dev python benchmarks/bench_budget.py {' '.join(argv if argv is not None else sys.argv[1:])}` "
+         f"({platform.machine()}, {os.cpu_count()} CPUs; {code_version()}; {w}x{h}, {args.rounds} rounds; load "
+         f"average {load0:.1f} at the start)\n")
     if args.base:
         compare_revisions(args.base, angles, args.rounds, cam, table, accuracy=not args.no_accuracy)
     if args.rules:
         compare_rules(args.rounds, cam, table, args.only)
     if args.errors:
         piece_errors(angles, cam, table)
+    if args.write:
+        _write_section(args.write, LINES)
+
+
+def _write_section(title, lines):
+    """Replace (or append) the section ``## title`` of docs/budget.md with ``lines``; the rest stays."""
+    path = os.path.join(ROOT, "docs", "budget.md")
+    old = open(path).read().split("\n") if os.path.exists(path) else ["# The error budget, measured", ""]
+    sections, current = [[]], None
+    for line in old:
+        if line.startswith("## "):
+            sections.append([])
+        sections[-1].append(line)
+    head = f"## {title}"
+    new = [head, "", *lines, ""]
+    for k, sec in enumerate(sections):
+        if sec and sec[0] == head:
+            sections[k] = new
+            break
+    else:
+        sections.append(new)
+    with open(path, "w") as f:
+        f.write("\n".join(line for sec in sections for line in sec).rstrip("\n") + "\n")
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":
