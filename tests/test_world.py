@@ -310,6 +310,24 @@ def test_new_nodes_are_hooked_at_the_next_update_and_the_users_links_win():
     assert {n.name for n in nt.nodes} == {"Background", "World Output", env_name, tc.name}
 
 
+def test_a_swapped_world_gets_its_tree_back_and_the_new_one_is_lensed():
+    scene = bpy.context.scene
+    w = _busy_world(scene)
+    before = _snapshot(w.node_tree)
+    _scene()
+    other = bpy.data.worlds.new("Other")
+    if bpy.app.version < (5, 0, 0):
+        other.use_nodes = True
+    scene.world = other
+    scene.frame_set(2)
+    assert _snapshot(w.node_tree) == before
+    assert len(_own_nodes(other.node_tree)) == 2  # the group and the shadow mix
+    assert scene.grlens.world_status.startswith("sky lensed")
+    scene.world = None  # no world: nothing to lens, no message
+    scene.frame_set(3)
+    assert not _own_nodes(other.node_tree) and scene.grlens.world_status == ""
+
+
 def test_disabling_the_add_on_restores_the_world():
     scene = bpy.context.scene
     w = _busy_world(scene)

@@ -99,7 +99,12 @@ def _world_relevant(scene, update):
     g = scene.grlens
     if isinstance(idb, bpy.types.Object):
         return idb in (scene.camera, g.observer, g.black_hole)
-    return isinstance(idb, bpy.types.World) and scene.world is not None and idb.original == scene.world
+    w = scene.world
+    if w is None:
+        return False
+    orig = getattr(idb, "original", idb)
+    return (isinstance(idb, bpy.types.World) and orig == w) or (isinstance(idb, bpy.types.NodeTree)
+                                                                 and orig == w.node_tree)
 
 
 @persistent
@@ -131,6 +136,15 @@ def on_load_post(*_args):
 
 
 @persistent
+def on_undo_post(*_args):
+    """Undo may bring back a table image whose pixels are not the ones written: write them again."""
+    from . import world
+
+    world.forget_all()
+    on_load_post()
+
+
+@persistent
 def on_save_pre(*_args):
     """Save the user's own worlds: grlens' nodes, node groups and tables are removed first."""
     from . import world
@@ -148,7 +162,9 @@ HANDLERS = ((bpy.app.handlers.frame_change_post, on_frame_change),
             (bpy.app.handlers.load_pre, on_load_pre),
             (bpy.app.handlers.load_post, on_load_post),
             (bpy.app.handlers.save_pre, on_save_pre),
-            (bpy.app.handlers.save_post, on_save_post))
+            (bpy.app.handlers.save_post, on_save_post),
+            (bpy.app.handlers.undo_post, on_undo_post),
+            (bpy.app.handlers.redo_post, on_undo_post))
 
 
 def attach():

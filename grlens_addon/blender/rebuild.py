@@ -379,7 +379,7 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
         report["status"] += f", r_obs = {geo.r_obs:.4g} r_s"
         if settings.max_error_px != max_error_px(g):
             report["status"] += f" (viewport preview: {settings.max_error_px:.3g} px)"
-        if world_line:
+        if world_line and world_line.startswith("sky lensed"):
             report["status"] += "; sky lensed"
     except _WorldOnly as exc:
         report["status"] = str(exc)

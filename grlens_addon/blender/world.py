@@ -424,14 +424,17 @@ def update(scene, depsgraph=None) -> str | None:
     None when the world is not lensed; raises WorldError for a scene that cannot be lensed (the
     world is then black)."""
     world = scene.world
+    # worlds no longer shown by a lensing scene (the scene's world was swapped) get theirs back
+    keep = {s.world for s in bpy.data.scenes if s.world is not None and wants_lensing(s)}
+    for w in bpy.data.worlds:
+        if w not in keep and is_lensed(w):
+            restore(w)
     if not wants_lensing(scene):
-        if is_lensed(world):
-            restore(world)
         return None
     if world is None:
-        raise WorldError("lens world is on but the scene has no world")
-    if world.node_tree is None:
-        raise WorldError(f"the world '{world.name}' uses no nodes (switch Use Nodes on to lens it)")
+        return None  # no world: the background is black, lensed or not
+    if world.node_tree is None or (bpy.app.version < (5, 0, 0) and not world.use_nodes):
+        return f"sky not lensed: the world '{world.name}' uses no nodes (a plain colour; switch Use Nodes on)"
     from .rebuild import observer_camera
 
     g = scene.grlens
