@@ -328,6 +328,21 @@ def test_a_swapped_world_gets_its_tree_back_and_the_new_one_is_lensed():
     assert not _own_nodes(other.node_tree) and scene.grlens.world_status == ""
 
 
+def test_deleting_grlens_nodes_by_hand_is_repaired_at_the_next_update():
+    scene = bpy.context.scene
+    w = _busy_world(scene)
+    before = _snapshot(w.node_tree)
+    _scene()
+    nt = w.node_tree
+    for n in _own_nodes(nt):
+        nt.nodes.remove(n)
+    scene.frame_set(2)
+    assert sorted(n.get("grlens_own") for n in _own_nodes(nt)) == ["group", "shadow", "shadow"]
+    assert nt.nodes["Mapping"].inputs["Vector"].links[0].from_node.get("grlens_own") == "group"
+    scene.grlens.lens_world = False
+    assert _snapshot(nt) == before
+
+
 def test_disabling_the_add_on_restores_the_world():
     scene = bpy.context.scene
     w = _busy_world(scene)

@@ -263,12 +263,32 @@ def _socket(sockets, ident):
     return None
 
 
+def _damaged(tree) -> bool:
+    """Whether grlens' nodes were deleted by hand while inputs are recorded as hooked: the group node
+    (or its table) is gone, or a World Output recorded as hooked no longer gets its Surface from a
+    shadow mix."""
+    recs = [n for n in tree.nodes if n.get(HOOKED) is not None]
+    if not recs:
+        return False
+    grp = _group_node(tree)
+    if grp is None or grp.node_tree is None or "table" not in grp.node_tree.nodes:
+        return True
+    for n in recs:
+        if n.bl_idname == "ShaderNodeOutputWorld" and "Surface" in n[HOOKED].keys():
+            surf = n.inputs["Surface"]
+            if not surf.is_linked or surf.links[0].from_node.get(OWN) != "shadow":
+                return True
+    return False
+
+
 def apply(world) -> bool:
     """Hook ``world``'s node tree up to the lensed sky (idempotent). Returns whether it changed
     anything. Worlds without a node tree are left alone."""
     tree = world.node_tree if world is not None else None
     if tree is None:
         return False
+    if _damaged(tree):
+        restore(world)  # the user deleted grlens' nodes: back to the user's tree, then hook afresh
     changed = _group_node(tree) is None
     grp = _ensure_group_node(world)
     vec, esc = grp.outputs["Vector"], grp.outputs["Escapes"]
