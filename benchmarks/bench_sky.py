@@ -3,7 +3,8 @@
 Prints
 * the escape table's build time (lutgen.escape_table, 2048 nodes), best of 20;
 * the per-frame cost of the world update for a camera that moves and changes its distance every
-  frame (grlens_addon.blender.world.update: values and a new table each frame), and the extra
+  frame (grlens_addon.blender.world.update: values and a new table each frame), of an update with
+  the camera at the same distance (nothing to write), and the extra
   time of a whole frame change (scene.frame_set) with lens_world on against off, medians over
   100 frames;
 * the Cycles render time of one scene with and without the lensed world, alternated in one process
@@ -99,7 +100,12 @@ def per_frame(n=100):
         t0 = time.perf_counter()
         world.update(scene, dg)
         upd.append(time.perf_counter() - t0)
-    return out, upd
+    same = []
+    for _ in range(n):  # the camera keeps its distance: values only, no new table
+        t0 = time.perf_counter()
+        world.update(scene, dg)
+        same.append(time.perf_counter() - t0)
+    return out, upd, same
 
 
 def render_times(repeats=3, method="AUTOMATIC", map_resolution=1024):
@@ -129,10 +135,11 @@ def main():
         escape_table(20.0 + 1e-3 * len(t))
         t.append(time.perf_counter() - t0)
     print(f"escape table (2048 nodes): {min(t) * 1e3:.2f} ms best of 20, median {statistics.median(t) * 1e3:.2f} ms")
-    frames, upd = per_frame()
+    frames, upd, same = per_frame()
     on, off = statistics.median(frames[True]), statistics.median(frames[False])
     print(f"world.update per frame, new radius each frame: median {statistics.median(upd) * 1e3:.2f} ms, "
           f"p90 {np.percentile(upd, 90) * 1e3:.2f} ms, max {max(upd) * 1e3:.2f} ms")
+    print(f"world.update, camera at the same distance: median {statistics.median(same) * 1e3:.2f} ms")
     print(f"frame_set, moving camera (no marked object): lens_world on {on * 1e3:.2f} ms, off {off * 1e3:.2f} ms "
           f"(medians of 200 frames each): +{(on - off) * 1e3:.2f} ms per frame")
     for method, res, what in (("AUTOMATIC", 1024, "importance map 1024 (default)"),
