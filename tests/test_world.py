@@ -413,6 +413,7 @@ def test_values_and_table_follow_the_camera_every_frame():
         e1 = [grp.nodes["e1"].inputs[k].default_value for k in range(3)]
         assert np.allclose(e1, p / np.linalg.norm(p), atol=1e-7)
         assert grp.nodes["xi_lim"].outputs[0].default_value == pytest.approx(escape_limit(r_obs), abs=1e-6)
+        assert grp.nodes["table"].image == grp.nodes["table+1"].image != grp.nodes["spare"].image
         px = np.empty(4 * grp.nodes["table"].image.size[0], np.float32)
         grp.nodes["table"].image.pixels.foreach_get(px)
         want = escape_table(float(f"{r_obs:.7g}")).deflection
@@ -463,10 +464,11 @@ def test_cycles_render_matches_the_exact_escape_directions(tmp_path):
     assert 10 < dark.sum() < 60 and np.all(img[dark] == 0.0)  # the shadow, black
 
 
-def test_cycles_animation_follows_the_camera_and_its_distance(tmp_path):
-    """A render of two frames (the `blender -b -a` loop) with the camera moving from 20 to 8 r_s:
-    each frame's sky is the exact one of that frame's camera (the table rewritten in the frame
-    handler is the one rendered)."""
+@pytest.mark.parametrize("persistent", [False, True])
+def test_cycles_animation_follows_the_camera_and_its_distance(tmp_path, persistent):
+    """A render of three frames (the `blender -b -a` loop) with the camera moving from 20 to 8 and 5
+    r_s: each frame's sky is the exact one of that frame's camera (the table written in the frame
+    handler is the one rendered), also with Persistent Data (Cycles keeps its scene between frames)."""
     import OpenEXR
 
     scene = bpy.context.scene
@@ -477,10 +479,13 @@ def test_cycles_animation_follows_the_camera_and_its_distance(tmp_path):
     cam.keyframe_insert("location", frame=1)
     cam.location = (16.0, 1.0, 0.5)
     cam.keyframe_insert("location", frame=2)
-    scene.frame_start, scene.frame_end = 1, 2
+    cam.location = (10.0, 1.0, 0.5)
+    cam.keyframe_insert("location", frame=3)
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.render.use_persistent_data = persistent
     scene.render.filepath = str(tmp_path / "anim_")
     bpy.ops.render.render(animation=True)
-    for f in (1, 2):
+    for f in (1, 2, 3):
         scene.frame_set(f)
         ch = OpenEXR.File(str(tmp_path / f"anim_{f:04d}.exr"), separate_channels=True).parts[0].channels
         img = np.stack([np.asarray(ch[c].pixels, dtype=np.float64) for c in ("R", "G", "B")], -1)
@@ -490,7 +495,7 @@ def test_cycles_animation_follows_the_camera_and_its_distance(tmp_path):
             d = _pixel_dirs(scene, cam, du, dv)
             return _direction_colours(escape_directions(d, pos, hole.location, R_S))
 
-        assert _check_per_pixel(img, want) > 0.95, f
+        assert _check_per_pixel(img, want) > 0.9, f  # (at 5 r_s more pixels lie by the shadow)
 
 
 def test_cycles_equirectangular_panorama(tmp_path):

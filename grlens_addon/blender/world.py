@@ -161,6 +161,11 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
         sep.location = (2200, -200 - 300 * k)
         L.new(tex.outputs["Color"], sep.inputs[0])
         vals.append(sep.outputs[0])
+    spare = N.new("ShaderNodeTexImage")  # unlinked: holds the other table image (see write_table)
+    spare.name = spare.label = "spare"
+    spare.location = (2100, -800)
+    spare.image = _new_table_image(image.name + " (spare)")
+    spare.interpolation = "Closest"
     lerp = N.new("ShaderNodeMix")  # float mix: a + w (b - a)
     lerp.data_type = "FLOAT"
     lerp.clamp_factor = False
@@ -231,7 +236,7 @@ def is_lensed(world) -> bool:
 def _ensure_group_node(world):
     tree = world.node_tree
     node = _group_node(tree)
-    if node is not None and node.node_tree is not None and "table" in node.node_tree.nodes:
+    if node is not None and _group_ok(node.node_tree):
         return node
     if node is not None:
         tree.nodes.remove(node)
@@ -263,6 +268,10 @@ def _socket(sockets, ident):
     return None
 
 
+def _group_ok(group) -> bool:
+    return group is not None and all(k in group.nodes for k in ("table", "table+1", "spare", "e1", "xi_lim"))
+
+
 def _damaged(tree) -> bool:
     """Whether grlens' nodes were deleted by hand while inputs are recorded as hooked: the group node
     (or its table) is gone, or a World Output recorded as hooked no longer gets its Surface from a
@@ -271,7 +280,7 @@ def _damaged(tree) -> bool:
     if not recs:
         return False
     grp = _group_node(tree)
-    if grp is None or grp.node_tree is None or "table" not in grp.node_tree.nodes:
+    if grp is None or not _group_ok(grp.node_tree):
         return True
     for n in recs:
         if n.bl_idname == "ShaderNodeOutputWorld" and "Surface" in n[HOOKED].keys():
@@ -383,9 +392,10 @@ def restore(world) -> None:
                 groups.append(node.node_tree)
             tree.nodes.remove(node)
     for g in groups:
-        tex = g.nodes.get("table")
-        if tex is not None and tex.image is not None:
-            images.append(tex.image)
+        for k in ("table", "table+1", "spare"):
+            tex = g.nodes.get(k)
+            if tex is not None and tex.image is not None and tex.image not in images:
+                images.append(tex.image)
         if g.users == 0:
             bpy.data.node_groups.remove(g)
     for img in images:
@@ -415,16 +425,23 @@ def _set(sock_owner, value: float):
         sock_owner.default_value = value
 
 
-def write_table(image, r_obs: float) -> bool:
-    """Fill ``image`` with lutgen.escape_table(r_obs) (deflection in every colour channel) unless it
-    holds that radius's table already in this session. Returns whether it wrote."""
+def write_table(group, r_obs: float) -> bool:
+    """Give the group's two table lookups lutgen.escape_table(r_obs) (the deflection in every colour
+    channel) unless their image holds that radius's table already in this session. Returns whether
+    it wrote. The table goes into the group's spare image, which then takes the lookups' place (the
+    former one becomes the spare): Cycles keeps an image it has loaded while the same image is in
+    use (with Persistent Data, between the frames of an animation, and in the viewport), so new
+    pixels must come in a different image."""
     from lutgen.escape import escape_table
 
     from .lutcache import round_radius
 
     key = round_radius(r_obs)
-    if _written.get(image.as_pointer()) == key and image.get(R_OBS_KEY) == key:
+    cur = group.nodes["table"].image
+    if cur is not None and _written.get(cur.as_pointer()) == key and cur.get(R_OBS_KEY) == key:
         return False
+    spare = group.nodes["spare"]
+    image = spare.image
     t = escape_table(key)
     px = np.zeros((t.size, 4), np.float32)
     px[:, :3] = t.deflection[:, None]
@@ -434,6 +451,9 @@ def write_table(image, r_obs: float) -> bool:
     image[R_OBS_KEY] = key
     image.update_tag()
     _written[image.as_pointer()] = key
+    group.nodes["table"].image = image
+    group.nodes["table+1"].image = image
+    spare.image = cur
     return True
 
 
@@ -484,7 +504,7 @@ def update(scene, depsgraph=None) -> str | None:
     from .lutcache import round_radius
 
     e1 = d / np.linalg.norm(d)
-    write_table(grp.nodes["table"].image, r_obs)
+    write_table(grp, r_obs)
     e1_node = grp.nodes["e1"]
     for k in range(3):
         _set(e1_node.inputs[k], float(e1[k]))
