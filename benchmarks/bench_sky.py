@@ -1,7 +1,7 @@
 """Lensed world (sky) benchmark, in the pip bpy of the dev environment: ``./dev bench sky``.
 
 Prints
-* the escape table's build time (lutgen.escape_table, 2048 nodes), best of 20;
+* the escape table's build time (lutgen.escape_table, default size), best of 20;
 * the per-frame cost of the world update for a camera that moves and changes its distance every
   frame (grlens_addon.blender.world.update: values and a new table each frame), of an update with
   the camera at the same distance (nothing to write), and the extra
@@ -26,7 +26,7 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 import grlens_addon  # noqa: E402
-from lutgen.escape import escape_table  # noqa: E402
+from lutgen.escape import TABLE_SIZE, escape_table  # noqa: E402
 
 
 def scene_with_sky(resolution=(320, 180), samples=16):
@@ -134,7 +134,7 @@ def main():
         t0 = time.perf_counter()
         escape_table(20.0 + 1e-3 * len(t))
         t.append(time.perf_counter() - t0)
-    print(f"escape table (2048 nodes): {min(t) * 1e3:.2f} ms best of 20, median {statistics.median(t) * 1e3:.2f} ms")
+    print(f"escape table ({TABLE_SIZE} nodes): {min(t) * 1e3:.2f} ms best of 20, median {statistics.median(t) * 1e3:.2f} ms")
     frames, upd, same = per_frame()
     on, off = statistics.median(frames[True]), statistics.median(frames[False])
     print(f"world.update per frame, new radius each frame: median {statistics.median(upd) * 1e3:.2f} ms, "

@@ -44,7 +44,7 @@ S_MAX = 24.0
 """Largest table coordinate s: xi_lim - xi = xi_lim e^-24 ~ 1e-10 xi_lim, below the float32
 resolution of an angle in a shader (~2.4e-7 rad at pi); beyond it the table is held constant."""
 
-TABLE_SIZE = 2048
+TABLE_SIZE = 1024
 """Default number of table nodes (uniform in s over [0, S_MAX])."""
 
 
