@@ -157,7 +157,6 @@ def compare_revisions(rev, angles, rounds, cam, table, accuracy=True):
 
 RULES = [
     # (name, attribute of budget, its "off" value, angles where the rule acts, other attributes set for both)
-    ("half probes (HALF_PROBES)", "HALF_PROBES", False, (45, 90, 135, 170, 180, 0), {}),
     ("strips (STRIP_BAND_PX)", "STRIP_BAND_PX", 0.0, (170, 180, 0), {}),
     ("second-order ring edge next to a patch (RING_EDGE_ORDERS)", "RING_EDGE_ORDERS", (), (355, 5), {}),
     ("thin images (THIN_FACTOR)", "THIN_FACTOR", 1.0, (350, 355, 5, 10), {}),

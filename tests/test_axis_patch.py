@@ -398,26 +398,6 @@ def test_clipped_patch_on_a_sphere_next_to_its_limb(lut, monkeypatch):
             assert np.hypot(ax_ + t * fx - px[v], ay_ + t * fy - py[v]).min() < 1e-12
 
 
-def test_touches_gap_finds_the_triangles_beside_undrawn_cells(lut, monkeypatch):
-    """A small plane, with the plain grid: its patch is incomplete (the corners' cells beyond the plane
-    are not drawn). touches_gap is True for the triangles whose projection meets such a cell, which
-    are exactly those with a point beyond the largest full circle, and False for all of them on a
-    complete patch."""
-    monkeypatch.setattr(budget, "CLIP_TO_TRIANGLES", False)
-    pts, tris = _grid(-4.0, 0.04, 2)
-    (p,) = _patches(pts, tris, lut)
-    assert not p.complete
-    x, y, _ = culling.axis_coordinates(pts, CAMERA, HOLE)
-    got = axis_patch.touches_gap(p, tris, x, y)
-    full = p.ring_radii[np.flatnonzero(~p.cell.all(axis=1))[0]]  # the inner circle of the first gap
-    reach = np.hypot(x, y)[tris].max(axis=1)
-    np.testing.assert_array_equal(got, reach > full)
-    assert got.any() and not got.all()
-    pts, tris = _grid(-4.0, 1.0, 10)
-    (p,) = _patches(pts, tris, lut)
-    assert p.complete and not axis_patch.touches_gap(p, tris, *culling.axis_coordinates(pts, CAMERA, HOLE)[:2]).any()
-
-
 def test_open_distance_is_where_a_patch_stops_drawing(lut, monkeypatch):
     """axis_patch.open_distance: on a complete patch, the outer circle for the triangles reaching
     inside it and inf for the others; on an incomplete one (the plain grid on a small plane), the
@@ -437,7 +417,7 @@ def test_open_distance_is_where_a_patch_stops_drawing(lut, monkeypatch):
     x, y, _ = culling.axis_coordinates(pts, CAMERA, HOLE)
     got = axis_patch.open_distance(p, tris, x, y)
     first_gap = p.ring_radii[np.flatnonzero(~p.cell.all(axis=1))[0]]
-    gap_near = axis_patch.touches_gap(p, tris, x, y)
+    gap_near = np.hypot(x, y)[tris].max(axis=1) > first_gap  # reaching beyond the largest full circle
     assert not p.complete and gap_near.any()
     assert np.all(got[gap_near] >= first_gap) and np.all(got[gap_near] <= p.radius)
     assert np.all(got[gap_near] < p.radius) and np.all(np.isin(got[gap_near], p.ring_radii))

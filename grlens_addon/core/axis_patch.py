@@ -348,18 +348,6 @@ def _cells_in(mask, r0, r1, j0, count) -> np.ndarray:
     return total[r1, c1] - total[r0, c1] - total[r1, j0] + total[r0, j0]
 
 
-def touches_gap(patch: Patch, tris, x, y) -> np.ndarray:
-    """(T,) bool: the triangles ``tris`` (T, 3) (axis coordinates x, y of their vertices, BU) whose
-    projection along the axis may meet a cell of the patch that is not drawn (inside its outer
-    circle; tested on the triangle's box in distance and azimuth). False for every triangle when the
-    patch is complete."""
-    if patch.cell is None or patch.cell.all() or len(tris) == 0:
-        return np.zeros(len(tris), bool)
-    r0, r1, j0, count, _ = _cell_box(patch.cell.shape, patch.ring_radii, tris, x, y)
-    r1 = np.clip(r1, 0, patch.cell.shape[0])
-    return (r0 < r1) & (_cells_in(~patch.cell, r0, r1, j0, count) > 0)
-
-
 def open_distance(patch: Patch, tris, x, y) -> np.ndarray:
     """(T,) for the triangles ``tris`` (T, 3) (axis coordinates x, y of their vertices, BU): the
     smallest distance from the axis (BU) at which the patch may leave part of each undrawn, within

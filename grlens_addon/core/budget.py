@@ -21,8 +21,8 @@ The budget gives each piece a tolerance in pixels:
   Everywhere else a piece borders another piece of the same image, so where their shared edge lies
   does not change coverage; along the silhouette (silhouette.py), along a ring's edge and across an
   image that is nothing but edges (under THIN_PX pixels wide) it does. Those are: silhouette edges
-  and the ring levels of silhouette triangles, strips (level_plan), the second order's ring edge
-  next to an axis patch and the pieces beside a patch's undrawn cells. An image that is nothing but
+  and the ring levels of silhouette triangles, strips (level_plan) and the second order's ring edge
+  next to an axis patch. An image that is nothing but
   edges (THIN_PX) has its whole budget scaled by THIN_FACTOR.
 * The patch's own ring edge: PATCH_EDGE_FACTOR x coverage (its chords are cheap, a patch has at
   most MAX_AZIMUTHS of them, and a second-order ring is under a pixel wide).
@@ -65,12 +65,6 @@ texture placement next to the axis (a square behind the hole crossed off its cen
 
 # --- the level plan -----------------------------------------------------------------------------
 
-HALF_PROBES = True
-"""The level plan maps the quarter points of every edge it cuts, so that an edge whose curvature is
-uneven along it is cut for the half that bends more (level_plan._half_sagitta), not for the
-average. Trades two map lookups per cut edge for pieces within the tolerance where an image bends
-unevenly (a floor's second-order image wrapping round the hole)."""
-
 RING_MAGNIFICATION = 2.0
 """Source triangles whose image circumference exceeds this many times their own are treated as lying
 in a strongly lensed (Einstein-ring) region: the level plan gives them ring levels (azimuth about
@@ -90,13 +84,13 @@ deg of its orbit: 38k -> 100k pieces per order). Trades pieces in grazing frames
 second-order ring's coverage."""
 
 RING_EDGE_REACH = 2.0
-"""Magnified triangles within this many patch radii of the axis draw the ring's edge next to a patch:
-in the second order (a ring under a pixel wide) they get the coverage tolerance; in the first order
-only those that may meet a cell an incomplete patch leaves undrawn (axis_patch.touches_gap)."""
-
 RING_EDGE_ORDERS = (2,)
-"""The orders whose ring edge next to a patch always gets the coverage tolerance (RING_EDGE_REACH);
-a first-order ring is wide where the patch is complete, and the rule would only double its pieces."""
+"""Magnified triangles within RING_EDGE_REACH patch radii of the axis draw the ring's edge next to a
+patch; in the orders RING_EDGE_ORDERS (the second order, whose ring is less than a pixel wide) they
+get the coverage tolerance. A first-order ring is wide: there the rule would only add pieces (next
+to incomplete patches, where kept pieces draw part of it, the coverage tolerance and half the
+tolerance were measured: the same mismatch at 171-175 and 185-189 deg, 5-21% more triangles;
+benchmarks/bench_budget.py)."""
 
 EDGE_ON_RATIO = 0.1
 """Magnified triangles on no patch's sheet whose projection along the axis has under this fraction

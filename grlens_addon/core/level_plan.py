@@ -6,7 +6,7 @@ Per order, in this sequence:
 1. Curvature (seed 000, eqs. 18-19): each edge's level from rho of its image, capped by what the
    screen needs (subdivision.edge_levels): no more segments than pixels, no more than keep the
    chords within the tolerance. Edge midpoints are mapped only where a level above 1 is possible
-   (:func:`probe_edges`).
+   (:func:`probe_edges`), and become vertices of the cut where the level is even.
 2. Silhouette: edges on the silhouette (visibility.Sight.silhouette) get the coverage tolerance.
 3. Rings: strongly magnified triangles next to the observer-hole axis get levels that keep the
    azimuth each piece covers within the ring sagitta the tolerance allows (culling.max_ring_span):
@@ -68,8 +68,8 @@ class LevelPlan:
     set aside before cutting (``set_aside``: counts by culling.CullReport field), with the vertices'
     frustum bits (``outside_bits`` (N,), culling.outside_bits, or None without a frustum).
     ``below_pixel``: the whole image is within a pixel and is not built. ``known``: (keys (K,) sorted,
-    mapping.Images) the images of the points the plan mapped (edge midpoints, quarter points) that
-    are vertices of the cut at these levels, under their welding keys (subdivision.Subdivided)."""
+    mapping.Images) the images of the edge midpoints the plan mapped that are vertices of the cut at
+    these levels, under their welding keys (subdivision.Subdivided)."""
 
     order: int
     levels: np.ndarray | None = None
@@ -107,16 +107,10 @@ def plan_levels(frame: Frame, source: Source, coarse: SourceImages, sight, patch
     levels = np.ones(len(edges.verts), dtype=np.int64)  # edges not probed keep level 1
     levels[probe] = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
                                             chord[probe], budget.pixel_angle, tol)
-    sagitta = quarters = None
-    if budget.active and B.HALF_PROBES:
-        sagitta, quarters = _half_sagitta(frame, source, img_v, img_m, probe, rho, chord, levels, order,
-                                          coarse.circumference[order])
-        levels[probe] = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
-                                                chord[probe], budget.pixel_angle, tol, sagitta)
     strip_tri = None
     if budget.active:
         strip_tri = _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, levels, rho, chord,
-                                         probe, tol, cov, sagitta)
+                                         probe, tol, cov)
     # the selection: the frustum, the patches' triangles, back faces
     selected, plan.outside_bits = sight.inside_frustum(img_v, img_m, probe)
     plan.set_aside["outside_frustum"] = len(tris) - len(selected)
@@ -136,14 +130,13 @@ def plan_levels(frame: Frame, source: Source, coarse: SourceImages, sight, patch
         drop[away] = True
         selected = selected[~drop[selected]]
     plan.levels, plan.selected = levels, selected
-    plan.known = _known_points(len(source.positions), levels, probe, img_m, quarters)
+    plan.known = _known_points(len(source.positions), levels, probe, img_m)
     if strip_tri is not None:
         plan.strips = strip_tri[selected]
     return plan
 
 
-def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, levels, rho, chord, probe, tol, cov,
-                         sagitta=None):
+def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, levels, rho, chord, probe, tol, cov):
     """Steps 2-3 of the plan (see the module docstring), raising ``levels`` in place; returns the mask
     (T,) of the triangles cut into strips, or None."""
     settings, edges, tris = frame.settings, source.edges, source.tris
@@ -151,7 +144,7 @@ def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, lev
     # silhouette edges (and the ring levels of silhouette triangles) aim at the coverage tolerance;
     # the silhouette is found only around the edges whose level that would change
     tight = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
-                                    chord[probe], pixel_angle, cov, sagitta)
+                                    chord[probe], pixel_angle, cov)
     raise_edges = tight != levels[probe]
     replaced = cap = on_sheets = None
     if order_patches:
@@ -172,18 +165,12 @@ def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, lev
         up = raise_edges & sil_edge[probe]
         levels[probe[up]] = tight[up]
         want = np.where(maybe & sil_tri[cand] & (sharp <= B.SILHOUETTE_RING_LEVEL_MAX), sharp, want)
-    if order_patches and cand.size and (order in B.RING_EDGE_ORDERS
-                                        or not all(p.complete for p in order_patches)):
-        # next to a patch this order's ring is less than a pixel wide, or the patch stops short of the
-        # surface's fold: the ring's edge there decides coverage, whatever the level
+    if order_patches and cand.size and order in B.RING_EDGE_ORDERS:
+        # next to a patch this order's ring is less than a pixel wide: the ring's edge there decides
+        # coverage, whatever the level
         reach = B.RING_EDGE_REACH * max(p.radius for p in order_patches)
-        xy, cand_tris = source.xy, tris.take(cand, axis=0)
-        near = culling.within_axis_distance(xy[:, 0], xy[:, 1], cand_tris, reach)
-        if order not in B.RING_EDGE_ORDERS:  # only where an incomplete patch leaves a gap
-            gap = np.zeros(cand.size, bool)
-            for p in order_patches:
-                gap |= axis_patch.touches_gap(p, cand_tris, xy[:, 0], xy[:, 1])
-            near &= gap
+        xy = source.xy
+        near = culling.within_axis_distance(xy[:, 0], xy[:, 1], tris.take(cand, axis=0), reach)
         want = np.where(near, np.maximum(want, sharp), want)
     strip = np.zeros(cand.size, bool)
     if B.STRIP_BAND_PX and cand.size:
@@ -199,67 +186,15 @@ def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, lev
     return strip_tri
 
 
-def _half_sagitta(frame, source, img_v, img_m, probe, rho, chord, levels, order, circumference):
-    """(P,) pixels: the sagitta of the probed edges ``probe`` to plan their levels by. rho * chord from
-    the edge's midpoint assumes the curvature is even along the edge (a sub-edge of 1/n of it sags
-    1/n^2 as much); where it is not (a floor's second-order image wrapping round the hole), the half
-    that bends more decides. For the edges cut at least in two, the images of the quarter points
-    give each half's own sagitta s_h, and a sub-edge of 1/n of the edge sags about 4 s_h / n^2: the
-    larger of the two estimates is used. Only the edges whose level the tolerance decides are probed
-    (the others are capped by their curvature level or their size on screen), and not those of
-    magnified triangles only (``circumference``: this order's image circumferences of the triangles)."""
-    pixel_angle = frame.budget.pixel_angle
-    settings = frame.settings
-    sag = rho * chord[probe] / pixel_angle
-    # only where the tolerance decides the level: not where the curvature level of eq. (19) or the
-    # edge's size in pixels is lower (a larger sagitta would not change the level there)
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        other = np.minimum(np.ceil(settings.max_tess_level * np.clip(settings.tess_a * np.power(np.maximum(rho, 0.0),
-                                                                                                  settings.tess_b), 0, 1)),
-                           np.ceil(chord[probe] / pixel_angle))
-    # and not on magnified triangles: next to the Einstein ring the ring levels and the ring sagitta (the
-    # culling's measure) plan the pieces
-    of_tri, n_e = source.edges.of_tri, len(source.edges.verts)
-    magnified = np.bincount(of_tri[_ring_candidates(source.circumference, circumference)].ravel(), minlength=n_e)
-    only_magnified = magnified == np.bincount(of_tri.ravel(), minlength=n_e)  # every triangle of the edge
-    k = np.flatnonzero((levels[probe] >= 2) & (levels[probe] < np.minimum(other, subdivision.GRID))
-                       & ~only_magnified[probe])
-    if k.size == 0:
-        return sag, None
-    ev = source.edges.verts[probe[k]]
-    pa, pb = source.positions.take(ev[:, 0], axis=0), source.positions.take(ev[:, 1], axis=0)
-    quarter = frame.map.images(np.concatenate([0.75 * pa + 0.25 * pb, 0.25 * pa + 0.75 * pb]), (order,))[order]
-    d = img_v.direction
-    da, db, dm = d.take(ev[:, 0], axis=0), d.take(ev[:, 1], axis=0), img_m.direction.take(k, axis=0)
-    q1, q3 = quarter.direction[:k.size], quarter.direction[k.size:]
-    halves = [subdivision.rho(x, y, q) * subdivision.chord_angle(x, y) for x, y, q in ((da, dm, q1), (dm, db, q3))]
-    with np.errstate(invalid="ignore"):
-        half = np.fmax(halves[0], halves[1]) / pixel_angle
-        sag[k] = np.fmax(sag[k], 4.0 * half)
-    return sag, (k, quarter)
-
-
-def _known_points(n_pts, levels, probe, mids, quarters):
-    """(keys, images) of the mapped probe points that are vertices of the cut: the midpoint of a probed
-    edge cut at an even level, the quarter points of one cut at a multiple of 4 (keys as
-    subdivision.subdivide welds them: n_pts + edge (GRID + 1) + index on the edge's own grid from its
-    lower vertex); None when there are none."""
+def _known_points(n_pts, levels, probe, mids):
+    """(keys, images) of the probed midpoints that are vertices of the cut (those of edges cut at an even
+    level; keys as subdivision.subdivide welds them: n_pts + edge (GRID + 1) + index on the edge's own
+    grid from its lower vertex), so they are not looked up again; None when there are none."""
     lev = levels.take(probe)
-    base = n_pts + probe * (subdivision.GRID + 1)
     even = np.flatnonzero(lev % 2 == 0)
-    keys, parts = [base[even] + lev[even] // 2], [mapping.take(mids, even)]
-    if quarters is not None:
-        k, img = quarters
-        four = np.flatnonzero(lev[k] % 4 == 0)
-        if four.size:
-            kk = k[four]
-            keys += [base[kk] + lev[kk] // 4, base[kk] + 3 * lev[kk] // 4]
-            parts += [mapping.take(img, four), mapping.take(img, four + len(k))]
-    keys = np.concatenate(keys)
-    if keys.size == 0:
+    if even.size == 0:
         return None
-    order = np.argsort(keys, kind="stable")
-    return keys[order], mapping.take(mapping.concatenate(parts), order)
+    return n_pts + probe[even] * (subdivision.GRID + 1) + lev[even] // 2, mapping.take(mids, even)
 
 
 def _ring_candidates(src_circ, img_circ) -> np.ndarray:

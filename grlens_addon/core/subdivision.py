@@ -44,7 +44,7 @@ GRID = 64  # largest level (GPU tessellators' usual maximum, as in seed 000)
 
 def edge_levels(rho: np.ndarray, max_tess_level: int, a: float, b: float,
                 chord: np.ndarray | None = None, pixel_angle: float | None = None,
-                max_error_px: float | None = None, sagitta_px: np.ndarray | None = None) -> np.ndarray:
+                max_error_px: float | None = None) -> np.ndarray:
     """Per-edge subdivision levels (integers 1 .. min(max_tess_level, 64), shape of ``rho``).
 
     The level is eq. (19), ceil(MaxTessLevel * clamp(a rho^b, 0, 1)), at least 1, and, when ``chord``
@@ -58,9 +58,6 @@ def edge_levels(rho: np.ndarray, max_tess_level: int, a: float, b: float,
       chord). An arc cut into n pieces deviates from its chords by about s / n^2, so this is the
       smallest level that keeps the straight sub-edges within ``max_error_px`` of the curved image.
 
-    ``sagitta_px``: the sagitta to use instead of rho * chord (pixels), where the caller measured it
-    better (level_plan: from the halves of the edge, when its curvature is not even along it).
-
     NaN rho (an end point without an image) gives level 1: such edges are culled later anyway.
     """
     top = int(np.clip(max_tess_level, 1, GRID))
@@ -72,8 +69,7 @@ def edge_levels(rho: np.ndarray, max_tess_level: int, a: float, b: float,
             chord_px = chord / pixel_angle
             n = np.minimum(n, np.nan_to_num(np.ceil(chord_px), nan=1.0))
             if max_error_px:
-                if sagitta_px is None:
-                    sagitta_px = r * chord_px
+                sagitta_px = r * chord_px
                 n = np.minimum(n, np.nan_to_num(np.ceil(np.sqrt(sagitta_px / max_error_px)), nan=1.0))
     return np.clip(n, 1, top).astype(np.int64)
 
@@ -518,8 +514,8 @@ class Pieces:
 def cut(frame, source, plan, coarse_images) -> Pieces:
     """The subdivide stage: the selected source triangles of a level plan (level_plan.LevelPlan) cut at
     its levels (strips where it says so), and the new vertices mapped (frame.map; the source's own
-    corners keep ``coarse_images``, their images of the plan's order, and the points the plan mapped
-    already keep theirs, LevelPlan.known)."""
+    corners keep ``coarse_images``, their images of the plan's order, and the edge midpoints the plan
+    mapped keep theirs, LevelPlan.known)."""
     sel = plan.selected
     edges = source.edges
     strips = None if plan.strips is None else (plan.strips, source.xy)
