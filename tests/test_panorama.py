@@ -298,8 +298,14 @@ def test_blender_panoramic_cameras_become_reference_cameras():
         # the direction at longitude 0, latitude 0 is the object's -Z
         col, row, _ = cam.project(cam.position[None] - mw[:3, 2][None])
         assert col[0] == pytest.approx(2.5 / 4.5 * 100, abs=1e-4) and row[0] == pytest.approx(1.2 / 2.2 * 50, abs=1e-4)
+        # the rebuild's pixel size is the panorama's angular resolution, and it has no frustum
+        from grlens_addon.blender import rebuild
+
+        assert rebuild._pixel_angle(scene, obj) == pytest.approx(min(4.5 / 200, 2.2 / 100))  # the render: 200x100
+        assert rebuild.frustum_planes(scene, obj) is None
         data.panorama_type = "FISHEYE_EQUIDISTANT"
         data.fisheye_fov = math.radians(200)
+        assert rebuild._pixel_angle(scene, obj) == pytest.approx(math.radians(200) / 200)
         cam = check.check_camera(scene, obj, 50)
         assert cam.kind == "FISHEYE_EQUIDISTANT" and cam.fisheye_fov == pytest.approx(math.radians(200))
         np.testing.assert_allclose(cam.pixel_directions()[25, 50], -mw[:3, 2] / np.linalg.norm(mw[:3, 2]), atol=0.05)

@@ -74,13 +74,22 @@ def camera_rotation(cam) -> np.ndarray:
 
 
 def _pixel_angle(scene, cam):
-    """Radians per pixel on the view sphere for the observer camera and the render resolution (the
-    camera's actual frame, so sensor fit and aspect ratio are taken into account)."""
+    """Radians per pixel on the view sphere for the observer camera and the render resolution: for a
+    perspective camera its actual frame (sensor fit and aspect ratio taken into account); for Cycles'
+    equirectangular and fisheye-equidistant panoramas their angular resolution (the reference
+    tracer's camera of the same kind, raytrace.Camera.pixel_angle); otherwise a generous estimate."""
     r = scene.render
     px_x = max(r.resolution_x * r.resolution_percentage / 100.0, 1.0)
     px_y = max(r.resolution_y * r.resolution_percentage / 100.0, 1.0)
+    if cam.type == "CAMERA" and cam.data.type == "PANO":
+        from . import check  # (check uses this module's camera helpers)
+
+        try:
+            return check.check_camera(scene, cam, 100).pixel_angle
+        except ValueError:  # another panorama type (or lens shift): the estimate below
+            pass
     if cam.type != "CAMERA" or cam.data.type != "PERSP":
-        return math.radians(60.0) / max(px_x, px_y)  # orthographic/panoramic: a generous estimate
+        return math.radians(60.0) / max(px_x, px_y)  # orthographic/other panoramas: a generous estimate
     half_x, half_y = half_tangents(scene, cam)
     return min(2.0 * math.atan(half_x) / px_x, 2.0 * math.atan(half_y) / px_y)
 
