@@ -6,7 +6,8 @@ Each scene is rendered by render.py in its own process (default frames, resoluti
 sample_scenes.scenes.DEFAULTS unless listed below); scenes with several frames are put side by side
 (the triangle: p1 = frame 150 on the left, p2 = frame 1 on the right, like the paper's figure 8),
 except the scenes in SEPARATE, whose frames become one picture each, docs/images/<scene>_NNNN.png
-(the fly-in: far, middle, close). Prints render.py's per-frame summary for each scene.
+(the fly-in: far, middle, close), and the star field's three views go to docs/images/starfield_normal.png,
+starfield_dome.png and starfield_panorama.png. Prints render.py's per-frame summary for each scene.
 """
 import os
 import subprocess
@@ -30,8 +31,10 @@ PICTURES = {  # scene: extra render.py arguments
     "room": [],
     "luminet": [], "luminet_blackbody": [],
     "flyin": ["--frames", "1,120,240"],
+    "starfield": [], "starfield_dome": [], "starfield_panorama": [],
 }
 SEPARATE = {"flyin"}  # one picture per frame: <scene>_NNNN.png
+TARGETS = {"starfield": "starfield_normal"}  # picture name when it is not the scene's
 
 
 def side_by_side(paths, gap=4):
@@ -63,7 +66,7 @@ def main(names):
             if name in SEPARATE:
                 outputs = [(os.path.join(OUT, os.path.basename(p)), [p]) for p in pngs]
             else:
-                outputs = [(os.path.join(OUT, f"{name}.png"), pngs)]
+                outputs = [(os.path.join(OUT, f"{TARGETS.get(name, name)}.png"), pngs)]
             for target, parts in outputs:
                 side_by_side(parts).save(target, optimize=True)
                 print(f"-> {os.path.relpath(target, ROOT)} ({os.path.getsize(target) // 1024} KB)", flush=True)

@@ -9,8 +9,11 @@ renders each frame to <output>/<scene>_NNNN.png and a multilayer OpenEXR <output
 frame (time for the grlens rebuild and for the render), then a summary of the time per frame.
 ``--list`` prints the scenes with their defaults: sphere (seed 000, 4.2), triangle and its variants
 (4.1, figure 8), disc and its views (4.3, figure 10), shell (seed 004), room (seed 003), luminet
-(seed 002), flyin (issue 19: the camera flies in from 80 to 4.5 r_s over a checkered floor). Frames,
-resolution and samples default to the scene's own defaults (sample_scenes.scenes.DEFAULTS).
+(seed 002), flyin (issue 19: the camera flies in from 80 to 4.5 r_s over a checkered floor), and the
+lensed star field (issue 21) in three cameras, one scene each: starfield (normal perspective view,
+640x360), starfield_dome (180-degree fisheye dome master, Cycles fisheye equidistant, 512x512) and
+starfield_panorama (360-degree equirectangular panorama, 1024x512); panoramas render in Cycles only.
+Frames, resolution and samples default to the scene's own defaults (sample_scenes.scenes.DEFAULTS).
 """
 import argparse
 import os
@@ -56,7 +59,10 @@ def set_exr(settings, multilayer: bool):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scene", choices=sorted(SCENES), default="sphere")
+    ap.add_argument("--scene", choices=sorted(SCENES), default="sphere",
+                    help="the scene (--list describes each); the star field's cameras are the scenes starfield "
+                         "(normal view), starfield_dome (180-degree fisheye) and starfield_panorama (360-degree "
+                         "equirectangular)")
     ap.add_argument("--frames", type=frames, default=None, help="e.g. 1,46,91 or 1-10 (default: the scene's)")
     ap.add_argument("--engine", choices=sorted(ENGINES), default="cycles")
     ap.add_argument("--resolution", type=resolution, default=None, help="WxH (default: the scene's)")

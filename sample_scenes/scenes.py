@@ -17,6 +17,7 @@ import math
 import bpy
 
 from sample_scenes import luminet as _luminet
+from sample_scenes import starfield as _starfield
 
 # --------------------------------------------------------------------------------------------------
 # helpers (plain bpy: materials, cameras, meshes)
@@ -855,6 +856,9 @@ SCENES = {
 }
 SCENES["luminet"] = _luminet.luminet_disc
 SCENES["luminet_blackbody"] = _luminet.luminet_disc_blackbody
+SCENES["starfield"] = _starfield.starfield
+SCENES["starfield_dome"] = functools.partial(_starfield.starfield, view="dome")
+SCENES["starfield_panorama"] = functools.partial(_starfield.starfield, view="panorama")
 for _incl in (90, 30, 10):
     SCENES[f"disc_{_incl}"] = functools.partial(accretion_disc, inclination=_incl)
     SCENES[f"disc_{_incl}_external"] = functools.partial(accretion_disc, inclination=_incl, external=True)
@@ -884,6 +888,12 @@ DEFAULTS = {
                  what="seed 003: Cornell-like room, sphere, cube, cylinder, hole of r_s = 0.4 BU in the middle"),
     "flyin": dict(frames=[1, 120, 180, 240], resolution=(480, 270), samples=16,
                   what="issue 19: camera flies in from 80 to 4.5 r_s over a checkered floor, orbiting sphere, 240 frames"),
+    "starfield": dict(frames=[1], resolution=(640, 360), samples=16,
+                      what="issue 21: lensed star field, Luminet's thin disc, orbiting sphere; normal view from 20 r_s"),
+    "starfield_dome": dict(frames=[1], resolution=(512, 512), samples=16,
+                           what="the star field through a 180-degree fisheye dome master (fisheye equidistant)"),
+    "starfield_panorama": dict(frames=[1], resolution=(1024, 512), samples=16,
+                               what="the star field as a 360-degree equirectangular panorama"),
 }
 for _incl, _letters in ((90, "a, b"), (30, "c, d"), (10, "e, f")):
     _obs, _ext = _letters.split(", ")

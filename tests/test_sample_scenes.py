@@ -24,7 +24,8 @@ STATS = os.path.join(HERE, "scripts", "scene_stats.py")
 SCENE_NAMES = sorted([
     "sphere", "triangle", "triangle_tess1", "triangle_tess4", "triangle_tess64", "triangle_flat",
     "disc", "disc_external", "disc_90", "disc_30", "disc_10", "disc_90_external", "disc_30_external",
-    "disc_10_external", "shell", "room", "luminet", "luminet_blackbody", "flyin"])
+    "disc_10_external", "shell", "room", "luminet", "luminet_blackbody", "flyin", "starfield", "starfield_dome",
+    "starfield_panorama"])
 
 # how each scene is rendered here: (resolution, frames, samples); Cycles
 TEST_RENDERS = {
@@ -47,6 +48,9 @@ TEST_RENDERS = {
     "luminet": ("96x54", "1", 2),
     "luminet_blackbody": ("96x54", "1", 2),
     "flyin": ("160x90", "120", 2),
+    "starfield": ("96x54", "1", 1),
+    "starfield_dome": ("96x96", "1", 1),
+    "starfield_panorama": ("192x96", "1", 1),
 }
 
 
@@ -459,3 +463,105 @@ def test_flyin_render_shadow_and_lensed_horizon(renders):
     side = min(np.median(top[: w // 8]), np.median(top[-w // 8:]))
     centre = min(top[w // 2 - 3: w // 2 + 3])
     assert centre < side - 8, (centre, side)  # 160x90: 9 against 26 rows from the top
+
+
+# --------------------------------------------------------------------------------------------------
+# lensed star field (issue 21 item 5): normal view, fisheye dome master, equirectangular panorama
+# --------------------------------------------------------------------------------------------------
+
+STARFIELD_SCRIPT = r"""
+import json, math, os, sys
+sys.path.insert(0, sys.argv[1])
+import bpy
+import grlens_addon
+from grlens_addon.blender import world as gw
+from sample_scenes.scenes import SCENES
+
+grlens_addon.register()
+bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+scene = bpy.context.scene
+scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 64, 36, 100
+SCENES["starfield"](scene)
+g = scene.grlens
+tree = scene.world.node_tree
+groups = [n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup" and n.node_tree is not None
+          and n.node_tree.name.startswith(gw.GROUP_PREFIX)]
+textures = [n for n in tree.nodes if n.bl_idname in ("ShaderNodeTexVoronoi", "ShaderNodeTexNoise")]
+out = {"lens_world": g.lens_world, "is_lensed": gw.is_lensed(scene.world), "world_status": g.world_status,
+       "groups": len(groups), "textures": len(textures),
+       "hooked": sum(1 for n in textures if n.inputs["Vector"].is_linked
+                     and n.inputs["Vector"].links[0].from_node in groups),
+       "cameras": {}, "views": {}}
+for name in ("CamNormal", "CamDome", "CamPanorama"):
+    d = bpy.data.objects[name].data
+    out["cameras"][name] = {"type": d.type, "panorama_type": getattr(d, "panorama_type", None),
+                            "fisheye_fov": d.fisheye_fov, "lat": [d.latitude_min, d.latitude_max],
+                            "lon": [d.longitude_min, d.longitude_max],
+                            "location": list(bpy.data.objects[name].location)}
+for name, res in (("CamNormal", (64, 36)), ("CamDome", (32, 32)), ("CamPanorama", (64, 32))):
+    scene.camera = bpy.data.objects[name]
+    scene.render.resolution_x, scene.render.resolution_y = res
+    bpy.ops.grlens.rebuild()
+    out["views"][name] = {"status": g.status, "report": g.report_lines, "lensed": gw.is_lensed(scene.world),
+                          "images": {o.name: len(o.data.polygons) for o in scene.objects
+                                     if o.type == "MESH" and o.grlens.order in (1, 2)}}
+print("STARFIELD " + json.dumps(out), flush=True)
+os._exit(0)
+"""
+
+
+@pytest.fixture(scope="module")
+def starfield():
+    out = run(STARFIELD_SCRIPT, os.path.join(HERE, ".."), script="-c")
+    return json.loads(next(line for line in out.splitlines() if line.startswith("STARFIELD "))[10:])
+
+
+def test_starfield_world_lensed_cameras_and_images(starfield):
+    """The star field's world is lensed (grlens' node group feeds every star and haze texture's Vector,
+    the view direction), its three cameras are a perspective view, a 180-degree fisheye equidistant
+    dome master and a full equirectangular panorama at the same place, and each, as the observer,
+    gets first- and second-order images of the disc and the sphere."""
+    sf = starfield
+    assert sf["lens_world"] and sf["is_lensed"] and sf["groups"] == 1
+    assert sf["textures"] == 3 and sf["hooked"] == 3, sf
+    assert "not lensed" not in sf["world_status"]
+    cams = sf["cameras"]
+    assert cams["CamNormal"]["type"] == "PERSP"
+    dome, pano = cams["CamDome"], cams["CamPanorama"]
+    assert dome["type"] == "PANO" and dome["panorama_type"] == "FISHEYE_EQUIDISTANT"
+    assert dome["fisheye_fov"] == pytest.approx(math.pi)
+    assert pano["type"] == "PANO" and pano["panorama_type"] == "EQUIRECTANGULAR"
+    assert pano["lat"] == pytest.approx([-math.pi / 2, math.pi / 2])
+    assert pano["lon"] == pytest.approx([-math.pi, math.pi])
+    assert cams["CamNormal"]["location"] == dome["location"] == pano["location"]
+    for name, view in sf["views"].items():
+        assert view["status"].startswith("2 object(s) lensed") and "sky lensed" in view["status"], (name, view)
+        assert view["lensed"] and view["report"] == "", (name, view)
+        im = view["images"]
+        assert im["ThinDisc.GR1"] > 1000 and im["ThinDisc.GR2"] > 0 and im["OrbitingSphere.GR1"] > 0, (name, im)
+        if name != "CamNormal":  # panoramas image everything (no frustum)
+            assert im["OrbitingSphere.GR2"] > 0, (name, im)
+
+
+def test_starfield_renders_black_shadow_and_round_dome(renders):
+    """Tiny Cycles renders (render.py, 1 sample): the upper half of the shadow (the disc's near side
+    crosses its lower half) is black in every view, the dome master is a disc (its corners, outside the
+    180-degree circle, are black) with stars and the disc inside it, and the panorama has sky all
+    around, behind the camera too."""
+    shadow_deg = math.degrees(math.asin(math.sqrt(6.75 / 400 * 0.95)))  # 7.27 degrees at 20 r_s
+    radius = {"starfield": shadow_radius_px(20.0, 50.0, 54), "starfield_dome": shadow_deg / 90.0 * 48,
+              "starfield_panorama": shadow_deg / 360.0 * 192}
+    for name, big_r in radius.items():
+        img = renders.get(name)[2][1].astype(float)
+        h, w = img.shape[:2]
+        peak = img.max(axis=2)
+        r, x, y = radius_map(img)
+        upper = (r < big_r - 1.0) & (y > 0.3 * big_r) & (np.abs(x) < 0.5 * big_r)
+        assert upper.sum() >= 1 and peak[upper].max() < 12, (name, big_r, peak[upper])
+        assert (peak > 60).sum() > 5, name
+    dome = renders.get("starfield_dome")[2][1].astype(float).max(axis=2)
+    r, _, _ = radius_map(dome)
+    assert dome[r > 49.5].max() < 5  # outside the fisheye circle
+    assert (dome[(r < 45) & (r > 18)] > 40).sum() > 10  # stars and the disc inside it
+    pano = renders.get("starfield_panorama")[2][1].astype(float).max(axis=2)
+    assert (pano[:, :24] > 15).sum() > 3 and (pano[:, -24:] > 15).sum() > 3
