@@ -239,12 +239,12 @@ def piece_errors(angles, cam, table):
         fr = frame.frame_context(scene, table, settings, None, cam.frustum_planes())
         source = frame.prepare_source(fr, src)
         coarse = frame.map_source(fr, source)
-        sight = visibility.see(fr, source)
+        sight = visibility.see(fr, source, coarse)
         levels = level_plan.presplit(fr, source, coarse, sight)
         if levels is not None:
             source = pipeline._split(fr, source, levels)
             coarse = frame.map_source(fr, source)
-            sight = visibility.see(fr, source)
+            sight = visibility.see(fr, source, coarse)
         patches = axis_patch.build_patches(fr, source, sight)
         probes = level_plan.probe_edges(fr, source, coarse)
         for order in fr.orders:

@@ -51,7 +51,7 @@ def _patches(pts, tris, lut, orders=(1, 2), closed=False, pixel=PIXEL):
     fr = frame.frame_context(SCENE, lut, pipeline.Settings(orders=tuple(orders), pixel_angle=pixel,
                                                           max_error_px=MAX_ERROR))
     source = frame.prepare_source(fr, pipeline.SourceMesh(pts, tris))
-    sight = visibility.see(fr, source)
+    sight = visibility.see(fr, source, frame.map_source(fr, source))
     sight._closed = bool(closed)
     return axis_patch.build_patches(fr, source, sight)
 

@@ -513,7 +513,8 @@ def test_frustum_pre_cull_matches_brute_force(lut):
     img_m = mapping.map_vertices(mids, scene, lut, 1)
     planes = np.array([[0.0, 0.0, 1.0, -0.05], [0.0, 1.0, 0.0, -1.0]])
     fr = frame.frame_context(scene, lut, pipeline.Settings(), frustum_planes=planes)
-    sight = visibility.see(fr, frame.prepare_source(fr, pipeline.SourceMesh(pts, tris)))
+    source = frame.prepare_source(fr, pipeline.SourceMesh(pts, tris))
+    sight = visibility.see(fr, source, frame.map_source(fr, source))
     sel, out_v = sight.inside_frustum(img_v, img_m, probe)
     mid = 0.5 * (img_v.position[edges.verts[:, 0]] + img_v.position[edges.verts[:, 1]])
     mid[probe] = img_m.position

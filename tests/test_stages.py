@@ -54,7 +54,7 @@ def _run(table, src, settings=None, planes="camera"):
     fr = frame.frame_context(SCENE, table, settings, None, CAM.frustum_planes() if planes == "camera" else planes)
     source = frame.prepare_source(fr, src)
     coarse = frame.map_source(fr, source)
-    sight = visibility.see(fr, source)
+    sight = visibility.see(fr, source, coarse)
     patches = axis_patch.build_patches(fr, source, sight)
     probes = level_plan.probe_edges(fr, source, coarse)
     out = {}

@@ -287,8 +287,10 @@ class SourceImages:
 
 
 def map_source(frame: Frame, source: Source) -> SourceImages:
-    """The map stage for the source's vertices: their images of every order of the frame."""
-    images = frame.map.images(source.positions, frame.orders, source.plane)
+    """The map stage for the source's vertices: their images of every order of the frame, with the rays'
+    tangents when pieces are measured on screen (visibility needs the directions in which the rays
+    leave the vertices: one lookup for both)."""
+    images = frame.map.images(source.positions, frame.orders, source.plane, tangents=frame.budget.active)
     chord = {o: chord_lengths(images[o].direction, source.edges.verts) for o in frame.orders}
     circ = {o: circumference_from_edges(chord[o], source.edges.of_tri) for o in frame.orders}
     return SourceImages(images, chord, circ, frame.scene)

@@ -50,12 +50,12 @@ def build_images(src: SourceMesh, scene: Scene, lut, settings: Settings, light: 
     if source.empty:
         return {o: empty_image(o, _report_of_nothing(source)) for o in frame.orders}
     coarse = map_source(frame, source)
-    sight = visibility.see(frame, source)
+    sight = visibility.see(frame, source, coarse)
     levels = level_plan.presplit(frame, source, coarse, sight)
     if levels is not None:  # a first split next to the axis; the stages run again on the smaller triangles
         source = _split(frame, source, levels)
         coarse = map_source(frame, source)
-        sight = visibility.see(frame, source)
+        sight = visibility.see(frame, source, coarse)
     patches = axis_patch.build_patches(frame, source, sight)
     probes = level_plan.probe_edges(frame, source, coarse)
     out = {}

@@ -23,12 +23,10 @@ from .frame import Frame, Source
 class Sight:
     """What can be seen of one source in one frame (see the module docstring)."""
 
-    def __init__(self, frame: Frame, source: Source):
-        self.frame, self.source = frame, source
+    def __init__(self, frame: Frame, source: Source, coarse):
+        self.frame, self.source, self.coarse = frame, source, coarse
         self._closed = None
-        n = len(source.positions)
-        self._known = np.zeros(n, bool)
-        self._d = {o: np.full((n, 3), np.nan) for o in frame.orders}
+        self._d = {}
 
     def closed(self) -> bool:
         """True for a closed, outward-wound surface seen from outside (computed once)."""
@@ -40,14 +38,14 @@ class Sight:
 
     def leaving(self, vertices, order) -> np.ndarray:
         """(len(vertices), 3) the unit directions in which light leaves the source vertices ``vertices``
-        towards the camera along ``order``'s rays (mapping.Mapper.leaving; looked up for all the
-        frame's orders at once, the first time a vertex is asked for)."""
-        new = vertices[~self._known[vertices]]
-        if new.size:
-            new = np.unique(new)
-            for o, (d, _) in self.frame.map.leaving(self.source.positions.take(new, axis=0), self.frame.orders).items():
-                self._d[o][new] = d
-            self._known[new] = True
+        towards the camera along ``order``'s rays (mapping.leaving_direction of the rays' tangents the
+        map stage looked up with the vertices' images)."""
+        if order not in self._d:
+            img = self.coarse.images[order]
+            if img.ux is None:  # mapped without tangents (no screen-space budget): look them up now
+                self._d[order] = self.frame.map.leaving(self.source.positions, (order,))[order][0]
+            else:
+                self._d[order] = mapping.leaving_direction(self.source.plane, self.frame.scene, img.ux, img.uy)
         return self._d[order].take(vertices, axis=0)
 
     def turned_away(self, tri_idx, orders) -> np.ndarray:
@@ -137,9 +135,10 @@ class Sight:
         return np.flatnonzero(inside), out_v
 
 
-def see(frame: Frame, source: Source) -> Sight:
-    """The :class:`Sight` of ``source`` in ``frame``."""
-    return Sight(frame, source)
+def see(frame: Frame, source: Source, coarse) -> Sight:
+    """The :class:`Sight` of ``source`` in ``frame``; ``coarse``: the map stage's images of its vertices
+    (frame.SourceImages)."""
+    return Sight(frame, source, coarse)
 
 
 def _below_pixel(img_v: mapping.Images, img_m: mapping.Images, pixel_angle) -> bool:
