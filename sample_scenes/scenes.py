@@ -434,7 +434,7 @@ def accretion_disc(scene, inclination=None, external=False):
     (20, -36, 0), (10, -40, 4) or (0, -40, 4) BU, with scene.grlens.observer = the observer camera:
     the image meshes are seen from outside, each vertex at its light-travel-time distance c dt from
     the observer; a black sphere inscribed in the observer's shadow cone marks the hole, against a dark blue
-    background."""
+    background (not lensed: scene.grlens.lens_world is off, since a lensed world is the observer's view)."""
     r_s = DISC_R_S
     hole = _hole(scene, r_s)
     observer = _camera(scene, "Observer", DISC_OBSERVER, (0.0, 0.0, 0.0), angle_y_deg=50.0)
@@ -453,8 +453,11 @@ def accretion_disc(scene, inclination=None, external=False):
     else:
         disc.rotation_euler = (0.0, math.radians(inclination), 0.0)
         scene.frame_start, scene.frame_end = 1, 1
+    # lens_world off for the external views: grlens lenses the world as the observer sees it, whatever
+    # camera renders, so the external camera would see the observer's shadow cone as a black patch in
+    # its background (and the uniform background needs no lensing)
     _lens(scene, hole, r_s, [disc], max_tess_level=64, tess_a=5.0, tess_b=0.75, observer=observer,
-          use_gr_illumination=True, light=lamp, light_intensity=1600.0)
+          use_gr_illumination=True, light=lamp, light_intensity=1600.0, lens_world=not external)
     # the first rebuild with GR illumination creates the "grlens GR Illumination" node group, which
     # the disc's materials then use
     bpy.ops.grlens.rebuild()
@@ -796,8 +799,8 @@ def flyin(scene):
     * grlens' default tables for every camera distance (lut_mode EVERY_DISTANCE, from 1.05 r_s to
       infinity, lutgen.LUTFamily): an exact table is built once for each of the family's fixed node
       radii the camera comes near (a second or two each), and every frame interpolates four of them.
-    * A dark blue-black world (not lensed: it also fills the shadow); the Standard view transform, so
-      that the emission colours show as they are.
+    * A dark blue-black world, lensed (scene.grlens.lens_world, on by default: black in the shadow);
+      the Standard view transform, so that the emission colours show as they are.
 
     The camera is placed at frame 1; the images are built by the first frame change (render.py)."""
     r_s = FLYIN_R_S

@@ -292,6 +292,9 @@ def test_disc_external_views(renders, name):
     img = imgs[min(imgs)]
     assert red(img).mean() > 0.03  # the image meshes
     assert (img.max(axis=2) < 8).sum() > 5  # the black shadow sphere against the dark blue background
+    # ... and nothing else black: the world is not lensed for the external camera (a world lensed as the
+    # observer sees it showed the observer's shadow cone as a black patch on the left)
+    assert img[:, : img.shape[1] // 5].max(axis=2).min() > 20
     if name == "disc_30_external":
         seq = renders.get("disc_external")[2][61]
         assert np.abs(seq.astype(float) - img.astype(float)).mean() < 2.0
