@@ -17,6 +17,8 @@ against the reference ray tracer, the coverage mismatch and the screen error p99
   p99 and max, and the share of pieces beyond the tolerance, split into pieces of magnified
   (Einstein-ring) triangles and the others.
 
+* ``--base REV --pareto``: bench_accuracy's Pareto sweep of the triangle scene with both cores.
+
 Usage: ./dev python benchmarks/bench_budget.py --base 2acf9ba [--step 10] [--rounds 5] [--ref-cache DIR]
        ./dev python benchmarks/bench_budget.py --rules [--ref-cache DIR]
        ./dev python benchmarks/bench_budget.py --errors [--step 15]
@@ -222,6 +224,21 @@ def sagitta_px(d_a, d_b, d_mid, pixel_angle):
         return np.arcsin(np.clip(np.abs(np.einsum("ij,ij->i", d_mid, n)), 0.0, 1.0)) / pixel_angle
 
 
+def compare_pareto(rev, width, height, repeat):
+    """bench_accuracy's Pareto sweep of the triangle scene (seed 000's triangle behind the hole at five
+    positions; every setting of the sweep) with REV's core and with this checkout's."""
+    base = base_core(rev)
+    for name, mod in (("base " + rev, base), ("this checkout", pipeline)):
+        BA.pipeline = mod
+        try:
+            emit(f"\nTriangle scene, {name}:\n")
+            lines, _ = BA.triangle_pareto(width, height, repeat)
+        finally:
+            BA.pipeline = pipeline
+        for line in lines:
+            emit(line)
+
+
 def piece_errors(angles, cam, table):
     """What the budget gives: the measured edge error of the kept pieces per angle."""
     scene = mapping.Scene(cam.position, np.zeros(3), BA.R_S)
@@ -274,6 +291,7 @@ def main(argv=None):
     ap.add_argument("--rules", action="store_true", help="each rule of the budget with and without it")
     ap.add_argument("--only", default=None, help="with --rules: only rules whose name contains this")
     ap.add_argument("--errors", action="store_true", help="the kept pieces' measured edge errors")
+    ap.add_argument("--pareto", action="store_true", help="with --base: the triangle scene's Pareto sweep of both")
     ap.add_argument("--angles", default=None, help="orbit angles (deg), comma-separated (default: every --step)")
     ap.add_argument("--step", type=float, default=10.0)
     ap.add_argument("--rounds", type=int, default=5)
@@ -294,7 +312,9 @@ def main(argv=None):
     emit(f"`./dev python benchmarks/bench_budget.py {' '.join(argv if argv is not None else sys.argv[1:])}` "
          f"({platform.machine()}, {os.cpu_count()} CPUs; {code_version()}; {w}x{h}, {args.rounds} rounds; load "
          f"average {load0:.1f} at the start)\n")
-    if args.base:
+    if args.base and args.pareto:
+        compare_pareto(args.base, w, h, max(1, args.rounds // 2))
+    elif args.base:
         compare_revisions(args.base, angles, args.rounds, cam, table, accuracy=not args.no_accuracy)
     if args.rules:
         compare_rules(args.rounds, cam, table, args.only)
