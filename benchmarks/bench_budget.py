@@ -48,7 +48,7 @@ import bench_accuracy as BA  # noqa: E402
 from bench_frame import uv_sphere  # noqa: E402
 from provenance import code_version  # noqa: E402
 from grlens_addon.core import (axis_patch, budget, culling, frame, level_plan, mapping, pipeline,  # noqa: E402
-                               rasterize, subdivision, visibility)
+                               rasterize, raytrace, subdivision, visibility)
 from lutgen import LUTFamily  # noqa: E402
 
 
@@ -239,21 +239,36 @@ def compare_pareto(rev, width, height, repeat):
             emit(line)
 
 
+def _floors():
+    """(label, source mesh, camera) of two floors seen at grazing angles: a floor 2 r_s below the hole
+    from 30 r_s in front of it to 150 r_s behind (tests/test_stages.py's, 320x180), and bench_tables'
+    floor reaching 1e4 r_s behind the hole (640x360, bench_tables' camera for it)."""
+    sys.path.insert(0, os.path.join(ROOT, "tests"))
+    import bench_tables as BT
+    from meshes import grid
+
+    make, target, fov = BT.IMAGE_SCENES[next(k for k in BT.IMAGE_SCENES if "1e4" in k)]
+    far_cam = raytrace.Camera.look_at([BA.R_OBS, 0.0, 0.0], target, math.radians(fov), 640, 360)
+    return [("floor to 150 r_s", grid(-150, 30, -60, 60, 30, 20, "z", -2.0), BA.camera(320, 180)),
+            ("floor to 1e4 r_s", make(), far_cam)]
+
+
 def piece_errors(angles, cam, table):
-    """What the budget gives: the measured edge error of the kept pieces per angle."""
-    scene = mapping.Scene(cam.position, np.zeros(3), BA.R_S)
-    settings = BA.make_settings(cam)
-    tol = settings.max_error_px
+    """What the budget gives: the measured sagitta of the kept pieces per orbit angle, and on two floors
+    seen at grazing angles."""
+    tol = BA.make_settings(cam).max_error_px
     emit(f"Tolerance {tol} px. Per kept piece the largest sagitta of its three edges: how far the exact image "
          "of the edge's source midpoint lies off the straight edge on screen (sagitta_px). Plain: pieces of "
          "triangles the lensing magnifies less than budget.RING_MAGNIFICATION; magnified: the others (next "
          "to the Einstein ring). Beyond: the share of pieces whose sagitta exceeds the tolerance.\n")
-    emit("| angle [deg] | order | pieces (plain / magnified) | plain: p99 / max [px] / beyond | "
-          "magnified: p99 / max [px] / beyond |")
+    emit("| scene | order | pieces (plain / magnified) | plain: p99 / max [px] / beyond | "
+         "magnified: p99 / max [px] / beyond |")
     emit("|---|---|---|---|---|")
-    for a in angles:
-        src = BA.sphere_scene(a)[0]
-        fr = frame.frame_context(scene, table, settings, None, cam.frustum_planes())
+    scenes = [(f"sphere at {a:g} deg", BA.sphere_scene(a)[0], cam) for a in angles] + _floors()
+    for label, src, c in scenes:
+        scene = mapping.Scene(c.position, np.zeros(3), BA.R_S)
+        settings = BA.make_settings(c)
+        fr = frame.frame_context(scene, table, settings, None, c.frustum_planes())
         source = frame.prepare_source(fr, src)
         coarse = frame.map_source(fr, source)
         sight = visibility.see(fr, source, coarse)
@@ -282,7 +297,7 @@ def piece_errors(angles, cam, table):
                 e = err[sel]
                 cells.append("-" if not len(e) else
                              f"{np.percentile(e, 99):.3f} / {e.max():.3f} / {100 * (e > tol).mean():.1f}%")
-            emit(f"| {a:g} | {order} | {int((~mag).sum())} / {int(mag.sum())} | {cells[0]} | {cells[1]} |")
+            emit(f"| {label} | {order} | {int((~mag).sum())} / {int(mag.sum())} | {cells[0]} | {cells[1]} |")
 
 
 def main(argv=None):

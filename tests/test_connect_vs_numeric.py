@@ -46,7 +46,7 @@ def check(cases):
 
 
 def test_random_cases():
-    check(random_cases(60, seed=11))
+    check(random_cases(20, seed=11))  # test_many_random_cases (slow): 1500
 
 
 @pytest.mark.slow

@@ -124,7 +124,13 @@ def test_list_names_every_scene_with_defaults():
     assert names == SCENE_NAMES == sorted(TEST_RENDERS)
 
 
-@pytest.mark.parametrize("name", SCENE_NAMES)
+SLOW_RENDERS = ("disc_90_external", "disc_10_external")
+"""Scenes whose render repeats another's code path (disc_30_external and disc_external show the
+external camera): rendered only with -m slow, to keep the default suite short."""
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW_RENDERS else n
+                                  for n in SCENE_NAMES])
 def test_every_scene_renders(renders, name):
     out_dir, stdout, imgs = renders.get(name)
     frames = TEST_RENDERS[name][1].split(",")
@@ -286,7 +292,8 @@ def test_disc_gr_illumination_and_light_travel_time_geometry(stats):
     assert ext["images"]["Disc.GR1"]["n_tris"] == one["n_tris"]  # same meshes, whatever camera renders
 
 
-@pytest.mark.parametrize("name", ["disc_90_external", "disc_30_external", "disc_10_external"])
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW_RENDERS else n
+                                  for n in ("disc_90_external", "disc_30_external", "disc_10_external")])
 def test_disc_external_views(renders, name):
     _, _, imgs = renders.get(name)
     img = imgs[min(imgs)]
