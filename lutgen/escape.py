@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import orbit as _orb
+from .solver import static_observer_radius
 
 S_MAX = 24.0
 """Largest table coordinate s: xi_lim - xi = xi_lim e^-24 ~ 1e-10 xi_lim, below the float32
@@ -52,15 +53,7 @@ def check_escape_radius(r_obs) -> float:
     """Validate an observer radius (units of r_s) for escape directions; returns it as float.
     Raises ValueError for NaN/inf and for observers on or inside the horizon (no static observer
     exists there). Observers inside the photon sphere (1 < r_obs <= 1.5) are allowed."""
-    try:
-        r = float(r_obs)
-    except (TypeError, ValueError):
-        raise ValueError(f"r_obs must be a number (units of r_s), got {r_obs!r}") from None
-    if not np.isfinite(r):
-        raise ValueError(f"r_obs must be finite, got {r}")
-    if r <= 1.0:
-        raise ValueError(f"the observer at r = {r:.6g} r_s is inside the event horizon (r must be > 1 r_s)")
-    return r
+    return static_observer_radius(r_obs)
 
 
 def escape_limit(r_obs) -> float:

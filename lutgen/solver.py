@@ -64,12 +64,10 @@ def shadow_half_angle(r_obs) -> np.ndarray:
     return np.arcsin(np.sqrt(np.clip(s2, 0.0, 1.0)))
 
 
-def check_observer_radius(r_obs: float) -> float:
-    """Validate a static observer radius (units of r_s) and return it as float.
-
-    Raises ValueError for NaN/inf, for observers inside the horizon (no static observer exists there)
-    and for observers inside the photon sphere (r_obs <= 1.5, not supported: the ray families differ).
-    """
+def static_observer_radius(r_obs, need: str = "> 1 r_s") -> float:
+    """A static observer's radius (units of r_s) as float; ValueError for what is not a finite number
+    and for observers on or inside the horizon (no static observer exists there). ``need``: what the
+    caller requires, for the message."""
     try:
         r = float(r_obs)
     except (TypeError, ValueError):
@@ -77,7 +75,17 @@ def check_observer_radius(r_obs: float) -> float:
     if not np.isfinite(r):
         raise ValueError(f"r_obs must be finite, got {r}")
     if r <= 1.0:
-        raise ValueError(f"observer at r_obs = {r} r_s is inside the event horizon (r_obs must be > 1.5 r_s)")
+        raise ValueError(f"observer at r_obs = {r:.6g} r_s is inside the event horizon (r_obs must be {need})")
+    return r
+
+
+def check_observer_radius(r_obs: float) -> float:
+    """Validate a static observer radius (units of r_s) and return it as float.
+
+    Raises ValueError for NaN/inf, for observers inside the horizon (no static observer exists there)
+    and for observers inside the photon sphere (r_obs <= 1.5, not supported: the ray families differ).
+    """
+    r = static_observer_radius(r_obs, "> 1.5 r_s")
     if r <= 1.5:
         raise ValueError(
             f"observer at r_obs = {r} r_s is inside the photon sphere; only r_obs > 1.5 r_s is supported")
