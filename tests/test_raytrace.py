@@ -515,7 +515,7 @@ def test_second_order_ring_edge_next_to_a_patch(lut, angle):
     assert image_metrics.compare(ref, render())["orders"]["all"]["mismatch_frac"] < 0.002
 
 
-@pytest.mark.parametrize("angle", [170.5, 172.0])
+@pytest.mark.parametrize("angle", [170.5, pytest.param(172.0, marks=pytest.mark.slow)])
 def test_patches_next_to_the_limb(lut, angle):
     """The sphere with the axis next to its limb, at 640x360: the patches, clipped to the source
     triangles under them (budget.CLIP_TO_TRIANGLES), draw their sheets up to the fold: under 0.35% of
@@ -570,7 +570,7 @@ def test_equatorial_disc():
     assert np.array_equal(lifted.order[same], buf.order[same])
 
 
-@pytest.mark.parametrize("angle", [4, 356])
+@pytest.mark.parametrize("angle", [4, pytest.param(356, marks=pytest.mark.slow)])  # 356: the mirror image
 def test_second_order_ring_edge_crosses_the_ring(lut, angle):
     """The sphere grazing the axis in front of the hole, at the benchmark's 640x360: the second-order
     ring is under a pixel wide, and its edge at the Einstein radius is the patch's polygon. With its
