@@ -313,7 +313,16 @@ def test_blender_panoramic_cameras_become_reference_cameras():
             data.panorama_type = other
             with pytest.raises(ValueError, match="equirectangular and fisheye equidistant, not " + other.replace("_", " ").lower()):
                 check.check_camera(scene, obj, 50)
+        # the panel says that only Cycles renders panoramas
+        from grlens_addon.blender import panels
+
+        scene.camera = obj
+        scene.render.engine = "CYCLES"
+        assert panels.panorama_note(scene) == ""
+        scene.render.engine = "BLENDER_WORKBENCH"
+        assert "only Cycles" in panels.panorama_note(scene)
         data.type = "ORTHO"
+        assert panels.panorama_note(scene) == ""
         with pytest.raises(ValueError, match="perspective or panoramic"):
             check.check_camera(scene, obj, 50)
     finally:

@@ -4,6 +4,17 @@ import bpy
 from .gather import can_lens
 
 
+def panorama_note(scene) -> str:
+    """A note for the panel when the observer camera is a panorama the render engine cannot draw:
+    Cycles renders equirectangular and fisheye panoramas; Eevee and Workbench have no panoramic
+    camera (they draw such a camera as a perspective one). Empty otherwise."""
+    g = getattr(scene, "grlens", None)  # (None when the add-on's properties are not registered)
+    cam = (g.observer if g is not None else None) or scene.camera
+    if cam is None or cam.type != "CAMERA" or cam.data.type != "PANO" or scene.render.engine == "CYCLES":
+        return ""
+    return "Panoramic camera: only Cycles renders panoramas"
+
+
 class VIEW3D_PT_grlens(bpy.types.Panel):
     bl_label = "grlens"
     bl_space_type = "VIEW_3D"
@@ -17,6 +28,9 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         col.prop(g, "black_hole")
         col.prop(g, "r_s")
         col.prop(g, "observer")
+        note = panorama_note(context.scene)
+        if note:
+            col.label(text=note, icon="INFO")
         obj = context.object
         if obj is not None and obj.grlens.order == 0 and (can_lens(obj) or obj.grlens.enabled):
             col.prop(obj.grlens, "enabled", text=f"Lens '{obj.name}'")
