@@ -47,8 +47,7 @@ sys.path.insert(0, HERE)
 import bench_accuracy as BA  # noqa: E402
 from bench_frame import uv_sphere  # noqa: E402
 from provenance import code_version  # noqa: E402
-from grlens_addon.core import (axis_patch, budget, culling, frame, level_plan, mapping, pipeline,  # noqa: E402
-                               rasterize, raytrace, subdivision, visibility)
+from grlens_addon.core import budget, frame, mapping, pipeline, rasterize, raytrace  # noqa: E402
 from lutgen import LUTFamily  # noqa: E402
 
 
@@ -269,22 +268,12 @@ def piece_errors(angles, cam, table):
         scene = mapping.Scene(c.position, np.zeros(3), BA.R_S)
         settings = BA.make_settings(c)
         fr = frame.frame_context(scene, table, settings, None, c.frustum_planes())
-        source = frame.prepare_source(fr, src)
-        coarse = frame.map_source(fr, source)
-        sight = visibility.see(fr, source, coarse)
-        levels = level_plan.presplit(fr, source, coarse, sight)
-        if levels is not None:
-            source = pipeline._split(fr, source, levels)
-            coarse = frame.map_source(fr, source)
-            sight = visibility.see(fr, source, coarse)
-        patches = axis_patch.build_patches(fr, source, sight)
-        probes = level_plan.probe_edges(fr, source, coarse)
-        for order in fr.orders:
-            plan = level_plan.plan_levels(fr, source, coarse, sight, patches, probes, order)
-            if plan.below_pixel:
+        st = pipeline.run_stages(fr, src)
+        source, coarse = st.source, st.coarse
+        for order, s in st.orders.items():
+            if s.pieces is None:
                 continue
-            pieces = subdivision.cut(fr, source, plan, coarse.images[order])
-            keep, _, _ = culling.cull_pieces(fr, source, coarse, plan, pieces, patches, order)
+            pieces, keep = s.pieces, s.keep
             sub, img, fs = pieces.sub, pieces.images, pieces.face_src
             mag = (coarse.circumference[order][fs] > budget.RING_MAGNIFICATION * source.circumference[fs])[keep]
             t = sub.tris[keep]

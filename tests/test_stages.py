@@ -6,15 +6,13 @@ absence are benchmarks (benchmarks/bench_budget.py), not tests."""
 import math
 import sys
 import os
-import warnings
 
 import numpy as np
 import pytest
 
-from grlens_addon.core import (assemble, axis_patch, budget, culling, frame, level_plan, mapping, pipeline,
-                               subdivision, visibility)
-from lutgen import LUTFamily, build_lut, connect
-from meshes import grid, uv_sphere
+from grlens_addon.core import assemble, axis_patch, budget, culling, frame, mapping, pipeline, subdivision
+from lutgen import LUTFamily, connect
+from meshes import grid
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "benchmarks"))
 import bench_accuracy as BA  # noqa: E402
@@ -48,24 +46,17 @@ SCENES = {
 
 
 def _run(table, src, settings=None, planes="camera"):
-    """Every stage as build_images runs them (without the first split): per order a dict of the
-    stage outputs."""
+    """Every stage as build_images runs them (pipeline.run_stages, then the assembly): per order a
+    dict of the stage outputs."""
     settings = settings or BA.make_settings(CAM)
     fr = frame.frame_context(SCENE, table, settings, None, CAM.frustum_planes() if planes == "camera" else planes)
-    source = frame.prepare_source(fr, src)
-    coarse = frame.map_source(fr, source)
-    sight = visibility.see(fr, source, coarse)
-    patches = axis_patch.build_patches(fr, source, sight)
-    probes = level_plan.probe_edges(fr, source, coarse)
+    st = pipeline.run_stages(fr, src)
     out = {}
-    for order in fr.orders:
-        plan = level_plan.plan_levels(fr, source, coarse, sight, patches, probes, order)
-        pieces = None if plan.below_pixel else subdivision.cut(fr, source, plan, coarse.images[order])
-        keep, patch_keep, report = culling.cull_pieces(fr, source, coarse, plan, pieces, patches, order)
-        image = assemble.assemble(fr, source, pieces, keep, patches, patch_keep, report, order)
-        out[order] = dict(frame=fr, source=source, coarse=coarse, plan=plan, pieces=pieces, keep=keep,
-                          patches=[p for p in patches if order in p.orders], patch_keep=patch_keep,
-                          report=report, image=image, probes=probes)
+    for order, s in st.orders.items():
+        image = assemble.assemble(fr, st.source, s.pieces, s.keep, st.patches, s.patch_keep, s.report, order)
+        out[order] = dict(frame=fr, source=st.source, coarse=st.coarse, plan=s.plan, pieces=s.pieces, keep=s.keep,
+                          patches=[p for p in st.patches if order in p.orders], patch_keep=s.patch_keep,
+                          report=s.report, image=image, probes=st.probes)
     return out
 
 

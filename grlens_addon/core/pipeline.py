@@ -23,6 +23,10 @@ Units: positions in Blender units (BU); light travel time as a length c*dt in BU
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
+import numpy as np
+
 from . import axis_patch, culling, level_plan, subdivision, visibility
 from .assemble import ImageMesh, assemble, empty_image
 from .frame import (DiscEmitter, Light, Settings, SourceMesh, Source, clean_source, frame_context,  # noqa: F401
@@ -46,9 +50,45 @@ def build_images(src: SourceMesh, scene: Scene, lut, settings: Settings, light: 
     if it is a second-order image (reported as ``below_pixel``); first-order images are always built,
     so small objects stay visible. ``light``: GR illumination; ``disc``: the source is a thin disc."""
     frame = frame_context(scene, lut, settings, light, frustum_planes)
+    st = run_stages(frame, src)
+    if st.source.empty:
+        return {o: empty_image(o, _report_of_nothing(st.source)) for o in frame.orders}
+    return {o: assemble(frame, st.source, s.pieces, s.keep, st.patches, s.patch_keep, s.report, o, disc)
+            for o, s in st.orders.items()}
+
+
+@dataclass
+class OrderStages:
+    """One order's stage outputs: the level plan, the pieces (None below a pixel), the culling's keep
+    mask (None below a pixel), its patch-face masks and its report."""
+
+    plan: level_plan.LevelPlan
+    pieces: subdivision.Pieces | None
+    keep: np.ndarray | None
+    patch_keep: list
+    report: culling.CullReport
+
+
+@dataclass
+class Stages:
+    """The outputs of the stages before assembly for one source in one frame: the prepared source
+    (after the first split, if any), the map stage's images of its vertices, its visibility, its
+    axis patches, the probed edge midpoints and {order: OrderStages} (empty for an empty source)."""
+
+    source: Source
+    coarse: object = None
+    sight: object = None
+    patches: list = field(default_factory=list)
+    probes: object = None
+    orders: dict = field(default_factory=dict)
+
+
+def run_stages(frame, src: SourceMesh) -> Stages:
+    """The method's stages for ``src`` in ``frame``, in order, up to the culling (build_images then
+    assembles the images; tests and benchmarks read the stages' outputs)."""
     source = prepare_source(frame, src)
     if source.empty:
-        return {o: empty_image(o, _report_of_nothing(source)) for o in frame.orders}
+        return Stages(source)
     coarse = map_source(frame, source)
     sight = visibility.see(frame, source, coarse)
     levels = level_plan.presplit(frame, source, coarse, sight)
@@ -58,13 +98,13 @@ def build_images(src: SourceMesh, scene: Scene, lut, settings: Settings, light: 
         sight = visibility.see(frame, source, coarse)
     patches = axis_patch.build_patches(frame, source, sight)
     probes = level_plan.probe_edges(frame, source, coarse)
-    out = {}
+    st = Stages(source, coarse, sight, patches, probes)
     for order in frame.orders:
         plan = level_plan.plan_levels(frame, source, coarse, sight, patches, probes, order)
         pieces = None if plan.below_pixel else subdivision.cut(frame, source, plan, coarse.images[order])
         keep, patch_keep, report = culling.cull_pieces(frame, source, coarse, plan, pieces, patches, order)
-        out[order] = assemble(frame, source, pieces, keep, patches, patch_keep, report, order, disc)
-    return out
+        st.orders[order] = OrderStages(plan, pieces, keep, patch_keep, report)
+    return st
 
 
 def _split(frame, source: Source, levels) -> Source:
