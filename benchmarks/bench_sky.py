@@ -10,7 +10,10 @@ Prints
 * the Cycles render time of one scene with and without the lensed world, alternated in one process
   (CPU, 320x180, 16 samples, a diffuse sphere lit by a procedural world), best of 3 each: with the
   world's importance sampling map at its default resolution (1024), at 256, and off (so the
-  per-sample cost of the world shader is seen apart from the map's bake, a fixed cost per frame).
+  per-sample cost of the world shader is seen apart from the map's bake, a fixed cost per frame);
+* the same for the sample scenes ``starfield`` (normal view) and ``starfield_panorama`` at their
+  own settings (resolution, 16 samples, no importance map), frame 1: a lensed disc and sphere in
+  front of a procedural star field, the render a user of the sample gets.
 
 Units: milliseconds and seconds as printed; the scene in Blender units with r_s = 2 BU.
 """
@@ -127,6 +130,31 @@ def render_times(repeats=3, method="AUTOMATIC", map_resolution=1024):
     return times
 
 
+def sample_scene_times(name, repeats=3):
+    from sample_scenes.scenes import DEFAULTS, SCENES
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    SCENES[name](scene)
+    d = DEFAULTS[name]
+    r = scene.render
+    r.engine = "CYCLES"
+    r.resolution_x, r.resolution_y = d["resolution"]
+    r.resolution_percentage = 100
+    scene.cycles.samples = d["samples"]
+    scene.cycles.use_denoising = False
+    scene.cycles.device = "CPU"
+    times = {True: [], False: []}
+    for k in range(repeats + 1):  # the first round warms up (kernel, shader compile): not counted
+        for on in (False, True):
+            scene.grlens.lens_world = on
+            t0 = time.perf_counter()
+            bpy.ops.render.render(write_still=False)
+            if k:
+                times[on].append(time.perf_counter() - t0)
+    return times, d
+
+
 def main():
     grlens_addon.register()
     t = []
@@ -148,6 +176,11 @@ def main():
         a, b = min(rt[False]), min(rt[True])
         print(f"Cycles 320x180, 16 samples, CPU, {what}: without lensed world {a:.2f} s, with {b:.2f} s "
               f"(best of 3, alternated): ratio {b / a:.2f}")
+    for name in ("starfield", "starfield_panorama"):
+        rt, d = sample_scene_times(name)
+        a, b = min(rt[False]), min(rt[True])
+        print(f"Cycles sample scene {name}, {d['resolution'][0]}x{d['resolution'][1]}, {d['samples']} samples, CPU: "
+              f"without lensed world {a:.2f} s, with {b:.2f} s (best of 3, alternated): ratio {b / a:.2f}")
     print(f"bpy {bpy.app.version_string}, {os.cpu_count()} CPUs")
 
 

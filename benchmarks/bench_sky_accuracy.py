@@ -1,8 +1,9 @@
 """Accuracy of the lensed world against the reference ray tracer's exact escape directions (issue 21).
 
-The sky model is what the world's node group computes per shading sample: xi from the ray direction
-and e1, the 1-D table of lutgen.escape (EscapeTable.lookup, linear in s as the shader interpolates),
-the escape direction cos(phi_inf) e1 + sin(phi_inf) e2; NaN (black) where the ray falls in. The
+The sky model is what the world's node group computes per shading sample
+(frame_check.lensed_world_sky: xi from the ray direction and e1, the 1-D table of lutgen.escape,
+linear in s as the shader interpolates, the escape direction cos(phi_inf) e1 + sin(phi_inf) e2; NaN
+(black) where the ray falls in). The
 reference is grlens_addon.core.raytrace's own closed-form curve (PixelBuffers.sky). Compared by
 frame_check.check_frame(sky=...) / image_metrics.compare_sky: the sky's angular error in pixels,
 the shadow (pixels where exactly one says the ray falls in) and the edges of a checkered world (10
@@ -29,31 +30,6 @@ sys.path.insert(0, HERE)
 import bench_accuracy as BA  # noqa: E402
 from grlens_addon.core import frame_check, mapping, pipeline, raytrace  # noqa: E402
 from lutgen import LUTFamily  # noqa: E402
-from lutgen.escape import escape_table  # noqa: E402
-
-
-def sky_model(hole, r_s):
-    """The node group's mapping as a function (directions (N, 3), camera position (3,)) -> (N, 3)."""
-    tables = {}
-
-    def sky(d, cam):
-        e1 = np.asarray(cam, float) - hole
-        r_obs = float(np.linalg.norm(e1)) / r_s
-        e1 /= np.linalg.norm(e1)
-        key = round(r_obs, 7)
-        if key not in tables:
-            tables[key] = escape_table(key)
-        along = d @ e1
-        perp = d - along[:, None] * e1
-        n_perp = np.linalg.norm(perp, axis=1)
-        xi = np.arctan2(n_perp, along)
-        phi = tables[key].lookup(xi)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            e2 = perp / n_perp[:, None]
-        e2[n_perp == 0] = 0.0
-        return np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2  # NaN rows where phi is NaN
-
-    return sky
 
 
 def main():
@@ -76,7 +52,7 @@ def main():
     print("|---|---|---|---|---|---|")
     for name, cam in cameras.items():
         t0 = time.perf_counter()
-        check = frame_check.check_frame([src], scene, table, settings, cam, sky=sky_model(hole, BA.R_S))
+        check = frame_check.check_frame([src], scene, table, settings, cam, sky=frame_check.lensed_world_sky(hole, BA.R_S))
         m = check.metrics["sky"]
         a = m["sky_angle_px"]
         print(f"| {name} | {a['p50']:.2g} / {a['p99']:.2g} / {a['max']:.2g} | {m['shadow_mismatch']} "

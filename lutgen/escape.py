@@ -166,6 +166,22 @@ class EscapeTable:
             res = xi + np.interp(j, np.arange(self.size), self.deflection)
             return np.where((xi >= 0.0) & (xi < self.xi_lim), res, np.nan)
 
+    def directions(self, d, e1) -> np.ndarray:
+        """Escape directions (N, 3) of rays leaving the observer in the directions ``d`` ((N, 3),
+        unit) for the outward radial unit vector ``e1`` (3,) (hole -> observer): cos(phi_inf) e1 +
+        sin(phi_inf) e2, e2 = unit(d - (d.e1) e1), phi_inf from :meth:`lookup` (the lensed world's
+        shader, in float64); NaN rows where the ray falls in. A ray along e1 keeps its direction."""
+        d = np.asarray(d, dtype=float).reshape(-1, 3)
+        e1 = np.asarray(e1, dtype=float)
+        along = d @ e1
+        perp = d - along[:, None] * e1
+        n_perp = np.linalg.norm(perp, axis=1)
+        phi = self.lookup(np.arctan2(n_perp, along))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            e2 = perp / n_perp[:, None]
+        e2[n_perp == 0] = 0.0
+        return np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
+
 
 def escape_table(r_obs, size: int = TABLE_SIZE, s_max: float = S_MAX) -> EscapeTable:
     """The escape-angle table of an observer at r_obs (units of r_s, > 1): ``size`` nodes uniform in

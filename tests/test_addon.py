@@ -680,6 +680,54 @@ def test_check_frame_against_ray_tracing(tmp_path):
     assert scene.grlens.check_summary.startswith("frame 7, 80x45: ") and "passes in" not in scene.grlens.check_summary
 
 
+def test_check_frame_checks_the_lensed_world(tmp_path):
+    """With a lensed world, check_frame also compares the world's mapping (its escape table) with the
+    reference's exact escape directions: sky metrics in the summary and the EXR; without lensing, no
+    sky check."""
+    from lutgen.exr_io import read_exr
+
+    scene, sphere = _small_demo()
+    _place(sphere, 90)
+    w = bpy.data.worlds.new("Sky")
+    if bpy.app.version < (5, 0, 0):
+        w.use_nodes = True
+    w.node_tree.nodes.new("ShaderNodeTexNoise")  # a direction texture, hooked to the lensed sky
+    scene.world = w
+    scene.frame_set(1)
+    out = str(tmp_path / "check_#.exr")
+    assert bpy.ops.grlens.check_frame(percentage=100, filepath=out) == {"FINISHED"}
+    assert "sky off by" in scene.grlens.check_summary
+    channels, meta = read_exr(tmp_path / "check_1.exr")
+    ref, got = channels["Reference.sky_direction.X"], channels["grlens.sky_direction.X"]
+    assert np.array_equal(np.isnan(ref), np.isnan(channels["Check.sky_error.V"]))
+    assert np.isfinite(ref).sum() > 1000 and np.isnan(ref).sum() > 20  # sky and shadow (and the sphere)
+    assert meta["sky_error_max_px"] < 0.05 and meta["shadow_mismatch_pixels"] == 0
+    assert np.all(np.isfinite(got[np.isfinite(ref)]))
+    scene.grlens.lens_world = False
+    assert bpy.ops.grlens.check_frame(percentage=50, filepath="") == {"FINISHED"}
+    assert "sky off by" not in scene.grlens.check_summary
+
+
+def test_timeline_markers_switch_the_observer_camera():
+    """Camera cuts by timeline markers: each frame's images are built for the camera the marker binds
+    to that frame, also from a script's frame_set (which switches scene.camera only after the frame
+    handlers); an explicit scene.grlens.observer wins over the markers."""
+    scene, sphere = _small_demo()
+    near = scene.camera
+    far = bpy.data.objects.new("FarCamera", near.data.copy())
+    far.matrix_world = near.matrix_world
+    far.location = (30 * 2.0, 0.0, 0.0)  # 30 r_s (r_s = 2 BU); the demo's camera is at 20 r_s
+    scene.collection.objects.link(far)
+    scene.timeline_markers.new("far", frame=3).camera = far
+    scene.timeline_markers.new("near", frame=6).camera = near
+    for f, r_obs in ((4, "30"), (7, "20"), (2, "30"), (8, "20")):  # before the first marker: its camera
+        scene.frame_set(f)
+        assert f"r_obs = {r_obs} r_s" in scene.grlens.status, (f, scene.grlens.status)
+    scene.grlens.observer = near
+    scene.frame_set(4)
+    assert "r_obs = 20 r_s" in scene.grlens.status
+
+
 def test_check_frame_refuses_what_it_cannot_check():
     from grlens_addon.blender import check
 

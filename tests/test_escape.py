@@ -148,6 +148,34 @@ def test_table_lookup_is_well_under_a_pixel(r_obs):
     assert np.isnan(t.lookup(t.xi_lim)) and np.isnan(t.lookup(t.xi_lim + 0.1))
 
 
+def test_table_directions_rotate_each_ray_in_its_own_plane():
+    """EscapeTable.directions: for rays in any direction around an arbitrary e1, the direction at
+    infinity is unit, lies in the plane of e1 and the ray, at the angle escape_angle from e1 on the
+    ray's side (within the table's error); rays that fall in give NaN rows; a ray along e1 keeps its
+    direction."""
+    rng = np.random.default_rng(3)
+    e1 = np.array([0.3, -0.5, 0.8])
+    e1 /= np.linalg.norm(e1)
+    d = rng.normal(size=(3000, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    d = np.vstack([d, e1])
+    t = escape.escape_table(6.0)
+    out = t.directions(d, e1)
+    xi = np.arccos(np.clip(d @ e1, -1.0, 1.0))
+    fell = xi >= t.xi_lim
+    assert fell.sum() > 10 and np.all(np.isnan(out[fell])) and np.all(np.isfinite(out[~fell]))
+    ok = ~fell & (np.abs(xi - t.xi_lim) > 1e-3)
+    o = out[ok]
+    assert np.allclose(np.linalg.norm(o, axis=1), 1.0, atol=1e-12)
+    normal = np.cross(e1, d[ok])
+    assert np.allclose(np.einsum("ij,ij->i", o, normal), 0.0, atol=1e-12)  # in the ray's plane
+    phi = escape.escape_angle(6.0, xi[ok])
+    side = np.einsum("ij,ij->i", np.cross(e1, o), normal)  # turned the ray's way from e1, not back
+    got = np.arctan2(np.linalg.norm(np.cross(e1, o), axis=1) * np.sign(side), o @ e1)
+    assert np.all(np.abs(np.angle(np.exp(1j * (got - phi)))) < 1e-4)
+    assert np.allclose(out[-1], e1)
+
+
 def test_bad_observers_are_refused():
     for r in (1.0, 0.5, math.nan, math.inf):
         with pytest.raises(ValueError):

@@ -422,6 +422,53 @@ def test_values_and_table_follow_the_camera_every_frame():
     assert min(times) < 0.05  # a frame change with a new table (benchmarks/bench_sky.py: a few ms)
 
 
+def test_the_table_is_read_the_way_the_engine_reads_it_best():
+    """Cycles reads the table with one filtered lookup; Eevee (GPU samplers) with two texel lookups
+    interpolated in math nodes. A change of engine relinks the group at the next update."""
+    scene = bpy.context.scene
+    w = _direction_world(scene)
+    _scene()
+    grp = next(n for n in _own_nodes(w.node_tree) if n.get("grlens_own") == "group").node_tree
+    eevee = "BLENDER_EEVEE" if bpy.app.version >= (5, 0, 0) else "BLENDER_EEVEE_NEXT"
+    for engine, source in (("CYCLES", "linear value"), (eevee, "closest value"), ("CYCLES", "linear value")):
+        scene.render.engine = engine
+        scene.frame_set(scene.frame_current)
+        links = grp.nodes["rotate"].inputs["Angle"].links
+        assert len(links) == 1 and links[0].from_node.name == source, engine
+        assert grp.nodes["linear"].image == grp.nodes["table"].image  # one table for both
+
+
+def test_the_sky_is_lensed_for_the_camera_that_renders():
+    """scene.grlens.observer may name another camera than the one that renders (an outside view of
+    the image meshes): the sky follows the render camera, so its own sky is exact; markers that switch
+    the active camera switch the lensed sky with it."""
+    scene = bpy.context.scene
+    w = _direction_world(scene)
+    _, cam, hole = _scene()
+    outside = bpy.data.objects.new("Outside", bpy.data.cameras.new("Outside"))
+    scene.collection.objects.link(outside)
+    outside.location = (0.0, -60.0, 10.0)
+    scene.grlens.observer = cam
+    grp = next(n for n in _own_nodes(w.node_tree) if n.get("grlens_own") == "group").node_tree
+
+    def e1():
+        return np.array([grp.nodes["e1"].inputs[k].default_value for k in range(3)])
+
+    for active in (outside, cam):
+        scene.camera = active
+        scene.frame_set(scene.frame_current)
+        p = np.array(active.location)
+        assert np.allclose(e1(), p / np.linalg.norm(p), atol=1e-7), active.name
+        r_obs = np.linalg.norm(p) / R_S
+        assert grp.nodes["xi_lim"].outputs[0].default_value == pytest.approx(escape_limit(r_obs), abs=1e-6)
+    scene.timeline_markers.new("outside", frame=5).camera = outside
+    scene.timeline_markers.new("observer", frame=9).camera = cam
+    for f, active in ((6, outside), (10, cam)):
+        scene.frame_set(f)
+        p = np.array(active.location)
+        assert np.allclose(e1(), p / np.linalg.norm(p), atol=1e-7), f
+
+
 def test_rebuild_without_marked_objects_lenses_the_world():
     scene = bpy.context.scene
     w = _world(scene)

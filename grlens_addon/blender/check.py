@@ -3,7 +3,10 @@
 Renders the lensed sources of the scene twice at a fraction of the render resolution, with the exact
 per-pixel ray tracer and with the polygon method the add-on uses (core.frame_check), compares them
 and writes both renders' passes (light travel time, image order, object index, UV, the reference's
-sky direction) and the mismatch to an OpenEXR file. The observer camera may be perspective or one of
+sky direction) and the mismatch to an OpenEXR file. When the scene's world is lensed
+(``scene.grlens.lens_world``), the sky is checked too: the world's mapping
+(``frame_check.lensed_world_sky``) against the reference's exact escape directions, with the
+grlens sky direction and the sky error as passes. The observer camera may be perspective or one of
 Cycles' panoramas equirectangular and fisheye equidistant (:func:`check_camera`). Geometry only: materials, GR illumination and disc colours are not compared.
 Units: Blender units; times in seconds; errors in pixels of the check's resolution.
 """
@@ -16,7 +19,7 @@ import bpy
 import numpy as np
 
 from ..core import frame_check, raytrace
-from . import gather, lutcache, rebuild
+from . import gather, lutcache, rebuild, world
 
 
 PANORAMA_TYPES = ("EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT")
@@ -96,7 +99,10 @@ def check_scene(scene, depsgraph=None, percentage: int = 50, filepath: str = "")
             names.append(s.name)
     if not meshes:
         raise rebuild.RebuildError("no marked object has faces")
-    result = frame_check.check_frame(meshes, geo, lut, settings, camera, names=names)
+    sky = None
+    if world.wants_lensing(scene) and world.is_lensed(scene.world) and world.lensing_camera(scene) == cam.original:
+        sky = frame_check.lensed_world_sky(geo.hole, geo.r_s)
+    result = frame_check.check_frame(meshes, geo, lut, settings, camera, names=names, sky=sky)
     path = ""
     if filepath:
         path = output_path(filepath, scene.frame_current)

@@ -93,12 +93,15 @@ def _relevant(scene, update):
 
 
 def _world_relevant(scene, update):
-    """Whether a depsgraph update can change the lensed world: the camera or hole moved, or the
-    world's node tree was edited (new nodes are hooked; our own value writes find nothing to do)."""
+    """Whether a depsgraph update can change the lensed world: the camera or hole moved, the
+    world's node tree was edited (new nodes are hooked; our own value writes find nothing to do), or
+    the scene itself (its render engine decides how the table is read)."""
     idb = update.id
     g = scene.grlens
     if isinstance(idb, bpy.types.Object):
         return idb in (scene.camera, g.observer, g.black_hole)
+    if isinstance(idb, bpy.types.Scene):
+        return getattr(idb, "original", idb) == scene
     w = scene.world
     if w is None:
         return False

@@ -53,10 +53,30 @@ def _extract(obj_eval, with_normals: bool = True) -> pipeline.SourceMesh:
     return gather.extract(obj_eval, with_normals)
 
 
+def active_camera(scene):
+    """The scene's active camera for its current frame: the camera of the timeline marker that binds
+    one at or before the frame (the latest; the earliest marker's when none is before; cameras hidden
+    for render skipped), as Blender switches cameras, else ``scene.camera``. (``scene.frame_set``
+    switches ``scene.camera`` only after the frame handlers have run.)"""
+    best, first = None, None
+    f = scene.frame_current
+    for m in scene.timeline_markers:
+        cam = m.camera
+        if cam is None or cam.hide_render:
+            continue
+        if m.frame <= f and (best is None or m.frame > best.frame):
+            best = m
+        if first is None or m.frame < first.frame:
+            first = m
+    m = best or first
+    return m.camera if m is not None else scene.camera
+
+
 def observer_camera(scene):
-    """The camera whose view is lensed: ``scene.grlens.observer`` if set, else the active camera."""
+    """The camera whose view is lensed: ``scene.grlens.observer`` if set, else the active camera
+    (:func:`active_camera`)."""
     obs = scene.grlens.observer
-    return obs if obs is not None else scene.camera
+    return obs if obs is not None else active_camera(scene)
 
 
 def half_tangents(scene, cam) -> tuple[float, float]:

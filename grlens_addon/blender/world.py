@@ -9,8 +9,10 @@ each marked with the custom property ``grlens_own``:
   world ray direction D (the Geometry node's Incoming, negated: in Cycles' background and in Eevee's
   world shader Incoming = -D), computes xi = atan2(|D x e1|, D . e1) from the outward radial
   direction e1 (hole -> camera), the table coordinate s = ln(xi_lim / (xi_lim - xi)), the
-  deflection phi_inf - xi from a float image of ``lutgen.escape_table`` (linear interpolation), and
-  outputs ``Vector`` = cos(phi_inf) e1 + sin(phi_inf) e2, e2 = unit(D - (D . e1) e1), and
+  deflection phi_inf - xi from a float image of ``lutgen.escape_table`` (linear interpolation: one
+  filtered lookup in Cycles, two texel lookups interpolated in math nodes for Eevee), and outputs
+  ``Vector`` = cos(phi_inf) e1 + sin(phi_inf) e2, e2 = unit(D - (D . e1) e1) (D rotated about
+  e1 x D by the deflection), and
   ``Escapes`` = (xi < xi_lim);
 * one Mix Shader per World Output (``grlens_own == "shadow"``) between the output's Surface and
   the user's shader: Fac = Escapes, the first shader socket empty (black).
@@ -78,13 +80,27 @@ def _vmath(nodes, op, x=0.0):
 
 
 def _build_group(name: str, image) -> bpy.types.NodeTree:
-    """The node group of one world: outputs Vector (the escape direction) and Escapes (1/0)."""
+    """The node group of one world: outputs Vector (the escape direction) and Escapes (1/0).
+
+    Per sample (Cycles' path, 11 nodes): D = -Incoming; xi = atan2(|e1 x D|, D . e1); the table
+    coordinate u = (j + 0.5) / n, j = s (n - 1) / s_max, s = -ln(1 - xi / xi_lim); the deflection
+    from the table image; D rotated by it about e1 x D, away from e1 (phi_inf = xi + deflection;
+    the escape direction is cos(phi_inf) e1 + sin(phi_inf) e2). Beyond the limit 1 - xi / xi_lim <= 0, the Math
+    node's logarithm gives 0 (u at the first texel) and Escapes is 0. Past the last node the
+    lookups' EXTEND repeats the last texel.
+
+    Two ways to read the table, one linked (:func:`_use_lookup`): "linear", one 'Linear' lookup
+    (Cycles interpolates in float on the CPU), and "closest", linear interpolation between two
+    texel-centre ('Closest') lookups done in math nodes, for Eevee: a GPU sampler picks a coarse
+    mipmap level where u changes fast between neighbouring pixels (next to the shadow) and
+    interpolates with 8-bit weights (errors of 0.1 in colour in 2 x 2 pixel blocks). The manual
+    one costs Cycles 7 more nodes (a sky-dominated frame renders about 20% slower)."""
+    from lutgen.escape import S_MAX, TABLE_SIZE
+
     ng = bpy.data.node_groups.new(name, "ShaderNodeTree")
     ng.interface.new_socket(name="Vector", in_out="OUTPUT", socket_type="NodeSocketVector")
     ng.interface.new_socket(name="Escapes", in_out="OUTPUT", socket_type="NodeSocketFloat")
     N, L = ng.nodes, ng.links
-    out = N.new("NodeGroupOutput")
-    out.location = (2400, 0)
     geo = N.new("ShaderNodeNewGeometry")
     e1 = N.new("ShaderNodeCombineXYZ")
     e1.name = e1.label = "e1"
@@ -92,119 +108,126 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
     lim = N.new("ShaderNodeValue")
     lim.name = lim.label = "xi_lim"
     lim.location = (0, -500)
-    # D = unit(-Incoming)
-    neg = _vmath(N, "SCALE", 200)
-    neg.inputs["Scale"].default_value = -1.0
-    L.new(geo.outputs["Incoming"], neg.inputs[0])
-    d = _vmath(N, "NORMALIZE", 400)
-    L.new(neg.outputs["Vector"], d.inputs[0])
-    # xi = atan2(|D x e1|, D . e1)
-    cos = _vmath(N, "DOT_PRODUCT", 600)
+    d = _vmath(N, "SCALE", 200)  # D = -Incoming (unit in Cycles' background and Eevee's world)
+    d.inputs["Scale"].default_value = -1.0
+    L.new(geo.outputs["Incoming"], d.inputs[0])
+    cos = _vmath(N, "DOT_PRODUCT", 400)
     L.new(d.outputs["Vector"], cos.inputs[0])
     L.new(e1.outputs[0], cos.inputs[1])
-    cross = _vmath(N, "CROSS_PRODUCT", 600)
-    L.new(d.outputs["Vector"], cross.inputs[0])
-    L.new(e1.outputs[0], cross.inputs[1])
-    sin = _vmath(N, "LENGTH", 800)
-    L.new(cross.outputs["Vector"], sin.inputs[0])
-    xi = _math(N, "ARCTAN2", x=1000, label="xi")
+    axis = _vmath(N, "CROSS_PRODUCT", 400)  # e1 x D: |.| = sin(xi), the axis of the deflection
+    L.new(e1.outputs[0], axis.inputs[0])
+    L.new(d.outputs["Vector"], axis.inputs[1])
+    sin = _vmath(N, "LENGTH", 600)
+    L.new(axis.outputs["Vector"], sin.inputs[0])
+    xi = _math(N, "ARCTAN2", x=800, label="xi")  # accurate next to xi = pi, unlike acos
     L.new(sin.outputs["Value"], xi.inputs[0])
     L.new(cos.outputs["Value"], xi.inputs[1])
-    # s = ln(xi_lim / (xi_lim - xi)); table position j = s (n - 1) / s_max, clamped to [0, n - 1]
-    gap = _math(N, "SUBTRACT", x=1200)
-    L.new(lim.outputs[0], gap.inputs[0])
-    L.new(xi.outputs[0], gap.inputs[1])
-    ratio = _math(N, "DIVIDE", x=1400)
-    L.new(lim.outputs[0], ratio.inputs[0])
-    L.new(gap.outputs[0], ratio.inputs[1])
-    s = _math(N, "LOGARITHM", x=1600, label="s")
-    s.inputs[1].default_value = math.e
-    L.new(ratio.outputs[0], s.inputs[0])
-    from lutgen.escape import S_MAX, TABLE_SIZE
-
-    j = _math(N, "MULTIPLY", x=1700, label="j")
-    j.inputs[1].default_value = (TABLE_SIZE - 1) / S_MAX
-    j.use_clamp = False
-    L.new(s.outputs[0], j.inputs[0])
-    jc = _math(N, "MINIMUM", x=1750)
-    jc.inputs[1].default_value = TABLE_SIZE - 1.001
-    L.new(j.outputs[0], jc.inputs[0])
-    jc2 = _math(N, "MAXIMUM", x=1800)
-    jc2.inputs[1].default_value = 0.0
-    L.new(jc.outputs[0], jc2.inputs[0])
-    # linear interpolation done here between two texel-centre ('Closest') lookups: GPU filtering
-    # would pick a coarse mipmap level where the table position changes fast between pixels
-    # (next to the shadow) and interpolates with 8-bit weights
-    j0 = _math(N, "FLOOR", x=1850)
-    L.new(jc2.outputs[0], j0.inputs[0])
-    w = _math(N, "SUBTRACT", x=1900, label="weight")
-    L.new(jc2.outputs[0], w.inputs[0])
+    inv = _math(N, "DIVIDE", x=800)  # -1 / xi_lim: constant per frame, folded by the compilers
+    inv.inputs[0].default_value = -1.0
+    L.new(lim.outputs[0], inv.inputs[1])
+    y = _math(N, "MULTIPLY_ADD", x=1000)  # 1 - xi / xi_lim = exp(-s)
+    L.new(xi.outputs[0], y.inputs[0])
+    L.new(inv.outputs[0], y.inputs[1])
+    y.inputs[2].default_value = 1.0
+    ln = _math(N, "LOGARITHM", x=1200, label="-s")
+    ln.inputs[1].default_value = math.e
+    L.new(y.outputs[0], ln.inputs[0])
+    # the 'linear' lookup: u = (j + 0.5) / n, j = -ln(y) (n - 1) / s_max
+    u = _math(N, "MULTIPLY_ADD", x=1400)
+    L.new(ln.outputs[0], u.inputs[0])
+    u.inputs[1].default_value = -(TABLE_SIZE - 1) / (S_MAX * TABLE_SIZE)
+    u.inputs[2].default_value = 0.5 / TABLE_SIZE
+    linear = _table_lookup(N, "linear", image, "Linear", (1600, 0))
+    L.new(u.outputs[0], linear.inputs["Vector"])
+    sep = N.new("ShaderNodeSeparateColor")
+    sep.name = "linear value"
+    sep.location = (1800, 0)
+    L.new(linear.outputs["Color"], sep.inputs[0])
+    # the 'closest' lookups: a + w (b - a) between texels j0 and j0 + 1, j0 = floor(j)
+    j = _math(N, "MULTIPLY", x=1400)
+    j.location.y = -400
+    L.new(ln.outputs[0], j.inputs[0])
+    j.inputs[1].default_value = -(TABLE_SIZE - 1) / S_MAX
+    j0 = _math(N, "FLOOR", x=1500)
+    j0.location.y = -400
+    L.new(j.outputs[0], j0.inputs[0])
+    w = _math(N, "SUBTRACT", x=1600, label="weight")
+    w.location.y = -400
+    L.new(j.outputs[0], w.inputs[0])
     L.new(j0.outputs[0], w.inputs[1])
     vals = []
-    for k, name in enumerate(("table", "table+1")):
-        u = _math(N, "MULTIPLY_ADD", x=1950)
-        u.inputs[1].default_value = 1.0 / TABLE_SIZE
-        u.inputs[2].default_value = (0.5 + k) / TABLE_SIZE
-        L.new(j0.outputs[0], u.inputs[0])
-        uv = N.new("ShaderNodeCombineXYZ")
-        uv.location = (2000, -200 - 300 * k)
-        uv.inputs[1].default_value = 0.5
-        L.new(u.outputs[0], uv.inputs[0])
-        tex = N.new("ShaderNodeTexImage")
-        tex.name = tex.label = name
-        tex.location = (2100, -200 - 300 * k)
-        tex.image = image
-        tex.interpolation = "Closest"
-        tex.extension = "EXTEND"
-        L.new(uv.outputs[0], tex.inputs["Vector"])
-        sep = N.new("ShaderNodeSeparateColor")
-        sep.location = (2200, -200 - 300 * k)
-        L.new(tex.outputs["Color"], sep.inputs[0])
-        vals.append(sep.outputs[0])
-    spare = N.new("ShaderNodeTexImage")  # unlinked: holds the other table image (see write_table)
-    spare.name = spare.label = "spare"
-    spare.location = (2100, -800)
-    spare.image = _new_table_image(image.name + " (spare)")
-    spare.interpolation = "Closest"
-    lerp = N.new("ShaderNodeMix")  # float mix: a + w (b - a)
+    for k, tname in enumerate(("table", "table+1")):
+        uk = _math(N, "MULTIPLY_ADD", x=1600)
+        uk.location.y = -600 - 300 * k
+        uk.inputs[1].default_value = 1.0 / TABLE_SIZE
+        uk.inputs[2].default_value = (0.5 + k) / TABLE_SIZE
+        L.new(j0.outputs[0], uk.inputs[0])
+        tex = _table_lookup(N, tname, image, "Closest", (1800, -600 - 300 * k))
+        L.new(uk.outputs[0], tex.inputs["Vector"])
+        sk = N.new("ShaderNodeSeparateColor")
+        sk.location = (2000, -600 - 300 * k)
+        L.new(tex.outputs["Color"], sk.inputs[0])
+        vals.append(sk.outputs[0])
+    lerp = N.new("ShaderNodeMix")
+    lerp.name = "closest value"
     lerp.data_type = "FLOAT"
     lerp.clamp_factor = False
-    lerp.location = (2300, -300)
+    lerp.location = (2200, -600)
     L.new(w.outputs[0], lerp.inputs[0])
     L.new(vals[0], lerp.inputs[2])
     L.new(vals[1], lerp.inputs[3])
-    phi = _math(N, "ADD", x=2400, label="phi_inf")
-    L.new(xi.outputs[0], phi.inputs[0])
-    L.new(lerp.outputs[0], phi.inputs[1])
-    # e2 = unit(D - (D . e1) e1); out = cos(phi) e1 + sin(phi) e2
-    along = _vmath(N, "SCALE", 800)
-    L.new(e1.outputs[0], along.inputs[0])
-    L.new(cos.outputs["Value"], along.inputs["Scale"])
-    perp = _vmath(N, "SUBTRACT", 1000)
-    L.new(d.outputs["Vector"], perp.inputs[0])
-    L.new(along.outputs["Vector"], perp.inputs[1])
-    e2 = _vmath(N, "NORMALIZE", 1200)
-    L.new(perp.outputs["Vector"], e2.inputs[0])
-    c_phi = _math(N, "COSINE", x=2300)
-    L.new(phi.outputs[0], c_phi.inputs[0])
-    s_phi = _math(N, "SINE", x=2300)
-    L.new(phi.outputs[0], s_phi.inputs[0])
-    a = _vmath(N, "SCALE", 2400)
-    L.new(e1.outputs[0], a.inputs[0])
-    L.new(c_phi.outputs[0], a.inputs["Scale"])
-    b = _vmath(N, "SCALE", 2400)
-    L.new(e2.outputs["Vector"], b.inputs[0])
-    L.new(s_phi.outputs[0], b.inputs["Scale"])
-    res = _vmath(N, "ADD", 2600)
-    L.new(a.outputs["Vector"], res.inputs[0])
-    L.new(b.outputs["Vector"], res.inputs[1])
-    esc = _math(N, "LESS_THAN", x=1200, label="escapes")
+    # unlinked: holds the other table image (see write_table)
+    _table_lookup(N, "spare", _new_table_image(image.name + " (spare)"), "Closest", (1800, -1300))
+    # the escape direction: D rotated about e1 x D by the deflection (an empty axis, D along e1,
+    # leaves D as it is: no deflection there)
+    rot = N.new("ShaderNodeVectorRotate")
+    rot.name = "rotate"
+    rot.rotation_type = "AXIS_ANGLE"
+    rot.location = (2400, 0)
+    L.new(d.outputs["Vector"], rot.inputs["Vector"])
+    L.new(axis.outputs["Vector"], rot.inputs["Axis"])
+    esc = _math(N, "LESS_THAN", x=1000, label="escapes")
+    esc.location.y = 300
     L.new(xi.outputs[0], esc.inputs[0])
     L.new(lim.outputs[0], esc.inputs[1])
-    out.location = (2800, 0)
-    L.new(res.outputs["Vector"], out.inputs["Vector"])
+    out = N.new("NodeGroupOutput")
+    out.location = (2600, 0)
+    L.new(rot.outputs["Vector"], out.inputs["Vector"])
     L.new(esc.outputs[0], out.inputs["Escapes"])
     return ng
+
+
+def _table_lookup(nodes, name, image, interpolation, location):
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.name = tex.label = name
+    tex.location = location
+    tex.image = image
+    tex.interpolation = interpolation
+    tex.extension = "EXTEND"
+    return tex
+
+
+LOOKUPS = {"linear": "linear value", "closest": "closest value"}
+"""The group's two ways to read the table -> the node whose output is the deflection."""
+
+
+def lookup_for(engine: str) -> str:
+    """'linear' for Cycles (one filtered lookup, float interpolation on the CPU), 'closest' for
+    every other engine (Eevee: GPU samplers, see :func:`_build_group`)."""
+    return "linear" if engine == "CYCLES" else "closest"
+
+
+def _use_lookup(group, kind: str) -> bool:
+    """Link the deflection of lookup ``kind`` into the rotation's angle (only when it changes: a
+    relink recompiles the world's shader). Returns whether it relinked."""
+    angle = group.nodes["rotate"].inputs["Angle"]
+    src = group.nodes[LOOKUPS[kind]]
+    if angle.is_linked and angle.links[0].from_node == src:
+        return False
+    for lk in list(angle.links):
+        group.links.remove(lk)
+    group.links.new(src.outputs[0], angle)
+    return True
 
 
 def _new_table_image(name: str):
@@ -269,7 +292,8 @@ def _socket(sockets, ident):
 
 
 def _group_ok(group) -> bool:
-    return group is not None and all(k in group.nodes for k in ("table", "table+1", "spare", "e1", "xi_lim"))
+    return group is not None and all(k in group.nodes for k in ("table", "table+1", "linear", "spare", "e1", "xi_lim",
+                                                                 "rotate", *LOOKUPS.values()))
 
 
 def _damaged(tree) -> bool:
@@ -392,7 +416,7 @@ def restore(world) -> None:
                 groups.append(node.node_tree)
             tree.nodes.remove(node)
     for g in groups:
-        for k in ("table", "table+1", "spare"):
+        for k in ("table", "table+1", "linear", "spare"):
             tex = g.nodes.get(k)
             if tex is not None and tex.image is not None and tex.image not in images:
                 images.append(tex.image)
@@ -415,6 +439,16 @@ def wants_lensing(scene) -> bool:
     """lens_world is on and a black hole is set."""
     g = scene.grlens
     return bool(g.lens_world) and g.black_hole is not None
+
+
+def lensing_camera(scene):
+    """The camera the sky is lensed for: the one that renders (``scene.camera``, or the camera a
+    timeline marker binds to the frame: rebuild.active_camera), so its sky is exact
+    even when ``scene.grlens.observer`` names another camera (whose view the image meshes are built
+    for: the render then shows them from outside); the observer when the scene has no active camera."""
+    from .rebuild import active_camera, observer_camera
+
+    return active_camera(scene) or observer_camera(scene)
 
 
 def _set(sock_owner, value: float):
@@ -451,8 +485,8 @@ def write_table(group, r_obs: float) -> bool:
     image[R_OBS_KEY] = key
     image.update_tag()
     _written[image.as_pointer()] = key
-    group.nodes["table"].image = image
-    group.nodes["table+1"].image = image
+    for k in ("table", "table+1", "linear"):
+        group.nodes[k].image = image
     spare.image = cur
     return True
 
@@ -475,10 +509,8 @@ def update(scene, depsgraph=None) -> str | None:
         return None  # no world: the background is black, lensed or not
     if world.node_tree is None or (bpy.app.version < (5, 0, 0) and not world.use_nodes):
         return f"sky not lensed: the world '{world.name}' uses no nodes (a plain colour; switch Use Nodes on)"
-    from .rebuild import observer_camera
-
     g = scene.grlens
-    cam = observer_camera(scene)
+    cam = lensing_camera(scene)
     if cam is None:
         raise WorldError("the scene has no camera (set scene.camera or scene.grlens.observer)")
     if depsgraph is None and bpy.context.scene == scene:
@@ -505,6 +537,7 @@ def update(scene, depsgraph=None) -> str | None:
 
     e1 = d / np.linalg.norm(d)
     write_table(grp, r_obs)
+    _use_lookup(grp, lookup_for(scene.render.engine))
     e1_node = grp.nodes["e1"]
     for k in range(3):
         _set(e1_node.inputs[k], float(e1[k]))

@@ -88,6 +88,26 @@ class FrameCheck:
         return "; ".join(parts)
 
 
+def lensed_world_sky(hole, r_s):
+    """The add-on's lensed world as a sky model for :func:`check_frame`: (directions (N, 3) unit
+    world, camera position (3,) BU) -> escape directions (N, 3), the node group's mapping (the
+    escape table of the camera's radius, rounded to 7 digits as the world update rounds it, read
+    linearly in s; ``lutgen.EscapeTable.directions``) in float64. ``hole`` (3,) and ``r_s`` in BU."""
+    from lutgen.escape import escape_table
+
+    hole = np.asarray(hole, dtype=float)
+    tables = {}
+
+    def sky(d, cam):
+        e1 = np.asarray(cam, dtype=float) - hole
+        key = float(f"{np.linalg.norm(e1) / r_s:.7g}")
+        if key not in tables:
+            tables[key] = escape_table(key)
+        return tables[key].directions(d, e1 / np.linalg.norm(e1))
+
+    return sky
+
+
 def check_frame(sources, scene: mapping.Scene, lut, settings: pipeline.Settings, camera: raytrace.Camera,
                 names=None, light=None, discs=None, sky=None) -> FrameCheck:
     """Reference and polygon renders of ``sources`` (pipeline.SourceMesh, world space, BU) seen by
