@@ -568,6 +568,52 @@ def test_cycles_equirectangular_panorama(tmp_path):
     assert _check_per_pixel(img, want) > 0.95
 
 
+def _fisheye_dirs(cam, size, fov, du=0.0, dv=0.0):
+    """(H, W, 3) world directions of a square equidistant fisheye's pixels through points du, dv px
+    off their centres (row 0 at the top); NaN outside its circle, where Cycles has no ray."""
+    n = size
+    x = (2.0 * (np.arange(n) + 0.5 + du) / n - 1.0)[None, :] + np.zeros((n, 1))
+    y = (1.0 - 2.0 * (np.arange(n) + 0.5 + dv) / n)[:, None] + np.zeros((1, n))
+    rho = np.hypot(x, y)
+    theta = 0.5 * fov * rho
+    sr = np.sin(theta) / np.maximum(rho, 1e-300)
+    local = np.stack([x * sr, y * sr, -np.cos(theta)], -1)
+    local[rho > 1.0] = np.nan
+    return local @ np.array(cam.matrix_world.to_3x3()).T
+
+
+def test_cycles_fisheye_dome_master(tmp_path):
+    """A 180 degree equidistant fisheye (a dome master) looking past the hole: the lensed world per
+    pixel, black in the shadow and outside the circle."""
+    from grlens_addon.blender.check import check_camera
+
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene(size=(32, 32), rotation_deg=(90.0, 0.0, 110.0))
+    cam.data.type = "PANO"
+    cam.data.panorama_type = "FISHEYE_EQUIDISTANT"
+    cam.data.fisheye_fov = math.pi
+    ref = check_camera(scene, cam, 100).pixel_directions()  # the reference's model (test_panorama: Cycles')
+    mine = _fisheye_dirs(cam, 32, math.pi)
+    assert np.array_equal(np.isnan(ref), np.isnan(mine)) and np.allclose(ref[~np.isnan(ref)], mine[~np.isnan(mine)], atol=1e-6)
+    scene.grlens.lens_world = True
+    img = _render(scene, tmp_path / "dome.exr")
+
+    def want(du, dv):
+        d = _fisheye_dirs(cam, 32, math.pi, du, dv)
+        out = np.full(d.shape, np.nan)
+        ok = np.all(np.isfinite(d), -1)
+        out[ok] = escape_directions(d[ok], cam.location, hole.location, R_S)
+        return _direction_colours(out)
+
+    assert _check_per_pixel(img, want) > 0.9
+    d = _fisheye_dirs(cam, 32, math.pi)
+    ok = np.all(np.isfinite(d), -1)
+    fell = np.zeros(ok.shape, bool)
+    fell[ok] = np.isnan(escape_directions(d[ok], cam.location, hole.location, R_S)).any(-1)
+    assert fell.sum() >= 1 and np.all(img[fell] == 0.0) and np.all(img[~ok] == 0.0)
+
+
 def _checker(p, scale=3.0):
     """Cycles' checker texture (svm_checker): colour 1 or 2 of the point p * scale."""
     p = (p * scale + 0.000001) * 0.999999
