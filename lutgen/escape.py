@@ -66,32 +66,6 @@ def escape_limit(r_obs) -> float:
     return np.pi - a if r > 1.5 else a
 
 
-_B_FAR = 1e4
-"""Impact parameters (r_s) above which orbits are made from their periapsis (see _orbits)."""
-
-
-def _orbits(b) -> _orb.Orbit:
-    """Orbits of impact parameters b (r_s). Above _B_FAR from the periapsis e2, the root of
-    u^2 (1 - u) = 1/b^2 next to 1/b (Newton from 1/b, relative error 1/(2b) squared each step),
-    because orbit_from_b loses e1 entirely for b >~ 1e9 (its trigonometric start is e1 = 0)."""
-    b = np.asarray(b, dtype=float)
-    far = b > _B_FAR
-    if not far.any():
-        return _orb.orbit_from_b(b)
-    near = _orb.orbit_from_b(np.where(far, 3.0, b))
-    c = 1.0 / (b[far] * b[far])
-    e2 = 1.0 / b[far]
-    for _ in range(4):
-        e2 = e2 - (e2 * e2 * (1.0 - e2) - c) / (e2 * (2.0 - 3.0 * e2))
-    fo = _orb.orbit_from_turning_point(_orb.U_PHOTON - e2, e2=e2)
-    fields = {}
-    for f in ("e1", "real", "e2", "e3", "delta", "m", "n"):
-        v = np.array(getattr(near, f), copy=True)
-        v[far] = getattr(fo, f)
-        fields[f] = v
-    return _orb.Orbit(**fields)
-
-
 def escape_angle(r_obs, xi) -> np.ndarray:
     """Position angle phi_inf (radians, >= 0) at which the ray leaving a static observer at r_obs
     (units of r_s, > 1) at angle xi (radians, [0, pi], from the outward radial direction) reaches
@@ -117,13 +91,13 @@ def escape_angle(r_obs, xi) -> np.ndarray:
     res[tiny] = 0.0
     out_m = ~tiny & (cos_x >= 0.0)
     if out_m.any():
-        orb = _orbits(b[out_m])
+        orb = _orb.orbit_from_b(b[out_m])
         f_o = _orb.sweep(orb, np.full(orb.e1.shape, uo))
         f_0 = _orb.sweep(orb, np.zeros(orb.e1.shape))
         res[out_m] = f_o - f_0
     in_m = ~tiny & (cos_x < 0.0)
     if in_m.any():
-        orb = _orbits(b[in_m])
+        orb = _orb.orbit_from_b(b[in_m])
         # e2 - uo = P(uo) / ((uo - e1)(e3 - uo)) with P(uo) = uo^2 (1 - uo) cot^2(xi): no cancellation
         cot = cos_x[in_m] / sin_x[in_m]
         gap = uo * uo * (1.0 - uo) * cot * cot / ((uo - orb.e1) * (orb.e3 - uo))

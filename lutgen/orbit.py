@@ -105,12 +105,16 @@ def orbit_from_b(b) -> Orbit:
             -4.0 * np.sinh(np.arcsinh(sq) / 3.0) ** 2,
         )
     e1 = (sigma - 1.0) / 3.0
-    # For large b the trigonometric form loses the relative accuracy of e1 ~ -1/b (asin near 1):
-    # polish e1 there with Newton on e1^2 (1 - e1) = 1/b^2 (a simple root, so well conditioned).
+    # For large b the trigonometric form loses the relative accuracy of e1 ~ -1/b (asin near 1),
+    # entirely for b >~ 1e8 (sigma rounds to 1, e1 to 0 or the wrong sign): polish e1 there with
+    # Newton on e1^2 (1 - e1) = 1/b^2 (a simple root, so well conditioned), started for b > 1e3 from
+    # the series e1 = -t + t^2/2 - 5 t^3/8 + O(t^4), t = 1/b (the other small root is +t + ...).
     big = sigma > 0.5
     if np.any(big):
-        c = 1.0 / (b[big] * b[big]) if b.ndim else 1.0 / (b * b)
-        e = e1[big]
+        bb = b[big] if b.ndim else b
+        c = 1.0 / (bb * bb)
+        t = 1.0 / bb
+        e = np.where(bb > 1e3, t * (-1.0 + t * (0.5 - 0.625 * t)), e1[big])
         for _ in range(3):
             e = e - (e * e * (1.0 - e) - c) / (e * (2.0 - 3.0 * e))
         e1 = np.where(big, 0.0, e1)

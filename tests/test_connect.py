@@ -237,3 +237,25 @@ def test_broadcasting_and_shapes():
     assert c.xi.shape == (2, 3)
     s = connect(20.0, 3.0, 1.0)
     assert np.ndim(s.xi) == 0 and np.isfinite(s.xi)
+
+
+def test_orbit_roots_for_huge_impact_parameters():
+    """lutgen.orbit.orbit_from_b keeps the roots of u^3 - u^2 + 1/b^2 = 0 (e1 < 0 < e2 < e3) to full
+    relative accuracy up to b = 1e15 r_s: against the series e1 = -t + t^2/2 - 5 t^3/8, e2 = t + t^2/2
+    + 5 t^3/8 (t = 1/b), Vieta's sum e1 + e2 + e3 = 1 and the cubic's residual; and it agrees with the
+    trigonometric solution where that is accurate."""
+    from lutgen.orbit import orbit_from_b
+
+    b = np.geomspace(1e3, 1e15, 49)
+    t = 1.0 / b
+    orb = orbit_from_b(b)
+    assert np.all(orb.real)
+    far = b >= 1e5  # the series' next term, O(t^3) relative, is below 1e-15 there
+    assert np.allclose(orb.e1[far] / t[far], -1.0 + t[far] * (0.5 - 0.625 * t[far]), rtol=2e-15, atol=0)
+    assert np.allclose(orb.e2[far] / t[far], 1.0 + t[far] * (0.5 + 0.625 * t[far]), rtol=2e-15, atol=0)
+    assert np.allclose(orb.e1 + orb.e2 + orb.e3, 1.0, rtol=0, atol=1e-15)
+    for e in (orb.e1, orb.e2):
+        assert np.allclose(e * e * (1.0 - e) * b * b, 1.0, rtol=1e-13, atol=0)
+    mid = orbit_from_b(np.array([3.0, 10.0, 100.0]))  # the series' start is not used here
+    ref = [np.sort(np.roots([1.0, -1.0, 0.0, 1.0 / bb ** 2]).real) for bb in (3.0, 10.0, 100.0)]
+    assert np.allclose(mid.e1, [r[0] for r in ref], rtol=1e-12)
