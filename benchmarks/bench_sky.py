@@ -7,6 +7,7 @@ Prints
   the camera at the same distance (nothing to write), and the extra
   time of a whole frame change (scene.frame_set) with lens_world on against off, medians over
   100 frames;
+* the same update for a world of 125 nodes (the pass over the user's tree);
 * the Cycles render time of one scene with and without the lensed world, alternated in one process
   (CPU, 320x180, 16 samples, a diffuse sphere lit by a procedural world), best of 3 each: with the
   world's importance sampling map at its default resolution (1024), at 256, and off (so the
@@ -111,6 +112,34 @@ def per_frame(n=100):
     return out, upd, same
 
 
+def big_world_update(n_layers=60, n=50):
+    """world.update with the camera at the same distance (nothing to write) for a world of
+    3 + 2 n_layers nodes (n_layers Noise textures mixed in a chain): the hooking pass over the user's
+    tree, linear in its size."""
+    from grlens_addon.blender import world
+
+    scene, cam = scene_with_sky()
+    nt = scene.world.node_tree
+    prev = nt.nodes["Background"].inputs["Color"].links[0].from_socket
+    for _ in range(n_layers):
+        tex = nt.nodes.new("ShaderNodeTexNoise")
+        mix = nt.nodes.new("ShaderNodeMix")
+        mix.data_type = "RGBA"
+        nt.links.new(prev, mix.inputs[6])
+        nt.links.new(tex.outputs["Color"], mix.inputs[7])
+        prev = mix.outputs[2]
+    nt.links.new(prev, nt.nodes["Background"].inputs["Color"])
+    dg = bpy.context.evaluated_depsgraph_get()
+    world.update(scene, dg)
+    nodes = len(nt.nodes)
+    times = []
+    for _ in range(n):
+        t0 = time.perf_counter()
+        world.update(scene, dg)
+        times.append(time.perf_counter() - t0)
+    return nodes, statistics.median(times)
+
+
 def render_times(repeats=3, method="AUTOMATIC", map_resolution=1024):
     scene, cam = scene_with_sky()
     scene.world.cycles.sampling_method = "MANUAL" if method == "AUTOMATIC" and map_resolution != 1024 else method
@@ -168,6 +197,9 @@ def main():
     print(f"world.update per frame, new radius each frame: median {statistics.median(upd) * 1e3:.2f} ms, "
           f"p90 {np.percentile(upd, 90) * 1e3:.2f} ms, max {max(upd) * 1e3:.2f} ms")
     print(f"world.update, camera at the same distance: median {statistics.median(same) * 1e3:.2f} ms")
+    nodes, t_big = big_world_update()
+    print(f"world.update, camera at the same distance, a world of {nodes} nodes (incl. grlens' 2): "
+          f"median {t_big * 1e3:.2f} ms")
     print(f"frame_set, moving camera (no marked object): lens_world on {on * 1e3:.2f} ms, off {off * 1e3:.2f} ms "
           f"(medians of 200 frames each): +{(on - off) * 1e3:.2f} ms per frame")
     for method, res, what in (("AUTOMATIC", 1024, "importance map 1024 (default)"),

@@ -243,7 +243,13 @@ def _own(tree, kind):
     return [n for n in tree.nodes if n.get(OWN) == kind]
 
 
+GROUP_NODE_NAME = "grlens Lensed Sky"
+
+
 def _group_node(tree):
+    node = tree.nodes.get(GROUP_NODE_NAME)  # by name first (one lookup); renamed: by its mark
+    if node is not None and node.get(OWN) == "group":
+        return node
     found = _own(tree, "group")
     return found[0] if found else None
 
@@ -268,7 +274,7 @@ def _ensure_group_node(world):
     node = tree.nodes.new("ShaderNodeGroup")
     node.node_tree = group
     node[OWN] = "group"
-    node.name = "grlens Lensed Sky"
+    node.name = GROUP_NODE_NAME
     node.label = "grlens: lensed sky (remove: switch Lens World off)"
     xs = [n.location.x for n in tree.nodes if n != node] or [0.0]
     node.location = (min(xs) - 300.0, 300.0)
@@ -296,80 +302,105 @@ def _group_ok(group) -> bool:
                                                                  "rotate", *LOOKUPS.values()))
 
 
-def _damaged(tree) -> bool:
+def _incoming(tree) -> dict:
+    """{input socket's as_pointer(): its link} of ``tree``, in one pass over the tree's links
+    (``socket.links`` scans every link of the tree, so asking each socket is quadratic in the size
+    of the user's tree). Shader sockets take one link each."""
+    return {lk.to_socket.as_pointer(): lk for lk in tree.links}
+
+
+def _survey(tree):
+    """One pass over ``tree``'s nodes: (the user's nodes with records, the user's direction textures,
+    the user's World Outputs)."""
+    recorded, textures, outputs = [], [], []
+    for node in tree.nodes:
+        if node.get(OWN):
+            continue
+        if node.get(HOOKED) is not None:
+            recorded.append(node)
+        kind = node.bl_idname
+        if kind in DIRECTION_TEXTURES:
+            textures.append(node)
+        elif kind == "ShaderNodeOutputWorld":
+            outputs.append(node)
+    return recorded, textures, outputs
+
+
+def _damaged(tree, recorded, incoming) -> bool:
     """Whether grlens' nodes were deleted by hand while inputs are recorded as hooked: the group node
     (or its table) is gone, or a World Output recorded as hooked no longer gets its Surface from a
     shadow mix."""
-    recs = [n for n in tree.nodes if n.get(HOOKED) is not None]
-    if not recs:
+    if not recorded:
         return False
     grp = _group_node(tree)
     if grp is None or not _group_ok(grp.node_tree):
         return True
-    for n in recs:
+    for n in recorded:
         if n.bl_idname == "ShaderNodeOutputWorld" and "Surface" in n[HOOKED].keys():
-            surf = n.inputs["Surface"]
-            if not surf.is_linked or surf.links[0].from_node.get(OWN) != "shadow":
+            lk = incoming.get(n.inputs["Surface"].as_pointer())
+            if lk is None or lk.from_node.get(OWN) != "shadow":
                 return True
     return False
 
 
 def apply(world) -> bool:
     """Hook ``world``'s node tree up to the lensed sky (idempotent). Returns whether it changed
-    anything. Worlds without a node tree are left alone."""
+    anything. Worlds without a node tree are left alone. Linear in the size of the tree: a pass over
+    its nodes and one over its links (twice when grlens' nodes were deleted by hand)."""
     tree = world.node_tree if world is not None else None
     if tree is None:
         return False
-    if _damaged(tree):
+    recorded, textures, outputs = _survey(tree)
+    incoming = _incoming(tree)
+    if _damaged(tree, recorded, incoming):
         restore(world)  # the user deleted grlens' nodes: back to the user's tree, then hook afresh
+        recorded, textures, outputs = _survey(tree)
+        incoming = _incoming(tree)
     changed = _group_node(tree) is None
     grp = _ensure_group_node(world)
     vec, esc = grp.outputs["Vector"], grp.outputs["Escapes"]
     links = tree.links
     # inputs the user relinked by hand since they were hooked: the user's link wins (forget the record)
-    for node in tree.nodes:
-        rec = node.get(HOOKED)
-        if rec is None:
-            continue
+    for node in recorded:
+        rec = node[HOOKED]
         for ident in list(rec.keys()):
             sock = _socket(node.inputs, ident)
-            if sock is None or (sock.is_linked and sock.links[0].from_node.get(OWN) is None):
+            lk = incoming.get(sock.as_pointer()) if sock is not None else None
+            if sock is None or (lk is not None and lk.from_node.get(OWN) is None):
                 del rec[ident]
         if not rec.keys():
             del node[HOOKED]
-    for node in list(tree.nodes):
-        if node.get(OWN):
-            continue
-        if node.bl_idname in DIRECTION_TEXTURES:
-            sock = _socket(node.inputs, "Vector")
-            if sock is not None and sock.enabled and not sock.is_linked:
-                _record(node, sock.identifier, "")
-                links.new(vec, sock)
-                changed = True
-        for sock in node.inputs:
-            for lk in list(sock.links):
-                fn = lk.from_node
-                if fn.bl_idname == "ShaderNodeTexCoord" and lk.from_socket.identifier in TEXCOORD_OUTPUTS:
-                    _record(node, sock.identifier, f"{fn.name}\t{lk.from_socket.identifier}")
-                    links.remove(lk)
-                    links.new(vec, sock)
-                    changed = True
-        if node.bl_idname == "ShaderNodeOutputWorld":
-            surf = node.inputs["Surface"]
-            if surf.is_linked and surf.links[0].from_node.get(OWN) != "shadow":
-                lk = surf.links[0]
-                src = lk.from_socket
-                _record(node, surf.identifier, f"{lk.from_node.name}\t{src.identifier}")
-                links.remove(lk)
-                mix = tree.nodes.new("ShaderNodeMixShader")
-                mix[OWN] = "shadow"
-                mix.name = "grlens Shadow"
-                mix.label = "grlens: shadow (black where rays fall in)"
-                mix.location = (node.location.x - 200.0, node.location.y - 200.0)
-                links.new(esc, mix.inputs[0])
-                links.new(src, mix.inputs[2])
-                links.new(mix.outputs[0], surf)
-                changed = True
+    for node in textures:  # their default coordinates (an unlinked Vector) are the view direction
+        sock = node.inputs.get("Vector")
+        if sock is not None and sock.enabled and not sock.is_linked:
+            _record(node, sock.identifier, "")
+            links.new(vec, sock)
+            changed = True
+    for lk in list(links):  # the user's Texture Coordinate Generated / Object links
+        fn, to = lk.from_node, lk.to_node
+        if (fn.bl_idname == "ShaderNodeTexCoord" and lk.from_socket.identifier in TEXCOORD_OUTPUTS
+                and not to.get(OWN)):
+            sock = lk.to_socket
+            _record(to, sock.identifier, f"{fn.name}\t{lk.from_socket.identifier}")
+            links.remove(lk)
+            links.new(vec, sock)
+            changed = True
+    for node in outputs:
+        surf = node.inputs["Surface"]
+        lk = incoming.get(surf.as_pointer())
+        if lk is not None and lk.from_node.get(OWN) != "shadow":
+            src = lk.from_socket
+            _record(node, surf.identifier, f"{lk.from_node.name}\t{src.identifier}")
+            links.remove(lk)
+            mix = tree.nodes.new("ShaderNodeMixShader")
+            mix[OWN] = "shadow"
+            mix.name = "grlens Shadow"
+            mix.label = "grlens: shadow (black where rays fall in)"
+            mix.location = (node.location.x - 200.0, node.location.y - 200.0)
+            links.new(esc, mix.inputs[0])
+            links.new(src, mix.inputs[2])
+            links.new(mix.outputs[0], surf)
+            changed = True
     return changed
 
 
