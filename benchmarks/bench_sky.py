@@ -7,7 +7,7 @@ Prints
   the camera at the same distance (nothing to write), and the extra
   time of a whole frame change (scene.frame_set) with lens_world on against off, medians over
   100 frames;
-* the same update for a world of 125 nodes (the pass over the user's tree);
+* the same update for a world of about 125 nodes (the pass over the user's tree);
 * the Cycles render time of one scene with and without the lensed world, alternated in one process
   (CPU, 320x180, 16 samples, a diffuse sphere lit by a procedural world), best of 3 each: with the
   world's importance sampling map at its default resolution (1024), at 256, and off (so the

@@ -422,6 +422,7 @@ def restore(world) -> None:
     if tree is None:
         return
     links = tree.links
+    incoming = _incoming(tree)
     for node in tree.nodes:
         rec = node.get(HOOKED)
         if rec is None:
@@ -430,9 +431,9 @@ def restore(world) -> None:
             sock = _socket(node.inputs, ident)
             if sock is None:
                 continue
-            for lk in list(sock.links):
-                if lk.from_node.get(OWN):
-                    links.remove(lk)
+            lk = incoming.get(sock.as_pointer())
+            if lk is not None and lk.from_node.get(OWN):
+                links.remove(lk)
             if was and not sock.is_linked:
                 from_name, from_ident = was.split("\t")
                 fn = tree.nodes.get(from_name)
