@@ -9,7 +9,8 @@ Prints
   100 frames;
 * the same update for a world of about 125 nodes (the pass over the user's tree);
 * the Cycles render time of one scene with and without the lensed world, alternated in one process
-  (CPU, 320x180, 16 samples, a diffuse sphere lit by a procedural world), best of 3 each: with the
+  (CPU, 320x180, 16 samples, a diffuse sphere lit by a procedural world, or by an HDRI made here),
+  best of 3 each: with the
   world's importance sampling map at its default resolution (1024), at 256, and off (so the
   per-sample cost of the world shader is seen apart from the map's bake, a fixed cost per frame);
 * the same for the sample scenes ``starfield`` (normal view) and ``starfield_panorama`` at their
@@ -33,7 +34,9 @@ import grlens_addon  # noqa: E402
 from lutgen.escape import TABLE_SIZE, escape_table  # noqa: E402
 
 
-def scene_with_sky(resolution=(320, 180), samples=16):
+def scene_with_sky(resolution=(320, 180), samples=16, sky="noise"):
+    """The benchmark scene; ``sky``: 'noise' (a cloudy procedural sky) or 'hdri' (an Environment
+    Texture of a 2048 x 1024 float image made here, as an HDRI would be used)."""
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
     w = bpy.data.worlds.new("Sky")
@@ -41,11 +44,22 @@ def scene_with_sky(resolution=(320, 180), samples=16):
     if bpy.app.version < (5, 0, 0):
         w.use_nodes = True
     nt = w.node_tree
-    noise = nt.nodes.new("ShaderNodeTexNoise")  # a cloudy sky from the world's default coordinates
-    noise.inputs["Scale"].default_value = 4.0
-    ramp = nt.nodes.new("ShaderNodeValToRGB")
-    nt.links.new(noise.outputs["Fac"], ramp.inputs["Fac"])
-    nt.links.new(ramp.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+    if sky == "hdri":
+        img = bpy.data.images.new("HDRI", 2048, 1024, alpha=False, float_buffer=True)
+        y, x = np.mgrid[0:1024, 0:2048] / 1024.0
+        val = 0.5 + 0.4 * np.sin(9.0 * x) * np.cos(7.0 * y) + 0.1 * np.random.default_rng(1).random((1024, 2048))
+        px = np.ones((1024, 2048, 4), np.float32)
+        px[..., :3] = val[..., None] * np.array([1.0, 0.9, 0.8])
+        img.pixels.foreach_set(px.ravel())
+        env = nt.nodes.new("ShaderNodeTexEnvironment")  # default coordinates: the view direction
+        env.image = img
+        nt.links.new(env.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+    else:
+        noise = nt.nodes.new("ShaderNodeTexNoise")  # a cloudy sky from the world's default coordinates
+        noise.inputs["Scale"].default_value = 4.0
+        ramp = nt.nodes.new("ShaderNodeValToRGB")
+        nt.links.new(noise.outputs["Fac"], ramp.inputs["Fac"])
+        nt.links.new(ramp.outputs["Color"], nt.nodes["Background"].inputs["Color"])
     hole = bpy.data.objects.new("BlackHole", None)
     scene.collection.objects.link(hole)
     mesh = bpy.data.meshes.new("Ball")
@@ -140,8 +154,8 @@ def big_world_update(n_layers=60, n=50):
     return nodes, statistics.median(times)
 
 
-def render_times(repeats=3, method="AUTOMATIC", map_resolution=1024):
-    scene, cam = scene_with_sky()
+def render_times(repeats=3, method="AUTOMATIC", map_resolution=1024, sky="noise"):
+    scene, cam = scene_with_sky(sky=sky)
     scene.world.cycles.sampling_method = "MANUAL" if method == "AUTOMATIC" and map_resolution != 1024 else method
     scene.world.cycles.sample_map_resolution = map_resolution
     path = os.path.join(bpy.app.tempdir or "/tmp", "bench_sky.png")
@@ -202,9 +216,12 @@ def main():
           f"median {t_big * 1e3:.2f} ms")
     print(f"frame_set, moving camera (no marked object): lens_world on {on * 1e3:.2f} ms, off {off * 1e3:.2f} ms "
           f"(medians of 200 frames each): +{(on - off) * 1e3:.2f} ms per frame")
-    for method, res, what in (("AUTOMATIC", 1024, "importance map 1024 (default)"),
-                              ("AUTOMATIC", 256, "importance map 256"), ("NONE", 1024, "no importance map")):
-        rt = render_times(method=method, map_resolution=res)
+    for sky, method, res, what in (("noise", "AUTOMATIC", 1024, "importance map 1024 (default)"),
+                                   ("noise", "AUTOMATIC", 256, "importance map 256"),
+                                   ("noise", "NONE", 1024, "no importance map"),
+                                   ("hdri", "AUTOMATIC", 1024, "HDRI world, importance map 1024 (default)"),
+                                   ("hdri", "NONE", 1024, "HDRI world, no importance map")):
+        rt = render_times(method=method, map_resolution=res, sky=sky)
         a, b = min(rt[False]), min(rt[True])
         print(f"Cycles 320x180, 16 samples, CPU, {what}: without lensed world {a:.2f} s, with {b:.2f} s "
               f"(best of 3, alternated): ratio {b / a:.2f}")

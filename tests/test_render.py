@@ -122,9 +122,11 @@ def test_same_frame_in_two_processes_gives_identical_geometry(tmp_path):
     script = os.path.join(os.path.dirname(__file__), "scripts", "geometry_digest.py")
     blend = str(tmp_path / "farm.blend")
 
+    env = {k: v for k, v in os.environ.items() if k != "GRLENS_LUT_CACHE"}  # each process builds its tables
+
     def run(*args):
         p = subprocess.run([sys.executable, script, blend, *map(str, args)], capture_output=True, text=True,
-                           timeout=300)
+                           timeout=300, env=env)
         return p.stdout + p.stderr
 
     assert "GRLENS_SAVED" in run(1)

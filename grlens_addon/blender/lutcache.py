@@ -13,7 +13,18 @@ Tables are deterministic (the same parameters give the same table, whatever was 
 two render-farm processes get identical geometry; packing (``bpy.ops.grlens.pack_lut()``) only saves
 the build time when the file is opened elsewhere. Packed tables live, exactly (float64), as hidden
 custom-property arrays on the Text data-block "grlens LUTs" (fake user), one per table.
+
+A disk cache, when the environment variable ``GRLENS_LUT_CACHE`` names a directory: every table
+built is also written there (``grlens-<sha1 of its name>.npz``, float64, exact; about 7 MB per
+family table) and read back by later processes, so a farm machine or a shared directory builds each
+table once, whatever the .blend holds. A file that cannot be read, is damaged, or holds another
+table is ignored (the table is built and the file replaced). Unset (the default): nothing on disk.
+Order of lookup: memory, the .blend, the disk cache, a build.
 """
+import hashlib
+import os
+import tempfile
+import zipfile
 from collections import OrderedDict
 
 import bpy
@@ -27,6 +38,56 @@ _WIDE = "_wide "
 FAMILY_TABLES = 24
 """Exact tables a family keeps in memory (about 7 MB each): enough for a camera that sweeps its radius
 by a factor of 20 (e.g. a fly-in from 60 to 4 r_s) to be scrubbed back and forth without rebuilding."""
+
+
+CACHE_ENV = "GRLENS_LUT_CACHE"
+"""Environment variable naming the directory of the disk cache (unset or empty: no disk cache)."""
+
+
+def _disk_path(name):
+    folder = os.environ.get(CACHE_ENV, "")
+    if not folder:
+        return None
+    return os.path.join(folder, "grlens-" + hashlib.sha1(name.encode()).hexdigest() + ".npz")
+
+
+def _disk_load(name, shapes):
+    """{array name: float64 array} of table ``name`` from the disk cache if it is there, whole and
+    of the expected ``shapes`` ({array name: shape}); else None."""
+    path = _disk_path(name)
+    if path is None or not os.path.isfile(path):
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if str(z["name"]) != name:
+                return None
+            out = {k: np.array(z[k]) for k in shapes}
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None
+    if any(out[k].dtype != np.float64 or out[k].shape != tuple(shp) for k, shp in shapes.items()):
+        return None
+    return out
+
+
+def _disk_save(name, arrays) -> None:
+    """Write table ``name`` into the disk cache (atomically: concurrent processes may write the same
+    table, with the same contents). A cache that cannot be written is skipped."""
+    path = _disk_path(name)
+    if path is None:
+        return
+    tmp = None
+    try:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".grlens-", suffix=".tmp", dir=os.path.dirname(path))
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, name=np.array(name), **arrays)
+        os.replace(tmp, path)
+        tmp = None
+    except OSError:
+        pass
+    finally:
+        if tmp is not None and os.path.exists(tmp):
+            os.remove(tmp)
 
 
 def _key(r_obs, r_min, r_max, n_r, n_phi):
@@ -63,10 +124,23 @@ def _from_store(key):
 
 def get_lut(r_obs, r_min, r_max, n_r, n_phi):
     """The fixed-range LUT for these parameters: from the memory cache, else from the .blend, else built."""
-    from lutgen import build_lut
+    from lutgen import LUT, build_lut
 
     key = _key(r_obs, r_min, r_max, n_r, n_phi)
-    return _cached(key, lambda: _from_store(key) or build_lut(*key))
+
+    def make():
+        lut = _from_store(key)
+        if lut is not None:
+            return lut
+        name = _prop_name(key)
+        got = _disk_load(name, {"data": (2, 4, key[3], key[4])})
+        if got is not None:
+            return LUT(r_obs=key[0], r_min=key[1], r_max=key[2], data=got["data"])
+        lut = build_lut(*key)
+        _disk_save(name, {"data": lut.data})
+        return lut
+
+    return _cached(key, make)
 
 
 def _cached(key, make):
@@ -86,7 +160,8 @@ def _wide_name(r_obs, r_min, rows, n_phi):
 
 
 def _wide_builder(r_obs, r_min, rows, n_phi):
-    """A family's exact table: from the .blend if packed there (exact), else built."""
+    """A family's exact table: from the .blend if packed there (exact), else from the disk cache,
+    else built (and written to the disk cache)."""
     from lutgen import WideLUT, build_wide_lut
 
     from lutgen.wide_lut import APEX_SIZE
@@ -101,7 +176,12 @@ def _wide_builder(r_obs, r_min, rows, n_phi):
         if data.size == 2 * 4 * sum(rows) * n_phi and apex.size == 4 * APEX_SIZE[0] * APEX_SIZE[1]:
             return WideLUT(r_obs=r_obs, r_min=r_min, rows=tuple(rows), data=data.reshape(2, 4, sum(rows), n_phi).copy(),
                            apex=apex.reshape(4, *APEX_SIZE).copy())
-    return build_wide_lut(r_obs, r_min, rows, n_phi)  # not packed, or damaged: built (the same table)
+    got = _disk_load(name, {"data": (2, 4, sum(rows), n_phi), "apex": (4, *APEX_SIZE)})
+    if got is not None:
+        return WideLUT(r_obs=r_obs, r_min=r_min, rows=tuple(rows), data=got["data"], apex=got["apex"])
+    lut = build_wide_lut(r_obs, r_min, rows, n_phi)  # not packed or cached, or damaged: built (the same table)
+    _disk_save(name, {"data": lut.data, "apex": lut.apex})
+    return lut
 
 
 def family(r_min):
