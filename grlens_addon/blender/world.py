@@ -94,7 +94,7 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
     texel-centre ('Closest') lookups done in math nodes, for Eevee: a GPU sampler picks a coarse
     mipmap level where u changes fast between neighbouring pixels (next to the shadow) and
     interpolates with 8-bit weights (errors of 0.1 in colour in 2 x 2 pixel blocks). The manual
-    one costs Cycles 7 more nodes (a sky-dominated frame renders about 20% slower)."""
+    one would cost Cycles 7 more nodes per lookup."""
     from lutgen.escape import S_MAX, TABLE_SIZE
 
     ng = bpy.data.node_groups.new(name, "ShaderNodeTree")
