@@ -434,7 +434,8 @@ def accretion_disc(scene, inclination=None, external=False):
     (20, -36, 0), (10, -40, 4) or (0, -40, 4) BU, with scene.grlens.observer = the observer camera:
     the image meshes are seen from outside, each vertex at its light-travel-time distance c dt from
     the observer; a black sphere inscribed in the observer's shadow cone marks the hole, against a dark blue
-    background (not lensed: scene.grlens.lens_world is off, since a lensed world is the observer's view)."""
+    background (not lensed: scene.grlens.lens_world is off; the view illustrates the image meshes in
+    space, and its uniform background shows no lensing anyway)."""
     r_s = DISC_R_S
     hole = _hole(scene, r_s)
     observer = _camera(scene, "Observer", DISC_OBSERVER, (0.0, 0.0, 0.0), angle_y_deg=50.0)
@@ -453,9 +454,9 @@ def accretion_disc(scene, inclination=None, external=False):
     else:
         disc.rotation_euler = (0.0, math.radians(inclination), 0.0)
         scene.frame_start, scene.frame_end = 1, 1
-    # lens_world off for the external views: grlens lenses the world as the observer sees it, whatever
-    # camera renders, so the external camera would see the observer's shadow cone as a black patch in
-    # its background (and the uniform background needs no lensing)
+    # lens_world off for the external views: they illustrate the image meshes in space (the black
+    # sphere marks the hole), and a uniform background shows no lensing (grlens would lens the sky
+    # for the external camera that renders, docs/sky.md)
     _lens(scene, hole, r_s, [disc], max_tess_level=64, tess_a=5.0, tess_b=0.75, observer=observer,
           use_gr_illumination=True, light=lamp, light_intensity=1600.0, lens_world=not external)
     # the first rebuild with GR illumination creates the "grlens GR Illumination" node group, which
