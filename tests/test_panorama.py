@@ -303,7 +303,17 @@ def test_blender_panoramic_cameras_become_reference_cameras():
 
         assert rebuild._pixel_angle(scene, obj) == pytest.approx(min(4.5 / 200, 2.2 / 100))  # the render: 200x100
         assert rebuild.frustum_planes(scene, obj) is None
+        # Blender's full panorama (its float32 properties hold +-pi/2 and +-pi just beyond them)
+        data.latitude_min, data.latitude_max = -math.pi / 2, math.pi / 2
+        data.longitude_min, data.longitude_max = -math.pi, math.pi
+        assert data.latitude_max > math.pi / 2 and data.longitude_max > math.pi  # as float64
+        cam = check.check_camera(scene, obj, 50)
+        assert (cam.latitude_min, cam.latitude_max) == (-math.pi / 2, math.pi / 2)
+        assert (cam.longitude_min, cam.longitude_max) == (-math.pi, math.pi)
+        assert rebuild._pixel_angle(scene, obj) == pytest.approx(2 * math.pi / 200)
         data.panorama_type = "FISHEYE_EQUIDISTANT"
+        data.fisheye_fov = 2 * math.pi  # a full-sphere fisheye
+        assert check.check_camera(scene, obj, 50).fisheye_fov == 2 * math.pi
         data.fisheye_fov = math.radians(200)
         assert rebuild._pixel_angle(scene, obj) == pytest.approx(math.radians(200) / 200)
         cam = check.check_camera(scene, obj, 50)

@@ -26,6 +26,14 @@ PANORAMA_TYPES = ("EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT")
 """Cycles' panorama types the check models (``cam.data.panorama_type``, Blender 4.x and 5.x)."""
 
 
+def _at_bound(value, bound):
+    """A camera angle (radians) read from a float32 property: +-``bound`` when it is that bound in
+    float32 (Blender stores pi/2 as 1.5707963705..., just beyond pi/2, so a full panorama's range
+    would read as out of range)."""
+    v = float(value)
+    return float(np.copysign(bound, v)) if abs(abs(v) - bound) <= 4e-7 * bound else v
+
+
 def check_camera(scene, cam, percentage) -> raytrace.Camera:
     """The reference tracer's camera for the observer camera ``cam`` (evaluated) at ``percentage`` of
     the scene's render resolution; ValueError for what the tracer cannot model.
@@ -56,9 +64,10 @@ def check_camera(scene, cam, percentage) -> raytrace.Camera:
     position = np.array(cam.matrix_world.translation, dtype=np.float64)
     rotation = rebuild.camera_rotation(cam)
     if data.type == "PANO":
-        lens = dict(kind=data.panorama_type, fisheye_fov=data.fisheye_fov, latitude_min=data.latitude_min,
-                    latitude_max=data.latitude_max, longitude_min=data.longitude_min,
-                    longitude_max=data.longitude_max)
+        half, full = 0.5 * np.pi, np.pi
+        lens = dict(kind=data.panorama_type, fisheye_fov=_at_bound(data.fisheye_fov, 2.0 * full),
+                    latitude_min=_at_bound(data.latitude_min, half), latitude_max=_at_bound(data.latitude_max, half),
+                    longitude_min=_at_bound(data.longitude_min, full), longitude_max=_at_bound(data.longitude_max, full))
         return raytrace.Camera(position, rotation, 0.0, width, height, **lens)
     _, half_y = rebuild.half_tangents(scene, cam)
     return raytrace.Camera(position, rotation, 2.0 * np.arctan(half_y), width, height)
