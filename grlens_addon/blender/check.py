@@ -7,7 +7,8 @@ sky direction) and the mismatch to an OpenEXR file. When the scene's world is le
 (``scene.grlens.lens_world``), the sky is checked too: the world's mapping
 (``frame_check.lensed_world_sky``) against the reference's exact escape directions, with the
 grlens sky direction and the sky error as passes. The observer camera may be perspective or one of
-Cycles' panoramas equirectangular and fisheye equidistant (:func:`check_camera`). Geometry only: materials, GR illumination and disc colours are not compared.
+Cycles' panoramas equirectangular and fisheye equidistant (:func:`check_camera`). Geometry only:
+materials, GR illumination and disc colours are not compared.
 Units: Blender units; times in seconds; errors in pixels of the check's resolution.
 """
 from __future__ import annotations
@@ -66,8 +67,10 @@ def check_camera(scene, cam, percentage) -> raytrace.Camera:
     if data.type == "PANO":
         half, full = 0.5 * np.pi, np.pi
         lens = dict(kind=data.panorama_type, fisheye_fov=_at_bound(data.fisheye_fov, 2.0 * full),
-                    latitude_min=_at_bound(data.latitude_min, half), latitude_max=_at_bound(data.latitude_max, half),
-                    longitude_min=_at_bound(data.longitude_min, full), longitude_max=_at_bound(data.longitude_max, full))
+                    latitude_min=_at_bound(data.latitude_min, half),
+                    latitude_max=_at_bound(data.latitude_max, half),
+                    longitude_min=_at_bound(data.longitude_min, full),
+                    longitude_max=_at_bound(data.longitude_max, full))
         return raytrace.Camera(position, rotation, 0.0, width, height, **lens)
     _, half_y = rebuild.half_tangents(scene, cam)
     return raytrace.Camera(position, rotation, 2.0 * np.arctan(half_y), width, height)

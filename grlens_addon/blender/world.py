@@ -85,9 +85,9 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
     Per sample (Cycles' path, 11 nodes): D = -Incoming; xi = atan2(|e1 x D|, D . e1); the table
     coordinate u = (j + 0.5) / n, j = s (n - 1) / s_max, s = -ln(1 - xi / xi_lim); the deflection
     from the table image; D rotated by it about e1 x D, away from e1 (phi_inf = xi + deflection;
-    the escape direction is cos(phi_inf) e1 + sin(phi_inf) e2). Beyond the limit 1 - xi / xi_lim <= 0, the Math
-    node's logarithm gives 0 (u at the first texel) and Escapes is 0. Past the last node the
-    lookups' EXTEND repeats the last texel.
+    the escape direction is cos(phi_inf) e1 + sin(phi_inf) e2). Beyond the limit,
+    1 - xi / xi_lim <= 0, the Math node's logarithm gives 0 (u at the first texel) and Escapes is 0.
+    Past the last node the lookups' EXTEND repeats the last texel.
 
     Two ways to read the table, one linked (:func:`_use_lookup`): "linear", one 'Linear' lookup
     (Cycles interpolates in float on the CPU), and "closest", linear interpolation between two
