@@ -4,7 +4,8 @@ Prints
 * the escape table's build time (lutgen.escape_table, default size), best of 20;
 * the per-frame cost of the world update for a camera that moves and changes its distance every
   frame (grlens_addon.blender.world.update: values and a new table each frame), of an update with
-  the camera at the same distance (nothing to write), and the extra
+  the camera at the same distance (nothing to write), of a frame change to frames seen before
+  (scrubbing: their tables are kept), and the extra
   time of a whole frame change (scene.frame_set) with lens_world on against off, medians over
   100 frames;
 * the same update for a world of about 125 nodes (the pass over the user's tree);
@@ -102,6 +103,7 @@ def per_frame(n=100):
     out = {}
     for on in (True, False, True, False):
         scene.grlens.lens_world = on
+        world._PIXELS.clear()  # every frame's table computed, as for a camera flying in the first time
         times = []
         for f in range(1, n + 1):
             t0 = time.perf_counter()
@@ -109,6 +111,13 @@ def per_frame(n=100):
             times.append(time.perf_counter() - t0)
         out.setdefault(on, []).extend(times)
     scene.grlens.lens_world = True
+    for f in range(1, n + 1):  # once through: every frame's table made
+        scene.frame_set(f)
+    looped = []
+    for f in range(1, n + 1):  # the same frames again (scrubbing, a looping playback): tables kept
+        t0 = time.perf_counter()
+        scene.frame_set(f)
+        looped.append(time.perf_counter() - t0)
     dg = bpy.context.evaluated_depsgraph_get()
     upd = []
     for f in range(1, n + 1):
@@ -123,7 +132,7 @@ def per_frame(n=100):
         t0 = time.perf_counter()
         world.update(scene, dg)
         same.append(time.perf_counter() - t0)
-    return out, upd, same
+    return out, upd, same, looped
 
 
 def big_world_update(n_layers=60, n=50):
@@ -206,11 +215,13 @@ def main():
         escape_table(20.0 + 1e-3 * len(t))
         t.append(time.perf_counter() - t0)
     print(f"escape table ({TABLE_SIZE} nodes): {min(t) * 1e3:.2f} ms best of 20, median {statistics.median(t) * 1e3:.2f} ms")
-    frames, upd, same = per_frame()
+    frames, upd, same, looped = per_frame()
     on, off = statistics.median(frames[True]), statistics.median(frames[False])
     print(f"world.update per frame, new radius each frame: median {statistics.median(upd) * 1e3:.2f} ms, "
           f"p90 {np.percentile(upd, 90) * 1e3:.2f} ms, max {max(upd) * 1e3:.2f} ms")
     print(f"world.update, camera at the same distance: median {statistics.median(same) * 1e3:.2f} ms")
+    print(f"frame_set, the same moving-camera frames again (tables kept): median "
+          f"{statistics.median(looped) * 1e3:.2f} ms")
     nodes, t_big = big_world_update()
     print(f"world.update, camera at the same distance, a world of {nodes} nodes (incl. grlens' 2): "
           f"median {t_big * 1e3:.2f} ms")

@@ -515,6 +515,34 @@ def test_interactive_edit_rebuilds_through_the_depsgraph_handler():
     np.testing.assert_array_equal(_verts("OrbitingSphere.GR1"), b)
 
 
+def test_depsgraph_updates_of_the_camera_hole_and_light_are_seen():
+    """The depsgraph handler's filters get the updates' evaluated copies: the camera, the observer,
+    the hole and the light count (regression: they were compared with the original objects, so a
+    camera or hole moved by hand in the viewport was seen only through other updates)."""
+    import types
+
+    from grlens_addon.blender import handlers
+
+    scene, sphere = _small_demo()
+    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
+    scene.collection.objects.link(lamp)
+    scene.grlens.light = lamp
+    other = bpy.data.objects.new("Other", None)
+    scene.collection.objects.link(other)
+    dg = bpy.context.evaluated_depsgraph_get()
+
+    def upd(obj):
+        ev = obj.evaluated_get(dg)
+        assert ev.original == obj and ev is not obj
+        return types.SimpleNamespace(id=ev)
+
+    for obj in (scene.camera, scene.grlens.black_hole, lamp, sphere):
+        assert handlers._relevant(scene, upd(obj)), obj.name
+    for obj in (scene.camera, scene.grlens.black_hole):
+        assert handlers._world_relevant(scene, upd(obj)), obj.name
+    assert not handlers._relevant(scene, upd(other)) and not handlers._world_relevant(scene, upd(other))
+
+
 def test_material_slots_and_indices_carry_over():
     """Faces of the images use the material slot of their source face (regression: clearing the
     image mesh's materials reset every face to slot 0)."""

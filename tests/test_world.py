@@ -469,6 +469,22 @@ def test_the_sky_is_lensed_for_the_camera_that_renders():
         assert np.allclose(e1(), p / np.linalg.norm(p), atol=1e-7), f
 
 
+@pytest.mark.parametrize("auto_update", [True, False])
+def test_moving_the_camera_by_hand_updates_the_sky(auto_update):
+    """A camera moved in the viewport (no frame change): the depsgraph handler updates the sky."""
+    scene = bpy.context.scene
+    w = _direction_world(scene)
+    _, cam, _ = _scene()
+    scene.grlens.auto_update = auto_update
+    grp = next(n for n in _own_nodes(w.node_tree) if n.get("grlens_own") == "group").node_tree
+    cam.location = (10.0, 10.0, 0.5)
+    bpy.context.view_layer.update()
+    e1 = np.array([grp.nodes["e1"].inputs[k].default_value for k in range(3)])
+    p = np.array(cam.location)
+    assert np.allclose(e1, p / np.linalg.norm(p), atol=1e-7)
+    assert scene.grlens.world_status.startswith(f"sky lensed, r_obs = {np.linalg.norm(p) / R_S:.4g} r_s")
+
+
 def test_rebuild_without_marked_objects_lenses_the_world():
     scene = bpy.context.scene
     w = _world(scene)

@@ -80,6 +80,11 @@ def on_frame_change(scene, depsgraph=None):
         update_world(scene, depsgraph)
 
 
+def _original(idb):
+    """The original data-block of an evaluated copy (depsgraph updates carry evaluated copies)."""
+    return getattr(idb, "original", None) or idb
+
+
 def _relevant(scene, update):
     """Whether a depsgraph update can change an image: a marked object (an instancer is updated with
     what it instances), the camera, hole or light, a mesh."""
@@ -88,7 +93,8 @@ def _relevant(scene, update):
         if idb.grlens.order in (1, 2):
             return False
         g = scene.grlens
-        return idb.grlens.enabled or idb in (scene.camera, g.observer, g.black_hole, g.light)
+        # (updates carry the evaluated copies: compare their originals)
+        return idb.grlens.enabled or _original(idb) in (scene.camera, g.observer, g.black_hole, g.light)
     return isinstance(idb, bpy.types.Mesh) and not idb.get("grlens_topology")
 
 
@@ -98,14 +104,16 @@ def _world_relevant(scene, update):
     the scene itself (its render engine decides how the table is read)."""
     idb = update.id
     g = scene.grlens
+    orig = _original(idb)
     if isinstance(idb, bpy.types.Object):
-        return idb in (scene.camera, g.observer, g.black_hole)
+        from .world import lensing_camera
+
+        return orig in (scene.camera, lensing_camera(scene), g.observer, g.black_hole)
     if isinstance(idb, bpy.types.Scene):
-        return getattr(idb, "original", idb) == scene
+        return orig == scene
     w = scene.world
     if w is None:
         return False
-    orig = getattr(idb, "original", idb)
     return (isinstance(idb, bpy.types.World) and orig == w) or (isinstance(idb, bpy.types.NodeTree)
                                                                  and orig == w.node_tree)
 

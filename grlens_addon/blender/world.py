@@ -35,6 +35,7 @@ r_s and radians.
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 
 import bpy
 import numpy as np
@@ -53,6 +54,11 @@ DIRECTION_TEXTURES = ("ShaderNodeTexEnvironment", "ShaderNodeTexSky", "ShaderNod
 
 TEXCOORD_OUTPUTS = ("Generated", "Object")
 """Texture Coordinate outputs that are the view direction in a world shader."""
+
+_PIXELS: OrderedDict = OrderedDict()
+PIXEL_CACHE = 256
+"""Table images' pixels kept per radius (r_s, rounded): 16 KB each, so scrubbing or looping an
+animation does not compute a frame's table again (a camera that flies in still does, once)."""
 
 _written: dict = {}
 """as_pointer() of a table image -> the radius (r_s, rounded) whose table its pixels hold in this
@@ -508,11 +514,18 @@ def write_table(group, r_obs: float) -> bool:
         return False
     spare = group.nodes["spare"]
     image = spare.image
-    t = escape_table(key)
-    px = np.zeros((t.size, 4), np.float32)
-    px[:, :3] = t.deflection[:, None]
-    px[:, 3] = 1.0
-    image.pixels.foreach_set(px.ravel())
+    px = _PIXELS.get(key)
+    if px is None:
+        t = escape_table(key)
+        px = np.zeros((t.size, 4), np.float32)
+        px[:, :3] = t.deflection[:, None]
+        px[:, 3] = 1.0
+        px = _PIXELS[key] = px.ravel()
+        while len(_PIXELS) > PIXEL_CACHE:
+            _PIXELS.popitem(last=False)
+    else:
+        _PIXELS.move_to_end(key)
+    image.pixels.foreach_set(px)
     image.update()
     image[R_OBS_KEY] = key
     image.update_tag()
