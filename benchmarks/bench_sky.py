@@ -15,8 +15,9 @@ Prints
   world's importance sampling map at its default resolution (1024), at 256, and off (so the
   per-sample cost of the world shader is seen apart from the map's bake, a fixed cost per frame);
 * the same for the sample scenes ``starfield`` (normal view) and ``starfield_panorama`` at their
-  own settings (resolution, 16 samples, no importance map), frame 1: a lensed disc and sphere in
-  front of a procedural star field, the render a user of the sample gets.
+  own settings (resolution, 16 samples, no importance map), frame 1, best of 5 and medians: a
+  lensed disc and sphere in front of a procedural star field, the render a user of the sample gets
+  (this machine's render times vary by about 10% from run to run).
 
 Units: milliseconds and seconds as printed; the scene in Blender units with r_s = 2 BU.
 """
@@ -120,13 +121,21 @@ def per_frame(n=100):
         looped.append(time.perf_counter() - t0)
     dg = bpy.context.evaluated_depsgraph_get()
     upd = []
-    for f in range(1, n + 1):
-        scene.frame_set(f)
-        cam.location.x += 1e-3  # a new radius for the update below
-        dg.update()
-        t0 = time.perf_counter()
-        world.update(scene, dg)
-        upd.append(time.perf_counter() - t0)
+    # world.update alone: grlens' depsgraph handler would update the world as soon as the moved
+    # camera is evaluated, so it is detached while the camera moves
+    from grlens_addon.blender import handlers
+
+    bpy.app.handlers.depsgraph_update_post.remove(handlers.on_depsgraph_update)
+    try:
+        for f in range(1, n + 1):
+            scene.frame_set(f)
+            cam.location.x += 1e-3  # a new radius for the update below
+            dg.update()
+            t0 = time.perf_counter()
+            world.update(scene, dg)
+            upd.append(time.perf_counter() - t0)
+    finally:
+        bpy.app.handlers.depsgraph_update_post.append(handlers.on_depsgraph_update)
     same = []
     for _ in range(n):  # the camera keeps its distance: values only, no new table
         t0 = time.perf_counter()
@@ -237,10 +246,12 @@ def main():
         print(f"Cycles 320x180, 16 samples, CPU, {what}: without lensed world {a:.2f} s, with {b:.2f} s "
               f"(best of 3, alternated): ratio {b / a:.2f}")
     for name in ("starfield", "starfield_panorama"):
-        rt, d = sample_scene_times(name)
+        rt, d = sample_scene_times(name, repeats=5)
         a, b = min(rt[False]), min(rt[True])
+        ma, mb = statistics.median(rt[False]), statistics.median(rt[True])
         print(f"Cycles sample scene {name}, {d['resolution'][0]}x{d['resolution'][1]}, {d['samples']} samples, CPU: "
-              f"without lensed world {a:.2f} s, with {b:.2f} s (best of 3, alternated): ratio {b / a:.2f}")
+              f"without lensed world {a:.2f} s, with {b:.2f} s (best of 5, alternated): ratio {b / a:.2f}; "
+              f"medians {ma:.2f} s and {mb:.2f} s: ratio {mb / ma:.2f}")
     print(f"bpy {bpy.app.version_string}, {os.cpu_count()} CPUs")
 
 
