@@ -30,6 +30,8 @@ from collections import OrderedDict
 import bpy
 import numpy as np
 
+from ..core.mapping import round_radius
+
 STORE = "grlens LUTs"
 _CACHE = OrderedDict()
 _MAX = 4
@@ -94,12 +96,6 @@ def _key(r_obs, r_min, r_max, n_r, n_phi):
     """Cache key; r_obs rounded to 7 significant digits (see core.mapping.R_OBS_TOLERANCE), so a
     camera orbiting at a fixed distance (float32 jitter) keeps using one table."""
     return (round_radius(r_obs), float(r_min), float(r_max), int(n_r), int(n_phi))
-
-
-def round_radius(r_obs) -> float:
-    """A camera or light radius (r_s) rounded to 7 significant digits: the radius tables are made for
-    (single-precision transforms jitter by ~1e-7; the direction error of rounding is below 1e-6 rad)."""
-    return float(f"{float(r_obs):.7g}")
 
 
 def _prop_name(key):

@@ -8,8 +8,10 @@ def panorama_note(scene) -> str:
     """A note for the panel when the observer camera is a panorama the render engine cannot draw:
     Cycles renders equirectangular and fisheye panoramas; Eevee and Workbench have no panoramic
     camera (they draw such a camera as a perspective one). Empty otherwise."""
-    g = getattr(scene, "grlens", None)  # (None when the add-on's properties are not registered)
-    cam = (g.observer if g is not None else None) or scene.camera
+    from .rebuild import observer_camera
+
+    # (no grlens settings when the add-on's properties are not registered)
+    cam = observer_camera(scene) if getattr(scene, "grlens", None) is not None else scene.camera
     if cam is None or cam.type != "CAMERA" or cam.data.type != "PANO" or scene.render.engine == "CYCLES":
         return ""
     return "Panoramic camera: only Cycles renders panoramas"

@@ -213,6 +213,9 @@ def _table_lookup(nodes, name, image, interpolation, location):
     return tex
 
 
+TABLE_LOOKUPS = ("table", "table+1", "linear")
+"""The group's image nodes that read the table (the 'closest' pair and the 'linear' one)."""
+
 LOOKUPS = {"linear": "linear value", "closest": "closest value"}
 """The group's two ways to read the table -> the node whose output is the deflection."""
 
@@ -304,8 +307,8 @@ def _socket(sockets, ident):
 
 
 def _group_ok(group) -> bool:
-    return group is not None and all(k in group.nodes for k in ("table", "table+1", "linear", "spare", "e1", "xi_lim",
-                                                                 "rotate", *LOOKUPS.values()))
+    return group is not None and all(k in group.nodes for k in (*TABLE_LOOKUPS, "spare", "e1", "xi_lim", "rotate",
+                                                                 *LOOKUPS.values()))
 
 
 def _incoming(tree) -> dict:
@@ -454,7 +457,7 @@ def restore(world) -> None:
                 groups.append(node.node_tree)
             tree.nodes.remove(node)
     for g in groups:
-        for k in ("table", "table+1", "linear", "spare"):
+        for k in (*TABLE_LOOKUPS, "spare"):
             tex = g.nodes.get(k)
             if tex is not None and tex.image is not None and tex.image not in images:
                 images.append(tex.image)
@@ -530,7 +533,7 @@ def write_table(group, r_obs: float) -> bool:
     image[R_OBS_KEY] = key
     image.update_tag()
     _written[image.as_pointer()] = key
-    for k in ("table", "table+1", "linear"):
+    for k in TABLE_LOOKUPS:
         group.nodes[k].image = image
     spare.image = cur
     return True

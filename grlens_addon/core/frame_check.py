@@ -100,7 +100,7 @@ def lensed_world_sky(hole, r_s):
 
     def sky(d, cam):
         e1 = np.asarray(cam, dtype=float) - hole
-        key = float(f"{np.linalg.norm(e1) / r_s:.7g}")
+        key = mapping.round_radius(np.linalg.norm(e1) / r_s)
         if key not in tables:
             tables[key] = escape_table(key)
         return tables[key].directions(d, e1 / np.linalg.norm(e1))

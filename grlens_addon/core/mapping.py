@@ -28,6 +28,13 @@ jitters by ~1e-7 from frame to frame; the add-on rounds the radius to 7 signific
 builds tables (one table for the whole orbit). The resulting direction error is below 1e-6 rad."""
 
 
+def round_radius(r_obs) -> float:
+    """A camera or light radius (r_s) rounded to 7 significant digits: the radius tables are made for
+    (single-precision transforms jitter by ~1e-7; the direction error of rounding is below 1e-6 rad,
+    see R_OBS_TOLERANCE)."""
+    return float(f"{float(r_obs):.7g}")
+
+
 @dataclass
 class Scene:
     """Camera and hole in world space (BU) and the Schwarzschild radius r_s (BU)."""
