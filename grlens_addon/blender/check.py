@@ -101,7 +101,7 @@ def check_scene(scene, depsgraph=None, percentage: int = 50, filepath: str = "")
     camera = check_camera(scene, cam, percentage)
     g = scene.grlens
     lut = lutcache.get_table(g, geo.r_obs)
-    src_dg = rebuild._source_depsgraph(depsgraph)
+    src_dg = depsgraph.view_layer.depsgraph  # (the check runs from the viewport: its settings)
     found = gather.instances(srcs, src_dg, with_normals=False)
     meshes, names = [], []
     for s in srcs:  # as the rebuild gathers them; objects without faces are left out

@@ -1,7 +1,8 @@
 """The geometry of a marked object, of any type, as one world-space source mesh (bpy side).
 
 * Meshes, curves, text, surfaces and metaballs: their evaluated mesh (``Object.to_mesh()``: modifiers
-  with their viewport settings, the realized mesh of Geometry Nodes; curves and text with their
+  with the depsgraph's settings, render levels in renders and viewport levels in the viewport; the
+  realized mesh of Geometry Nodes; curves and text with their
   bevel, extrusion and fill; a metaball family's surface belongs to its basis object, the one whose
   name has no ``.001`` suffix).
 * Instances, through the evaluated depsgraph's ``object_instances`` (entries whose ``parent`` is the
@@ -17,8 +18,8 @@
   particles drawn as paths or halos) for the report: an object with no faces at all is skipped
   with a reason, one with faces is imaged and the rest named.
 
-The depsgraph is the one the sources are evaluated in (the view layer's: see
-rebuild._source_depsgraph); its instances are walked once per rebuild, and only when a marked
+The depsgraph is the one the sources are evaluated in (a render's own for renders, the view
+layer's for the viewport: see rebuild.source_depsgraphs); its instances are walked once per rebuild, and only when a marked
 object may have instances. Units: Blender units, world space.
 """
 from __future__ import annotations
@@ -48,7 +49,7 @@ def can_lens(obj) -> bool:
 def may_have_instances(obj) -> bool:
     """Whether the depsgraph may hold instances made by ``obj`` (so its instances are gathered)."""
     return (obj.type == "EMPTY" or obj.is_instancer or len(obj.particle_systems) > 0
-            or any(m.type == "NODES" and m.show_viewport for m in obj.modifiers))
+            or any(m.type == "NODES" and (m.show_viewport or m.show_render) for m in obj.modifiers))
 
 
 @dataclass

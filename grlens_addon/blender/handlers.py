@@ -12,7 +12,9 @@ import bpy
 from bpy.app.handlers import persistent
 
 _busy = False
-_printed: list = []  # the report lines printed last (see _run)
+_rendering = False  # between render_pre and render_complete / render_cancel
+_printed: list = []  # the report lines printed last by an interactive session (see _print)
+_printed_frame: dict = {"key": None, "lines": set()}  # background: the lines printed for this frame
 
 
 def wants_preview(depsgraph=None, background=None) -> bool:
@@ -21,6 +23,36 @@ def wants_preview(depsgraph=None, background=None) -> bool:
     (F12 and animation renders fire the frame handlers with it)."""
     background = bpy.app.background if background is None else background
     return not background and (depsgraph is None or depsgraph.mode != "RENDER")
+
+
+def quiet(scene, status: str) -> bool:
+    """Whether a failed rebuild's ``status`` is left unprinted: "no object is marked" in a scene that
+    does not use grlens (no black hole set), so that renders of other scenes print nothing."""
+    return "no object is marked" in status and scene.grlens.black_hole is None
+
+
+def _print(scene, report) -> None:
+    """Print a rebuild's error status and report lines. In background mode (renders, farms) each
+    distinct line once per frame (a frame may be rebuilt several times: a render's frame handlers
+    and the depsgraph's), per-object lines on every frame; interactively, the lines when they
+    change."""
+    lines = [f"grlens: {w}" for w in report["warnings"]]
+    status = report["status"]
+    if status.startswith("grlens:") and not quiet(scene, status):
+        lines.insert(0, status.rsplit(" [", 1)[0])  # (without the time: one line per frame)
+    global _printed
+    if bpy.app.background:
+        key = (scene.name, scene.frame_current, scene.frame_subframe)
+        if _printed_frame["key"] != key:
+            _printed_frame["key"], _printed_frame["lines"] = key, set()
+        for line in lines:
+            if line not in _printed_frame["lines"]:
+                print(line)
+                _printed_frame["lines"].add(line)
+    elif lines != _printed:
+        for line in lines:
+            print(line)
+        _printed = lines
 
 
 def _run(scene, depsgraph=None):
@@ -32,13 +64,7 @@ def _run(scene, depsgraph=None):
         from .rebuild import rebuild_scene
 
         report = rebuild_scene(scene, depsgraph, preview=wants_preview(depsgraph))
-        if report["status"].startswith("grlens:") and bpy.app.background:
-            print(report["status"])
-        global _printed
-        if report["warnings"] != _printed:  # the same lines frame after frame are printed once
-            for w in report["warnings"]:
-                print(f"grlens: {w}")
-            _printed = list(report["warnings"])
+        _print(scene, report)
         return report
     finally:
         _busy = False
@@ -55,8 +81,8 @@ def update_world(scene, depsgraph=None):
         from . import world
 
         line, error = world.refresh(scene, depsgraph)
-        if error and bpy.app.background:
-            print(f"grlens: {error}")
+        if error:
+            _print(scene, {"status": f"grlens: {error}", "warnings": []})
         return line, error
     finally:
         _busy = False
@@ -74,10 +100,39 @@ def request_rebuild(scene):
 
 @persistent
 def on_frame_change(scene, depsgraph=None):
-    if scene.grlens.auto_update:
-        _run(scene, depsgraph)  # rebuild_scene updates the world too
-    else:
-        update_world(scene, depsgraph)
+    try:
+        if scene.grlens.auto_update:
+            _run(scene, depsgraph)  # rebuild_scene updates the world too
+        else:
+            update_world(scene, depsgraph)
+    finally:
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            from .rebuild import hide_sources
+
+            hide_sources(scene)  # (shown to the render's depsgraph by on_render_pre: out of the picture again)
+
+
+@persistent
+def on_render_pre(scene, *_args):
+    """Before a render frame's depsgraph is built: the lensed sources are shown to it, so that their
+    images are built from their render settings (rebuild.expose_sources); the frame handler hides
+    them again after the rebuild, and the render re-evaluates without them."""
+    global _rendering
+    _rendering = True
+    if scene is not None and hasattr(scene, "grlens"):
+        from .rebuild import expose_sources
+
+        expose_sources(scene)
+
+
+@persistent
+def on_render_end(scene, *_args):
+    """A render finished or was cancelled: every lensed source hidden from renders again."""
+    global _rendering
+    _rendering = False
+    from .rebuild import hide_sources
+
+    hide_sources()
 
 
 def _original(idb):
@@ -120,7 +175,7 @@ def _world_relevant(scene, update):
 
 @persistent
 def on_depsgraph_update(scene, depsgraph):
-    if _busy or depsgraph.mode == "RENDER":
+    if _busy or _rendering or depsgraph.mode == "RENDER":
         return
     ups = list(depsgraph.updates)
     if scene.grlens.auto_update and any(_relevant(scene, u) for u in ups):
@@ -175,7 +230,10 @@ HANDLERS = ((bpy.app.handlers.frame_change_post, on_frame_change),
             (bpy.app.handlers.save_pre, on_save_pre),
             (bpy.app.handlers.save_post, on_save_post),
             (bpy.app.handlers.undo_post, on_undo_post),
-            (bpy.app.handlers.redo_post, on_undo_post))
+            (bpy.app.handlers.redo_post, on_undo_post),
+            (bpy.app.handlers.render_pre, on_render_pre),
+            (bpy.app.handlers.render_complete, on_render_end),
+            (bpy.app.handlers.render_cancel, on_render_end))
 
 
 def attach():

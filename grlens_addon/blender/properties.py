@@ -30,17 +30,24 @@ def _world_changed(self, context):
     handlers.update_world(context.scene if context else None)
 
 
+def _is_camera(self, obj) -> bool:
+    """Only cameras can be the observer (the field's list offers nothing else; a script that sets
+    another object gets the rebuild's message)."""
+    return obj.type == "CAMERA"
+
+
 class GRLENS_SceneSettings(bpy.types.PropertyGroup):
     black_hole: PointerProperty(
         name="Black Hole", type=bpy.types.Object, update=_changed,
         description="Object whose location is the centre of the black hole (usually an empty)")
     observer: PointerProperty(
-        name="Observer", type=bpy.types.Object, update=_changed,
+        name="Observer", type=bpy.types.Object, update=_changed, poll=_is_camera,
         description="Camera whose view is lensed (the static observer); empty: the scene's active camera. "
                     "Render through another camera to see the image meshes from outside")
     r_s: FloatProperty(
-        name="Schwarzschild Radius", default=1.0, min=1e-6, soft_max=100.0, unit="LENGTH", update=_changed,
-        description="Schwarzschild radius r_s of the black hole, in scene length units")
+        name="Schwarzschild Radius", default=1.0, soft_min=1e-6, soft_max=100.0, unit="LENGTH", update=_changed,
+        description="Schwarzschild radius r_s of the black hole, in scene length units (a positive length; "
+                    "zero or a negative value is refused with a message, never clamped)")
     lut_mode: EnumProperty(
         name="Lookup Table", default="EVERY_DISTANCE", update=_changed,
         items=[("EVERY_DISTANCE", "Every Distance",

@@ -9,6 +9,7 @@ restored when they are not: see _set_source_visibility). Units: Blender units; r
 from __future__ import annotations
 
 import math
+import time
 import uuid
 
 import bpy
@@ -139,15 +140,43 @@ def max_error_px(g, preview: bool = False) -> float | None:
     return tol or None
 
 
-def scene_geometry(scene, depsgraph, preview: bool = False):
-    """(mapping.Scene, core Settings, evaluated observer camera) or RebuildError; ``preview``: the
-    viewport's tolerance (:func:`max_error_px`)."""
+def check_settings(scene) -> None:
+    """Refuse, with a RebuildError saying what to change, the scene settings no image can be built
+    from: no camera, an observer that is not a camera, no black hole, r_s not a positive finite
+    length. (Nothing is clamped: a wrong value is named.)"""
     g = scene.grlens
     cam = observer_camera(scene)
     if cam is None:
         raise RebuildError("the scene has no camera (set scene.camera or scene.grlens.observer)")
+    if cam.type != "CAMERA":
+        which = "scene.grlens.observer" if g.observer is not None else "the scene's camera"
+        raise RebuildError(f"the observer '{cam.name}' ({which}) is a {cam.type.lower()}, not a camera")
     if g.black_hole is None:
         raise RebuildError("no black hole object is set (scene.grlens.black_hole)")
+    if not (math.isfinite(g.r_s) and g.r_s > 0):
+        raise RebuildError(f"the Schwarzschild radius must be a positive length (scene.grlens.r_s = {g.r_s:g})")
+
+
+GEOMETRY_TYPES = ("MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES", "POINTCLOUD", "VOLUME")
+"""Object types that render geometry of their own (a black hole object of such a type shows)."""
+
+
+def hole_notes(scene) -> list[str]:
+    """Report lines about the black hole object: one that renders geometry of its own (a mesh used
+    as the hole) shows as that geometry inside the shadow."""
+    hole = scene.grlens.black_hole
+    if hole is not None and hole.type in GEOMETRY_TYPES and not hole.hide_render:
+        return [f"the black hole '{hole.name}' is a {hole.type.lower()} and renders inside the shadow: "
+                "use an empty for the hole, or hide it from renders"]
+    return []
+
+
+def scene_geometry(scene, depsgraph, preview: bool = False):
+    """(mapping.Scene, core Settings, evaluated observer camera) or RebuildError; ``preview``: the
+    viewport's tolerance (:func:`max_error_px`)."""
+    check_settings(scene)
+    g = scene.grlens
+    cam = observer_camera(scene)
     cam_eval = cam.evaluated_get(depsgraph)
     hole_eval = g.black_hole.evaluated_get(depsgraph)
     geo = mapping.Scene(np.array(cam_eval.matrix_world.translation), np.array(hole_eval.matrix_world.translation), g.r_s)
@@ -155,7 +184,8 @@ def scene_geometry(scene, depsgraph, preview: bool = False):
     if r_obs <= 1.0:
         raise RebuildError(f"the camera is inside the event horizon (r = {r_obs:.4g} r_s)")
     if r_obs <= 1.5:
-        raise RebuildError(f"the camera is inside the photon sphere (r = {r_obs:.4g} r_s); grlens needs r > 1.5 r_s")
+        raise RebuildError(f"the camera is inside the photon sphere (r = {r_obs:.4g} r_s): the images need "
+                           "r > 1.5 r_s")
     orders = tuple(o for o, on in ((1, g.show_order_1), (2, g.show_order_2)) if on)
     settings = pipeline.Settings(max_tess_level=g.max_tess_level, tess_a=g.tess_a, tess_b=g.tess_b,
                                  cull_ratio=g.cull_ratio, orders=orders,
@@ -192,6 +222,20 @@ def remove_image_object(obj):
         bpy.data.meshes.remove(mesh)
 
 
+def remove_all_images() -> None:
+    """Remove every image object grlens made and give every source its own visibility back (the
+    add-on is being disabled, or Clear). The objects' marks are kept."""
+    for obj in list(bpy.data.objects):
+        if is_image_object(obj):
+            remove_image_object(obj)
+    for obj in bpy.data.objects:
+        _set_source_visibility(obj, False)
+    coll = bpy.data.collections.get(COLLECTION)
+    if coll is not None and not coll.objects and not coll.children:
+        bpy.data.collections.remove(coll)
+    forget_all()
+
+
 def _set_source_visibility(src, lensed: bool):
     """Hide a lensed source from renders (hide_render: every engine, Workbench included, which has no
     per-object camera visibility) and from the camera; restore the user's settings when it is not."""
@@ -207,14 +251,54 @@ def _set_source_visibility(src, lensed: bool):
         del src["grlens_hidden"]
 
 
-def _source_depsgraph(depsgraph):
-    """The depsgraph that evaluates the (render-hidden) sources at the current frame: the view layer's
-    own depsgraph, updated when a render depsgraph is being used (render-hidden objects are not in
-    the render depsgraph). Sources therefore use their modifiers' viewport settings."""
-    view_dg = depsgraph.view_layer.depsgraph
-    if depsgraph.mode == "RENDER":
-        view_dg.update()
-    return view_dg
+def _present(src, depsgraph) -> bool:
+    """Whether the render ``depsgraph`` evaluates ``src`` (objects hidden from renders are not in it)."""
+    return not src.hide_render
+
+
+def source_depsgraphs(srcs, depsgraph):
+    """{``src.as_pointer()``: the depsgraph that evaluates ``src``} for the marked objects ``srcs``:
+    for a render (``depsgraph.mode == 'RENDER'``) the render depsgraph itself, so that sources are
+    evaluated with their render settings (modifier render levels, render visibility of what they
+    instance); the handlers show lensed sources to it for the frame (:func:`expose_sources`). A source
+    the render depsgraph does not hold (hidden from renders by the user, or a render the handlers did
+    not prepare) and every source of a viewport update are evaluated in the view layer's depsgraph
+    (viewport settings), updated first for a render."""
+    out, view_dg = {}, None
+    for src in srcs:
+        if depsgraph.mode == "RENDER" and _present(src, depsgraph):
+            out[src.as_pointer()] = depsgraph
+            continue
+        if view_dg is None:
+            view_dg = depsgraph.view_layer.depsgraph
+            if depsgraph.mode == "RENDER":
+                view_dg.update()
+        out[src.as_pointer()] = view_dg
+    return out
+
+
+def expose_sources(scene) -> int:
+    """Before a render builds its depsgraph (render_pre): show the lensed sources of ``scene`` to it
+    (``hide_render`` off), so that it evaluates them with render settings; :func:`hide_sources` hides
+    them again once their images are built (the render then re-evaluates without them). Sources the
+    user hides from renders stay hidden. Returns the number of sources shown."""
+    n = 0
+    if not scene.grlens.auto_update:
+        return 0  # no rebuild in the render: nothing needs the sources
+    for src in scene.objects:
+        if (src.get("grlens_hidden") is not None and src.grlens.enabled and not src.grlens.saved_hide_render
+                and src.hide_render):
+            src.hide_render = False
+            n += 1
+    return n
+
+
+def hide_sources(scene=None) -> None:
+    """Hide every lensed source (of ``scene``, or of every scene) from renders again (after its images
+    were built for a render frame, or after a render that was cancelled)."""
+    for src in (scene.objects if scene is not None else bpy.data.objects):
+        if src.get("grlens_hidden") is not None and not src.hide_render:
+            src.hide_render = True
 
 
 def _disc_emitter(obj_eval):
@@ -324,6 +408,18 @@ def _stats(images) -> dict:
     return out
 
 
+def clear_image(obj) -> None:
+    """Empty the image object ``obj`` and forget the inputs it was built from, so that the next
+    rebuild builds it whatever its inputs are (a frame that could not be lensed never leaves an
+    image empty at a later good frame)."""
+    _INPUTS.pop(obj.get("grlens_input"), None)
+    if "grlens_input" in obj:
+        del obj["grlens_input"]
+    if obj.data is not None and len(obj.data.vertices):
+        upload.forget(obj.data)
+        obj.data.clear_geometry()
+
+
 def _empty_images(scene, src, orders, wanted):
     """Empty the existing image objects of ``src`` (none are created) and forget their inputs, so the
     next rebuild builds them; they are kept (``wanted``)."""
@@ -331,12 +427,7 @@ def _empty_images(scene, src, orders, wanted):
         for name in (f"{src.name}.GR{order}", f"{src.name}.GR{order}.grlens"):
             obj = bpy.data.objects.get(name)
             if obj is not None and is_image_object(obj) and obj.grlens.source == src:
-                _INPUTS.pop(obj.get("grlens_input"), None)
-                if "grlens_input" in obj:
-                    del obj["grlens_input"]
-                if obj.data is not None and len(obj.data.vertices):
-                    upload.forget(obj.data)
-                    obj.data.clear_geometry()
+                clear_image(obj)
                 wanted.add(obj.name)
 
 
@@ -348,8 +439,9 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
     and what of an object is not imaged, and why. ``preview``: an automatic update of the interactive
     viewport, built to the viewport's tolerance (see :func:`max_error_px`; renders and explicit
     rebuilds use the render tolerance)."""
+    t0 = time.perf_counter()
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
-    report = {"status": "", "objects": {}, "stats": {}, "warnings": []}
+    report = {"status": "", "objects": {}, "stats": {}, "warnings": [], "seconds": 0.0}
     warn = report["warnings"]
     srcs = sources(scene)
     wanted = set()
@@ -364,6 +456,7 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
                 raise RebuildError("no object is marked for lensing (obj.grlens.enabled)")
             raise _WorldOnly(f"no object marked; {world_line}")
         geo, settings, cam = scene_geometry(scene, depsgraph, preview)
+        warn.extend(hole_notes(scene))
         planes = frustum_planes(scene, cam)
         g = scene.grlens
         lut = lutcache.get_table(g, geo.r_obs)
@@ -380,20 +473,21 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
                 else:
                     light = pipeline.Light(lpos, g.light_intensity,
                                            lutcache.get_table(g, r_light))
-        src_dg = _source_depsgraph(depsgraph)
+        src_dgs = source_depsgraphs(srcs, depsgraph)
         shading.ensure_view_layer_aovs(scene)
-        try:
-            found = gather.instances(srcs, src_dg, with_normals=light is not None)
-            walk_error = None
-        except Exception as exc:  # noqa: BLE001 (reported per object below)
-            found, walk_error = {}, exc
+        found, walk_error = {}, None
+        for dg in {id(d): d for d in src_dgs.values()}.values():
+            try:
+                found.update(gather.instances([s for s in srcs if src_dgs[s.as_pointer()] is dg], dg))
+            except Exception as exc:  # noqa: BLE001 (reported per object below)
+                walk_error = exc
         counts = {"lensed": 0, "skipped": 0, "failed": 0}
         for src in srcs:
             try:
                 if walk_error is not None and gather.may_have_instances(src):
                     raise walk_error
-                outcome = _rebuild_source(scene, src, src_dg, found.get(src.as_pointer()), geo, settings, lut, light,
-                                          planes, report, wanted)
+                outcome = _rebuild_source(scene, src, src_dgs[src.as_pointer()], found.get(src.as_pointer()), geo,
+                                          settings, lut, light, planes, report, wanted)
             except Exception as exc:  # noqa: BLE001 (one object's failure must not stop the others)
                 warn.append(f"{src.name}: failed: {type(exc).__name__}: {exc}" if not str(exc) else
                             f"{src.name}: failed: {exc}")
@@ -416,6 +510,10 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
         report["status"] = f"grlens: {exc}"
     except ValueError as exc:  # bad numbers from the scene (r_s, NaN transforms, LUT parameters)
         report["status"] = f"grlens: {exc}"
+    if report["status"].startswith("grlens:") and srcs:
+        # the images are not built; say what the world does, so the two never seem to disagree
+        report["status"] += "; no images" + (f" ({world_line})" if world_line and world_line.startswith("sky lensed")
+                                             else "")
     # image objects not rebuilt now: keep (empty) those of enabled sources while the scene is invalid,
     # remove those of sources that are gone or disabled and of orders switched off
     invalid = report["status"].startswith("grlens:")
@@ -423,12 +521,15 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
         if is_image_object(obj) and obj.name not in wanted:
             src = obj.grlens.source
             if invalid and src is not None and src.grlens.enabled:
-                obj.data.clear_geometry()
+                clear_image(obj)
             else:
                 remove_image_object(obj)
     for o in scene.objects:
         if not is_image_object(o) and not o.grlens.enabled:
             _set_source_visibility(o, False)
+    report["seconds"] = time.perf_counter() - t0
+    if not report["status"].startswith("grlens:") or srcs:
+        report["status"] += f" [{1000 * report['seconds']:.0f} ms]"
     scene.grlens.status = report["status"]
     scene.grlens.report_lines = "\n".join(warn)
     return report
@@ -447,7 +548,7 @@ def _rebuild_source(scene, src, src_dg, inst, geo, settings, lut, light, planes,
     warn = report["warnings"]
     src_eval = src.evaluated_get(src_dg)
     _set_source_visibility(src, _hides(src))
-    got = gather.gather(src, src_eval, inst, with_normals=light is not None)
+    got = gather.gather(src, src_eval, inst)
     if got.skip is not None:
         warn.append(f"{src.name}: skipped: {got.skip}")
         report["objects"][src.name] = "skipped"
@@ -479,6 +580,7 @@ def _rebuild_source(scene, src, src_dg, inst, geo, settings, lut, light, planes,
     for order, img in images.items():
         obj = objs[order]
         upload.upload(obj.data, img, mats)
+        upload.set_normals(obj.data, img)
         upload.set_order(obj.data, order)
         obj["grlens_input"] = key
         entry[order] = (len(img.positions), len(img.tris), img.report.total_culled())

@@ -4,11 +4,18 @@ Units: positions in Blender units, written in world space (image objects have id
 Attributes written: UV map ``UVMap`` (corner), ``light_travel_time`` (point, float: c*dt in scene
 length units), ``grlens_order`` (point, float: 1 or 2), ``grlens_irradiance`` (corner, float; only
 with GR illumination), ``grlens_redshift`` (point, float: 1 + z) and ``grlens_disc_colour`` (point,
-colour: linear RGB) for thin-disc sources, material indices.
+colour: linear RGB) for thin-disc sources, material indices, and the source's shading normals as the
+image's custom normals (:func:`set_normals`).
 """
 import uuid
 
+import bpy
 import numpy as np
+
+FREE_NORMALS = bpy.app.version >= (4, 5, 0)
+"""Custom normals can be written as a plain float vector attribute ``custom_normal`` on the corners
+(Blender 4.5 and later: about 4 ms for 200k triangles); before, through
+``Mesh.normals_split_custom_set`` (about 1 s for 200k triangles)."""
 
 _TOPOLOGY: dict = {}
 """Token (the mesh's ``grlens_topology`` property) -> the triangle array last uploaded with it.
@@ -102,6 +109,35 @@ def upload(mesh, img, materials) -> None:
     if len(img.tris):  # the face attribute (memory speed; polygons.foreach_set goes item by item)
         _attr(mesh, "material_index", "INT", "FACE").data.foreach_set(
             "value", np.ascontiguousarray(img.material, dtype=np.int32))
+
+
+def set_normals(mesh, img) -> None:
+    """The image's shading normals: at every corner the source's own shading normal (world space, flat
+    or smooth or custom, as the source shades) at the corner's source point (``img.corner_normal``),
+    so that a lamp lights the image as it lights the source. Second-order images are mirror images
+    (their rays cross the axis behind the hole), so their faces are wound the other way round
+    relative to the side of the source that is seen: their normals are written reversed. The
+    renderer turns a normal round on a face seen from behind, so every image is lit on the side of
+    the source that its ray leaves from, never from behind. Without normals (an empty image or a
+    source without them) Blender's own are used."""
+    n = img.corner_normal
+    have = FREE_NORMALS and mesh.attributes.get("custom_normal") is not None
+    if n is None or not len(img.tris):
+        if have:
+            mesh.attributes.remove(mesh.attributes["custom_normal"])
+        return
+    vals = np.ascontiguousarray(n if img.order != 2 else -n, dtype=np.float32).reshape(-1, 3)
+    if FREE_NORMALS:
+        a = mesh.attributes.get("custom_normal")
+        if a is None or a.data_type != "FLOAT_VECTOR" or a.domain != "CORNER":
+            if a is not None:
+                mesh.attributes.remove(a)
+            a = mesh.attributes.new("custom_normal", "FLOAT_VECTOR", "CORNER")
+        a.data.foreach_set("vector", vals.ravel())
+    else:  # every edge sharp: each corner keeps its own normal (no averaging over smooth fans)
+        _attr(mesh, "sharp_edge", "BOOLEAN", "EDGE").data.foreach_set("value", np.ones(len(mesh.edges), dtype=bool))
+        mesh.normals_split_custom_set(vals)
+    mesh.update_tag()
 
 
 def set_order(mesh, order: int) -> None:

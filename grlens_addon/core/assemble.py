@@ -25,7 +25,9 @@ class ImageMesh:
     """One lensed image mesh.
 
     positions (V, 3) BU; tris (F, 3); corner_uv (F, 3, 2) or None; material (F,);
-    light_travel_time (V,) c*dt in BU; irradiance (F, 3) per corner or None; report: culling counts;
+    light_travel_time (V,) c*dt in BU; irradiance (F, 3) per corner or None; corner_normal (F, 3, 3)
+    the source's unit shading normal (world space) at each corner's source point, or None when the
+    source has no normals; report: culling counts;
     source_tri (F,) the source triangle of each face; source_position (V, 3) BU: the undistorted
     world point each image vertex shows; with a :class:`DiscEmitter`: redshift (V,) 1 + z (0 where
     gas has no circular orbit: r <= 1.5 r_s or on the disc axis) and disc_colour (V, 3) linear RGB
@@ -44,6 +46,7 @@ class ImageMesh:
     source_position: np.ndarray = field(repr=False, default=None)
     redshift: np.ndarray | None = field(repr=False, default=None)
     disc_colour: np.ndarray | None = field(repr=False, default=None)
+    corner_normal: np.ndarray | None = field(repr=False, default=None)
 
 
 def empty_image(order, report: culling.CullReport) -> ImageMesh:
@@ -98,11 +101,12 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
     corner_uv = None
     if mesh.corner_uv is not None:
         corner_uv = corner_values(mesh.corner_uv)
-    irr = None
+    irr = n = None
     scene, light = frame.scene, frame.light
-    if light is not None and mesh.corner_normals is not None:
+    if mesh.corner_normals is not None:  # interpolated like the UVs (a flat face's stay its normal)
         n = corner_values(mesh.corner_normals)
         n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-300)
+    if light is not None and n is not None:
         pts = v_src.take(image_tris.ravel(), axis=0)
         e, _ = illumination.irradiance(pts, n.reshape(-1, 3), light.position, scene.hole, scene.r_s,
                                        light.lut, light.intensity)
@@ -120,7 +124,7 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
     return ImageMesh(order=order, positions=v_pos, tris=image_tris, corner_uv=corner_uv,
                      material=mesh.material[src_tri], light_travel_time=v_dist, irradiance=irr, report=report,
                      source_tri=source.origin[src_tri], source_position=v_src, redshift=redshift,
-                     disc_colour=colour)
+                     disc_colour=colour, corner_normal=n)
 
 
 def _patch_parts(patches, patch_keep, order, offset):
