@@ -179,7 +179,12 @@ def scene_geometry(scene, depsgraph, preview: bool = False):
     cam = observer_camera(scene)
     cam_eval = cam.evaluated_get(depsgraph)
     hole_eval = g.black_hole.evaluated_get(depsgraph)
-    geo = mapping.Scene(np.array(cam_eval.matrix_world.translation), np.array(hole_eval.matrix_world.translation), g.r_s)
+    cam_pos = np.array(cam_eval.matrix_world.translation)
+    hole_pos = np.array(hole_eval.matrix_world.translation)
+    for what, obj, pos in (("camera", cam, cam_pos), ("black hole", g.black_hole, hole_pos)):
+        if not np.all(np.isfinite(pos)):
+            raise RebuildError(f"the {what} '{obj.name}' has a location that is not a finite number")
+    geo = mapping.Scene(cam_pos, hole_pos, g.r_s)
     r_obs = geo.r_obs
     if r_obs <= 1.0:
         raise RebuildError(f"the camera is inside the event horizon (r = {r_obs:.4g} r_s)")

@@ -158,6 +158,18 @@ def _add_aov_nodes(tree):
         tree.links.new(a.outputs["Fac"], out.inputs["Value"])
 
 
+def _plain_surface(tree, colour) -> None:
+    """Make ``tree`` the surface Cycles gives an empty material slot or a material without nodes: a
+    Diffuse BSDF of ``colour`` (linear RGBA; 0.8 grey for an empty slot). A new material's default
+    Principled BSDF would add a specular lobe, and the images would shade unlike their source."""
+    tree.nodes.clear()
+    bsdf = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf.inputs["Color"].default_value = colour
+    out = tree.nodes.new("ShaderNodeOutputMaterial")
+    out.location = (300, 0)
+    tree.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+
+
 def image_material(mat):
     """The material image objects use in place of ``mat`` (None: an empty slot): a copy of it with
     the grlens AOV outputs added. The user's material is never edited; the copy is refreshed when
@@ -169,7 +181,10 @@ def image_material(mat):
     if old is not None and old.get("grlens_digest") == digest:
         return old
     copy = bpy.data.materials.new(name + ".new") if mat is None else mat.copy()
+    plain = mat is None or not _uses_nodes(mat)
     _use_nodes(copy)
+    if plain:
+        _plain_surface(copy.node_tree, (0.8, 0.8, 0.8, 1.0) if mat is None else tuple(mat.diffuse_color))
     _add_aov_nodes(copy.node_tree)
     copy["grlens_digest"] = digest
     copy["grlens_material_copy"] = 1
