@@ -383,6 +383,10 @@ NEAR = 0.3
 at the observer (its value there less uo, from the same row stencil): next to the observer the
 target's offset in u and the swept angle are both small."""
 
+SECANT_DONE = 1e-6
+"""A secant step shorter than this relative to d ends the iteration (the error left is of order its
+square times the curvature: below 1e-11 relative)."""
+
 TOL_D = 1e-12
 """Iterations stop when their step in d = |xi - crit| is below this relative to d."""
 
@@ -514,6 +518,13 @@ class RayMap:
                 d_t = d_t - g / dg
         return np.where(kind == 1, d_p, d_t)
 
+    def _twins(self):
+        """For each segment, the first segment of the same rays (same kind and d-range; the outward and
+        inward halves of the observer's sky: segments 0 and 3, 1 and 2)."""
+        if self.n_seg == 4:
+            return [0, 1, 1, 0]
+        return list(range(self.n_seg))
+
     def _setup_nodes(self):
         """Per segment, nodes uniform in z = logit(d / far) from the label RHO_MIN + 0.5 to the far end,
         and the observer's phase theta_o and J there (closed forms)."""
@@ -521,7 +532,15 @@ class RayMap:
         z_all, th_all, j_all = [], [], []
         self.s_zlo, self.s_zhi = np.empty(self.n_seg), np.empty(self.n_seg)
         uo = self.uo
+        twin = self._twins()
         for i in range(self.n_seg):
+            if twin[i] < i:  # the same rays as an earlier segment, traced the other way: same phases
+                j = twin[i]
+                z_all.append(z_all[j])
+                th_all.append(th_all[j])
+                j_all.append(j_all[j])
+                self.s_zlo[i], self.s_zhi[i] = self.s_zlo[j], self.s_zhi[j]
+                continue
             seg = np.array([i])
             d_lo = self._d_of_rho(seg, np.array([RHO_MIN + 0.5]))[0]
             if self.s_kind[i] == 1:
@@ -572,7 +591,11 @@ class RayMap:
         rows, ds, ths, bs, sts, lns = [], [], [], [], [], []
         self.r_first, self.r_count = np.empty(self.n_seg, dtype=np.int64), np.empty(self.n_seg, dtype=np.int64)
         total = 0
+        twin = self._twins()
         for i in range(self.n_seg):
+            if twin[i] < i:  # the same rows as an earlier segment
+                self.r_first[i], self.r_count[i] = self.r_first[twin[i]], self.r_count[twin[i]]
+                continue
             kc = self.s_kind[i]
             k_lo = int(round((RHO_MIN + 0.5 - fl.rho0[kc]) / fl.step))
             if kc == 1:
@@ -600,9 +623,30 @@ class RayMap:
             total += k.size
         self.row_g, self.row_d, self.row_theta = np.concatenate(rows), np.concatenate(ds), np.concatenate(ths)
         self.row_b, self.row_start, self.row_length = np.concatenate(bs), np.concatenate(sts), np.concatenate(lns)
+        # the ray tangent at the observer (pi/2, the far end of the turning segments) as a row
+        self.tan = None
+        if self.n_seg == 4:
+            i = 1
+            d_far = self.s_far[i] - FAR_GAP_T
+            rho_t = self._rho(np.array([i]), np.array([d_far]))
+            kc = self.s_kind[i]
+            n_c = fl.n_cols
+            kind = np.full(n_c, kc)
+            b = _b_of(kind[:1], rho_t)[0]
+            st_ln = [(self.flat.start, 0), (self.flat.length, 0)]
+            g = np.clip((rho_t[0] - fl.rho0[kc]) / fl.step, 0.0, fl.n_rows[kc] - 1)
+            i0, w = _cubic_stencil(np.array([g]), fl.n_rows[kc])
+            rows_t = i0[0] + fl.offset[kc] + np.arange(4)
+            w = w[:, 0]
+            sc = _scale(np.array([kc]), np.array([b]))[0]
+            st = float(w @ fl.start[rows_t]) * sc
+            ln = float(w @ fl.length[rows_t]) * sc
+            u_rows = fl.u.reshape(-1, n_c)[rows_t]
+            self.tan = dict(u=w @ u_rows, b=b, start=st, length=ln, kind=kc,
+                            theta=self.node_theta[(i + 1) * self.n_z - 1])
         # the table's error at the observer on each row (subtracted next to the observer)
         all_rows = np.arange(self.row_g.size)
-        seg_of_row = np.repeat(np.arange(self.n_seg), self.r_count)
+        seg_of_row = np.concatenate([np.full(self.r_count[i], i) for i in range(self.n_seg) if self._twins()[i] == i])
         self.row_eps = np.zeros(all_rows.size)
         self.row_eps = self._row_residual(all_rows, np.full(all_rows.size, self.uo), np.zeros(all_rows.size),
                                           seg_of_row)
@@ -705,6 +749,24 @@ class RayMap:
         f = np.where(kind == 0, v / self.row_b.take(row), v) - u
         return f if near is None else f - np.where(near, self.row_eps.take(row), 0.0)
 
+    def _tangent_residual(self, u, sweep, direction):
+        """f on the ray tangent at the observer (1-D cubic along its interpolated row)."""
+        t = self.tan
+        n_c = self.flat.n_cols
+        th = np.abs(t["theta"] + direction * sweep)
+        c = (th - t["start"]) / t["length"] * (n_c - 1)
+        cc = np.clip(c, 0.0, n_c - 1)
+        j0, wc = _cubic_stencil(cc, n_c)
+        row = t["u"]
+        v = wc[0] * row.take(j0) + wc[1] * row.take(j0 + 1) + wc[2] * row.take(j0 + 2) + wc[3] * row.take(j0 + 3)
+        out = np.flatnonzero(c != cc)
+        if out.size:
+            dw = _derivative_weights(cc[out], n_c)
+            jo = j0[out]
+            v[out] += (dw[0] * row.take(jo) + dw[1] * row.take(jo + 1) + dw[2] * row.take(jo + 2)
+                       + dw[3] * row.take(jo + 3)) * (c[out] - cc[out])
+        return (v / t["b"] if t["kind"] == 0 else v) - u
+
     # ---- the solve --------------------------------------------------------------------------------
     @property
     def parameters(self) -> dict:
@@ -775,8 +837,7 @@ class RayMap:
             if self.s_side[i] < 0:
                 f = self._row_residual(np.full(at.size, self.r_first[i]), u[at], sweep[at], s_at, near[at])
             else:
-                f = self._residual(s_at, np.full(at.size, self.s_far[i] - FAR_GAP_T), u[at], sweep[at],
-                                   near=near[at])
+                f = self._tangent_residual(u[at], sweep[at], self.s_dir[i])
             hit = f >= 0.0
             seg[at[hit]] = i
             undecided[at[hit]] = False
@@ -839,7 +900,8 @@ class RayMap:
                 x_new = x - f * (x - x_prev) / (f - f_prev)
             x_new = np.where(f == 0.0, x, x_new)
             good = np.isfinite(x_new) & (x_new >= lo.take(act)) & (x_new <= hi.take(act))
-            done = good & (np.abs(x_new - x) <= TOL_D * x)
+            # a step this short leaves an error of order its square: converged
+            done = good & (np.abs(x_new - x) <= SECANT_DONE * x)
             out[act[done]] = x_new[done]
             ok[act[done]] = True
             keep = good & ~done
