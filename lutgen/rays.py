@@ -338,13 +338,43 @@ def build_kind(name, rho_max, step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS, rho_min
     return Kind(name, float(rho_min), float(step), start / sc, length / sc, rec.u, rec.j)
 
 
-class OrbitTable:
-    """The three kinds of orbits (see the module docstring); built once, for every observer."""
+TABLE_VERSION = 1
+"""Bumped whenever the table's contents change (disk caches key on it)."""
 
-    def __init__(self, step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS):
+_RHO_MAX = {"T": RHO_MAX_T, "P": RHO_MAX_P, "I": RHO_MAX_I}
+
+
+class OrbitTable:
+    """The three kinds of orbits (see the module docstring); built once, for every observer (about a
+    second; ``nbytes`` about 26 MB). Deterministic: the same size gives a bit-identical table."""
+
+    def __init__(self, step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS, kinds=None):
         self.step, self.n_cols = float(step), int(n_cols)
-        self.kinds = {"T": build_kind("T", RHO_MAX_T, step, n_cols), "P": build_kind("P", RHO_MAX_P, step, n_cols),
-                      "I": build_kind("I", RHO_MAX_I, step, n_cols)}
+        self.kinds = kinds if kinds is not None else {
+            k: build_kind(k, _RHO_MAX[k], step, n_cols) for k in ("T", "P", "I")}
+
+    @staticmethod
+    def shapes(step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS) -> dict:
+        """{array name: shape} of :meth:`arrays` for a table of this size."""
+        out = {}
+        for k, mx in _RHO_MAX.items():
+            n = int(round((mx - RHO_MIN) / step)) + 1
+            out.update({f"{k}_start": (n,), f"{k}_length": (n,), f"{k}_u": (n, n_cols), f"{k}_j": (n, n_cols)})
+        return out
+
+    def arrays(self) -> dict:
+        """The table as float64 arrays (for a disk cache); :meth:`from_arrays` reads them back exactly."""
+        out = {}
+        for k, kind in self.kinds.items():
+            out.update({f"{k}_start": kind.start, f"{k}_length": kind.length, f"{k}_u": kind.u, f"{k}_j": kind.j})
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays, step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS) -> "OrbitTable":
+        kinds = {k: Kind(k, RHO_MIN, float(step), *(np.asarray(arrays[f"{k}_{a}"], dtype=np.float64)
+                                                     for a in ("start", "length", "u", "j")))
+                 for k in ("T", "P", "I")}
+        return cls(step, n_cols, kinds)
 
     @property
     def nbytes(self) -> int:
