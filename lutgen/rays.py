@@ -800,7 +800,8 @@ class RayMap:
     # ---- the solve --------------------------------------------------------------------------------
     @property
     def parameters(self) -> dict:
-        return dict(kind="orbits", r_obs=self.r_obs, r_min=self.r_min, source=self.source, **self.table.parameters)
+        return dict(kind="orbits", r_obs=self.r_obs, r_min=self.r_min, source=self.source,
+                    step=self.table.step, n_cols=self.table.n_cols)
 
     def lookup(self, r, phi, order: int = 1, quantities=QUANTITIES) -> Lookup:
         return self.lookup_orders(r, phi, (order,), quantities)[order]
@@ -875,7 +876,7 @@ class RayMap:
         first, count = self.r_first.take(seg), self.r_count.take(seg)
         orient = self.s_side.take(seg)  # f grows along the nodes when side > 0
         lo, hi = np.zeros(n, dtype=np.int64), count.copy()
-        f_lo = self._row_residual(first, u, sweep, seg, near)
+        f_lo = np.full(n, np.nan)  # node 0's value: computed below where the search never moved lo
         f_hi = orient * np.inf
         while True:
             o = np.flatnonzero(hi - lo > 1)
@@ -887,6 +888,9 @@ class RayMap:
             ob, oa = o[below], o[~below]
             lo[ob], f_lo[ob] = mid[below], f[below]
             hi[oa], f_hi[oa] = mid[~below], f[~below]
+        at0 = np.flatnonzero(lo == 0)
+        if at0.size:
+            f_lo[at0] = self._row_residual(first[at0], u[at0], sweep[at0], seg[at0], near[at0])
         d = np.empty(n)
         none = orient * f_lo >= 0.0  # a root at the critical end (within rounding)
         d[none] = self.row_d.take(first[none])
@@ -896,7 +900,14 @@ class RayMap:
         i = np.flatnonzero(inner)
         if i.size:
             k0 = np.clip(lo[i] - 1, 0, count[i] - 4)
-            fs = np.stack([self._row_residual(first[i] + k0 + j, u[i], sweep[i], seg[i], near[i]) for j in range(4)])
+            fs = np.empty((4, i.size))
+            for j in range(4):  # the bracket's two rows are known from the search
+                known_lo, known_hi = k0 + j == lo[i], k0 + j == hi[i]
+                fs[j, known_lo], fs[j, known_hi] = f_lo[i[known_lo]], f_hi[i[known_hi]]
+                m = np.flatnonzero(~known_lo & ~known_hi)
+                if m.size:
+                    im = i[m]
+                    fs[j, m] = self._row_residual(first[im] + k0[m] + j, u[im], sweep[im], seg[im], near[im])
             t = _cubic_root(fs, (lo[i] - k0).astype(float))
             rho = self.flat.rho0.take(self.s_kind.take(seg[i])) + self.flat.step * (
                 self.row_g.take(first[i] + k0) - self.flat.offset.take(self.s_kind.take(seg[i])) + t)

@@ -209,10 +209,7 @@ def orbit_map(r_obs, r_min):
     disk cache); cached by radius like the other tables."""
     from lutgen import rays
 
-    r, r_min = round_radius(r_obs), round_radius(r_min)
-    if not r_min < r:
-        raise ValueError(f"the lookup table's innermost radius (LUT r min = {r_min:.4g} r_s) must be below "
-                         f"the distance of the camera or light ({r:.4g} r_s)")
+    r, r_min = round_radius(r_obs), round_radius(r_min)  # (r_min may exceed r: targets below are not imaged)
     return _cached(("orbits", r, r_min), lambda: rays.RayMap(r, r_min=r_min, table=orbit_table()))
 
 
@@ -261,6 +258,9 @@ def pack(lut) -> str:
     store = bpy.data.texts.get(STORE) or bpy.data.texts.new(STORE)
     store.use_fake_user = True
     p = lut.parameters
+    if p.get("kind") == "orbits":
+        return ("nothing: the orbit table serves every radius and is the same in every process (built once "
+                "per process, or read from the disk cache)")
     if p.get("kind") != "wide":
         key = _key(*(p[k] for k in ("r_obs", "r_min", "r_max", "n_r", "n_phi")))
         store[_prop_name(key)] = lut.data.ravel()
