@@ -534,7 +534,7 @@ class RayMap:
         kind = self.s_kind.take(seg)
         c = self.xi_c
         x = np.exp(rho)
-        with np.errstate(invalid="ignore", over="ignore"):
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
             # P: sin d = sin c e^rho / ((sqrt(cos^2 c + e^rho) + cos c) sqrt(1 + e^rho))
             sd = math.sin(c) * x / ((np.sqrt(math.cos(c) ** 2 + x) + math.cos(c)) * np.sqrt(1.0 + x))
             d_p = np.arcsin(np.minimum(sd, 1.0))

@@ -848,7 +848,7 @@ PLUNGE_DISTANCE = (6.0, 1.05)  # r_s
 PLUNGE_ELEVATION = 25.0  # degrees above the equatorial plane, fixed (the camera falls radially)
 PLUNGE_AZIMUTH = -100.0  # degrees
 PLUNGE_FOV = (70.0, 100.0)  # degrees, vertical
-PLUNGE_LOOK = (0.0, 0.85)
+PLUNGE_LOOK = (0.0, 0.95)
 """How far the view has turned from the hole (0) towards straight up (1, radially outwards, through the
 tangent towards the floor at 0.5) at the start and the end of the descent."""
 
