@@ -34,10 +34,11 @@ ordered by xi from 0 to pi in four segments (outward rays that cross the photon 
 inward turning rays, inward rays that cross it; the turning rays are of kind ``T`` for an observer
 outside the photon sphere and ``I`` inside it), the radius a ray has reached after sweeping the
 target's angle, less the target's radius, changes sign exactly once: at the connecting ray (rays
-that escaped before count as below, rays that fell in as above). A vertex's segment is found from the
-signs at the segments' ends, and its ray by a safeguarded secant iteration in the row label rho. No
-table depends on the observer: a camera at a new radius costs a few 1-D arrays (its own phases on
-each row), not a table build.
+that escaped before count as below, rays that fell in as above). A point's segment is found from the
+signs at the segments' ends, its ray bracketed between two of the table's rows by a binary search
+(1-D lookups along rows) and found by secant steps in d = |xi - crit| with the bicubic interpolation
+(:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius costs a few 1-D
+arrays (its own phase on each ray), not a table build. docs/inside.md describes it with its figures.
 """
 from __future__ import annotations
 
@@ -291,24 +292,6 @@ class Kind:
                     slope += wr[i, out] * dw[j] * flat.take(base[out] + (i * n_c + j))
             v[out] += slope * (c[out] - cc[out])
         return v
-
-    def row_values(self, rows, theta, b, st, ln):
-        """u on table rows ``rows`` (int) at angles ``theta`` (their b, start and length given), with the
-        same linear continuation as :meth:`evaluate`."""
-        n_c = self.n_cols
-        c = (theta - st) / ln * (n_c - 1)
-        cc = np.clip(c, 0.0, n_c - 1)
-        j0, wc = _cubic_stencil(cc, n_c)
-        flat = self.u.reshape(-1)
-        base = rows * n_c + j0
-        v = wc[0] * flat.take(base) + wc[1] * flat.take(base + 1) + wc[2] * flat.take(base + 2) + wc[3] * flat.take(base + 3)
-        out = np.flatnonzero(c != cc)
-        if out.size:
-            dw = _derivative_weights(cc[out], n_c)
-            bo = base[out]
-            v[out] += (dw[0] * flat.take(bo) + dw[1] * flat.take(bo + 1) + dw[2] * flat.take(bo + 2)
-                       + dw[3] * flat.take(bo + 3)) * (c[out] - cc[out])
-        return v / b if self.name == "T" else v
 
 
 def build_kind(name, rho_max, step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS, rho_min=RHO_MIN) -> Kind:

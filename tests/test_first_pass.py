@@ -50,7 +50,8 @@ def test_no_table_per_radius_and_alone_equals_in_a_run(monkeypatch):
         alone = _geometry(pipeline.build_images(src, scene, rays.RayMap(scene.r_obs, table=table), SETTINGS))
         assert alone.keys() == run[i].keys()
         for o in alone:
-            assert np.array_equal(alone[o][0], run[i][o][0], equal_nan=True) and np.array_equal(alone[o][1], run[i][o][1])
+            assert np.array_equal(alone[o][0], run[i][o][0], equal_nan=True)
+            assert np.array_equal(alone[o][1], run[i][o][1])
 
 
 def test_a_new_radius_costs_one_dimensional_arrays():

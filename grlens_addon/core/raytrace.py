@@ -8,7 +8,8 @@ Units and conventions
 ---------------------
 World positions, r_s, distances and light travel times c*dt are in Blender units (BU); internally
 lengths are in units of r_s (as in ``lutgen``), c = 1. The camera is a static observer at
-r_obs = |camera - hole| / r_s (> 1; inside the photon sphere too). ``e1 = (camera - hole)/|camera - hole|`` is its outward radial
+r_obs = |camera - hole| / r_s (> 1; inside the photon sphere too).
+``e1 = (camera - hole)/|camera - hole|`` is its outward radial
 direction; a ray leaving the camera in the world direction ``d`` makes the angle ``xi`` with e1 (in
 the observer's static orthonormal frame, which grlens identifies with Blender's Euclidean axes at the
 camera) and lies in the plane through the hole spanned by e1 and ``e2 = unit(d - (d.e1) e1)``. In
@@ -578,7 +579,8 @@ class Rays:
             i = self.inner
             oi = orb.subset(i)
             p_uo = self.uo * self.uo * (1.0 - self.uo) * (cos_xi[i] / sin_xi[i]) ** 2  # P(uo), no cancellation
-            self.g_obs[i] = _sweep_inner(oi, np.full(int(i.sum()), self.uo), p_uo / ((self.uo - oi.e1) * (self.uo - oi.e2)))
+            gap = p_uo / ((self.uo - oi.e1) * (self.uo - oi.e2))
+            self.g_obs[i] = _sweep_inner(oi, np.full(int(i.sum()), self.uo), gap)
             self.w0[i] = self.c[i] * self.g_obs[i]
         with np.errstate(invalid="ignore"):
             f_peri = _orb.sweep_to_turning_point(orb)
@@ -798,8 +800,9 @@ def image_pixels(points, camera: Camera, hole, r_s, order: int) -> tuple[np.ndar
     emitter-observer solver), not from a LUT and not from this module's ray tracing, so it is an
     independent check of both. Inside the photon sphere, where lutgen.connect has no solution, from
     lutgen.rays (checked against the DOP853 integrator to about 1e-7 rad; then the screen error
-    measures the subdivision and rasterisation, not the rays). NaN where the point has no image of that order (inside the horizon,
-    on the camera-hole axis, non-finite) or the image lies behind the camera. hole: (3,) BU; r_s: BU.
+    measures the subdivision and rasterisation, not the rays). NaN where the point has no image of
+    that order (inside the horizon, on the camera-hole axis, non-finite) or the image lies behind the
+    camera. hole: (3,) BU; r_s: BU.
     """
     scene = Scene(camera.position, hole, r_s)
     plane = plane_coordinates(np.asarray(points, dtype=np.float64).reshape(-1, 3), scene)
