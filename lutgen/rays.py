@@ -903,7 +903,21 @@ class RayMap:
             far_d = self.s_far.take(seg[e]) - FAR_GAP_T
             d_a = self.row_d.take(first[e] + np.minimum(lo[e], count[e] - 1))
             d_b = np.where(hi[e] >= count[e], far_d, self.row_d.take(first[e] + np.minimum(hi[e], count[e] - 1)))
-            d[e] = self._regula_falsi(seg[e], u[e], sweep[e], d_a, d_b, f_lo[e], f_hi[e], near[e])
+            f_a, f_b = f_lo[e], f_hi[e]
+            tan = np.flatnonzero((hi[e] >= count[e]) & (self.s_kind.take(seg[e]) != 1))
+            if tan.size and self.tan is not None:  # the far end is the ray tangent at the observer: its f
+                f_b[tan] = self._tangent_residual(u[e[tan]], sweep[e[tan]], self.s_dir.take(seg[e[tan]]))
+            # in these intervals f is smooth in d: regula falsi for a start, then secant steps
+            with np.errstate(divide="ignore", invalid="ignore"):
+                d0 = d_a - f_a * (d_b - d_a) / (f_b - f_a)
+            lo_d, hi_d = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
+            d0 = np.where(np.isfinite(d0) & (d0 > lo_d) & (d0 < hi_d), d0, 0.5 * (d_a + d_b))
+            d[e], ok = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6)
+            rest = np.flatnonzero(~ok)
+            if rest.size:
+                er = e[rest]
+                d[er] = self._regula_falsi(seg[er], u[er], sweep[er], d_a[rest], d_b[rest], f_a[rest], f_b[rest],
+                                           near[er])
         return self._finish(seg, d, u, r, phi, sweep, order, near)
 
     def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4):
