@@ -46,7 +46,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import elliprf
 
 from . import orbit as _orb
 from .lut import QUANTITIES, Lookup, _cubic_stencil
@@ -119,18 +118,7 @@ def _orbits(kind, rho) -> _orb.Orbit:
     return orb
 
 
-def _sweep_inner(orb, u, gap=None):
-    """Angle swept from the apoapsis e3 of turning orbits down to u >= e3 (Carlson's two-point form of
-    integral_{e3}^{u} du / sqrt((u - e1)(u - e2)(u - e3)), all terms positive). ``gap``: u - e3 where
-    it is known more accurately than from the difference."""
-    u = np.asarray(u, dtype=float)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        x3 = np.sqrt(np.maximum(u - orb.e3 if gap is None else gap, 0.0))
-        y1, y2 = np.sqrt(orb.e3 - orb.e1), np.sqrt(orb.delta)
-        x1, x2 = np.sqrt(u - orb.e1), np.sqrt(u - orb.e2)
-        # DLMF 19.29.4 with y = e3 (a root), a fourth factor 1: U12 = Y1 Y2 / X3 etc. times (x - y)
-        out = 2.0 * x3 * elliprf((y1 * y2) ** 2, (x1 * y2) ** 2, (y1 * x2) ** 2)
-    return np.where(x3 > 0.0, out, 0.0)
+_sweep_inner = _orb.sweep_inner
 
 
 def row_ranges(kind, rho):
@@ -1028,3 +1016,94 @@ def _cubic_root(fs, t0):
             t_new = t - p / dp
         t = np.where(np.isfinite(t_new), np.clip(t_new, t0, t0 + 1.0), t)
     return t
+
+
+# ------------------------------------------------------------------------------------------------
+# Exact connecting rays of an observer inside the photon sphere
+# ------------------------------------------------------------------------------------------------
+def connect_inside(r_obs, r, phi, order):
+    """Connecting rays of ``order`` for a static observer inside the photon sphere (R_OBS_MIN <= r_obs
+    <= 1.5 r_s) to points (r, phi) (1-D arrays, r > 1, phi in [0, pi]): dict of xi, dt, ux, uy, b, in
+    lutgen.solver's conventions, exact to rounding. The orbit table's ray (:class:`RayMap`) is the
+    start; secant steps in the orbit's label rho on the closed-form swept angle (Carlson's forms:
+    lutgen.orbit.sweep for the rays that cross the photon sphere, sweep_inner on the inner branch)
+    polish it; travel times are lutgen.orbit.travel_time and travel_time_inner."""
+    r_obs = float(r_obs)
+    r, phi = np.asarray(r, dtype=float), np.asarray(phi, dtype=float)
+    n = r.size
+    u = 1.0 / r
+    uo = 1.0 / r_obs
+    sweep = phi if order == 1 else 2.0 * math.pi - phi
+    m = RayMap(r_obs, r_min=min(float(r.min()), r_obs) * (1 - 1e-12) if n else 1.01)
+    xi0 = m.lookup(r, phi, order).xi
+    v_o = uo * uo * (1.0 - uo)
+    sin_c = B_C * math.sqrt(v_o)
+    outward = xi0 < 0.5 * math.pi
+    s = np.sin(xi0)
+    plunging = s < sin_c
+    kind = np.where(plunging, "P", "I")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # (b/b_c)^2 - 1 = (sin^2 xi - sin^2 xi_c) / sin^2 xi_c, (b_c/b)^2 - 1 = its negative over (b/b_c)^2
+        xi_c = math.asin(min(sin_c, 1.0))
+        x = np.where(outward, xi0, math.pi - xi0)
+        num = np.sin(x - xi_c) * np.sin(x + xi_c)
+        rho = np.where(plunging, np.log(-num / np.sin(x) ** 2), np.log(num / sin_c ** 2))
+    out = {k: np.full(n, np.nan) for k in ("xi", "dt", "ux", "uy", "b")}
+    radial = (s < 1e-12) | ~np.isfinite(rho)
+    for kname in ("P", "I"):
+        sel = np.flatnonzero((kind == kname) & ~radial & np.isfinite(xi0))
+        if not sel.size:
+            continue
+        ou, uu, sw = outward[sel], u[sel], sweep[sel]
+
+        def sweeps(rh):
+            orb = _orbits(kname, rh)
+            if kname == "P":
+                fo, fu = _orb.sweep(orb, np.full(rh.size, uo)), _orb.sweep(orb, uu)
+                return np.where(ou, fo - fu, fu - fo), orb, None
+            go, gu = _orb.sweep_inner(orb, np.full(rh.size, uo)), _orb.sweep_inner(orb, uu)
+            before, after = go - gu, go + gu
+            past = ou & (np.abs(after - sw) < np.abs(before - sw))  # past the apoapsis
+            return np.where(ou, np.where(past, after, before), gu - go), orb, past
+
+        x0 = rho[sel]
+        f0 = sweeps(x0)[0] - sw
+        x1 = x0 + 1e-7 * np.maximum(1.0, np.abs(x0))
+        f1 = sweeps(x1)[0] - sw
+        for _ in range(6):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x2 = x1 - f1 * (x1 - x0) / (f1 - f0)
+            x2 = np.where(np.isfinite(x2) & (f1 != f0), x2, x1)
+            x0, f0 = x1, f1
+            x1 = x2
+            f1 = sweeps(x1)[0] - sw
+            if np.all(np.abs(x1 - x0) <= 1e-14 * np.maximum(1.0, np.abs(x1))):
+                break
+        _, orb, past = sweeps(x1)
+        b = impact_parameter(kname, x1)
+        xi = np.arcsin(np.minimum(b * math.sqrt(v_o), 1.0))
+        xi = np.where(ou, xi, math.pi - xi)
+        if kname == "P":
+            dt = _orb.travel_time(orb, np.full(sel.size, uo), uu, r_a=np.full(sel.size, r_obs), r_b=r[sel])
+            going_out = ou
+        else:
+            to, tu = _orb.travel_time_inner(orb, np.full(sel.size, uo)), _orb.travel_time_inner(orb, uu)
+            dt = np.where(ou, np.where(past, to + tu, to - tu), tu - to)
+            going_out = ou & ~past
+        k = math.sqrt(1.0 - uo)
+        s2 = np.maximum(1.0 - b * b * uu * uu * (1.0 - uu), 0.0)
+        u_r = np.where(going_out, 1.0, -1.0) * k * np.sqrt(s2)
+        r_u_phi = (1.0 if order == 1 else -1.0) * k * b * uu
+        c, sn = np.cos(phi[sel]), np.sin(phi[sel])
+        out["xi"][sel], out["dt"][sel], out["b"][sel] = xi, dt, b
+        out["ux"][sel], out["uy"][sel] = u_r * c - r_u_phi * sn, u_r * sn + r_u_phi * c
+    rad = np.flatnonzero(radial & np.isfinite(xi0))
+    if rad.size:  # the radial rays (phi = 0 or pi on the axis)
+        inward = u[rad] > uo
+        out["xi"][rad] = np.where(inward, math.pi, 0.0)
+        out["dt"][rad] = _orb.radial_travel_time(uo, u[rad], r_a=r_obs, r_b=r[rad])
+        k = math.sqrt(1.0 - uo)
+        u_r = np.where(inward, -k, k)
+        out["ux"][rad], out["uy"][rad] = u_r * np.cos(phi[rad]), u_r * np.sin(phi[rad])
+        out["b"][rad] = 0.0
+    return out

@@ -58,7 +58,7 @@ and, for the curve itself, against lutgen.reference's DOP853 integrator).
 
 Light travel time: lutgen.orbit.travel_time from u_obs to u_hit, or, for a hit after the periapsis,
 from u_obs to the periapsis plus from there to u_hit (as lutgen.solver._finish does); on the inner
-branch a Gauss-Legendre quadrature in v, u = e3 + (e3 - e2) sinh^2(v) (:func:`_inner_time`).
+branch a Gauss-Legendre quadrature in v, u = e3 + (e3 - e2) sinh^2(v) (lutgen.orbit.travel_time_inner).
 
 Sky
 ---
@@ -97,7 +97,7 @@ import numpy as np
 from scipy.special import ellipj
 
 from lutgen import orbit as _orb
-from lutgen.rays import _sweep_inner
+from lutgen.orbit import sweep_inner as _sweep_inner
 from lutgen.solver import connect, static_observer_radius
 from .culling import side_planes
 from .mapping import Scene, any_perpendicular, plane_coordinates
@@ -701,8 +701,8 @@ class Rays:
             out = np.empty(len(idx))
             i = idx[inner]
             oi = self.orbit.subset(i)
-            t_o = _inner_time(oi, np.full(len(i), self.uo), self.g_obs[i])
-            t_u = _inner_time(oi, u[inner], None)
+            t_o = _orb.travel_time_inner(oi, np.full(len(i), self.uo))
+            t_u = _orb.travel_time_inner(oi, u[inner])
             after = ~self.inward[i] & (phi[inner] > self.g_obs[i])
             out[inner] = np.where(self.inward[i], t_u - t_o, np.where(after, t_o + t_u, t_o - t_u))
             rest = ~inner
@@ -738,35 +738,6 @@ class Rays:
 # --------------------------------------------------------------------------------------------------
 # Tracing
 # --------------------------------------------------------------------------------------------------
-_GL32 = np.polynomial.legendre.leggauss(32)
-
-
-def _inner_time(orb, u, _unused=None):
-    """Coordinate time (r_s/c) from the apoapsis e3 of inner-branch orbits (an observer inside the photon
-    sphere) to inverse radius u >= e3: integral e dx / (x^2 (1 - x) sqrt(P(x))), P = (x - e1)(x - e2)
-    (x - e3), with x = e3 + delta sinh^2(v), delta = e3 - e2 (which removes the root at e3 and the near
-    double root e2 of orbits that wind): dt = 2 e dv / (x^2 (1 - x) sqrt(x - e1)). Gauss-Legendre, 32
-    nodes on each of up to 64 segments of at most 0.5 in v (independent of lutgen.rays' table)."""
-    u = np.asarray(u, dtype=float)
-    e = orb.inv_b
-    delta = orb.delta
-    with np.errstate(invalid="ignore", divide="ignore"):
-        v_end = np.arcsinh(np.sqrt(np.maximum(u - orb.e3, 0.0) / delta))
-    n_seg = np.clip(np.ceil(v_end / 0.5), 1, 64).astype(int)
-    x_gl, w_gl = _GL32
-    out = np.zeros(u.size)
-    for k in range(int(n_seg.max())):
-        a = v_end * k / n_seg
-        b = v_end * (k + 1) / n_seg
-        live = k < n_seg
-        half = np.where(live, 0.5 * (b - a), 0.0)
-        v = (0.5 * (a + b))[:, None] + half[:, None] * x_gl[None, :]
-        x = orb.e3[:, None] + delta[:, None] * np.sinh(v) ** 2
-        f = 2.0 * e[:, None] / (x * x * (1.0 - x) * np.sqrt(x - orb.e1[:, None]))
-        out += half * (f @ w_gl)
-    return out
-
-
 def trace(scene: TriangleScene, camera: Camera, hole, r_s, *, pair_chunk: int = 400_000) -> PixelBuffers:
     """Reference image: the first triangle hit by the exact null geodesic through each pixel centre.
 
@@ -798,19 +769,14 @@ def image_pixels(points, camera: Camera, hole, r_s, order: int) -> tuple[np.ndar
 
     The direction comes from the exact connecting geodesic (lutgen.connect, the closed-form
     emitter-observer solver), not from a LUT and not from this module's ray tracing, so it is an
-    independent check of both. Inside the photon sphere, where lutgen.connect has no solution, from
-    lutgen.rays (checked against the DOP853 integrator to about 1e-7 rad; then the screen error
-    measures the subdivision and rasterisation, not the rays). NaN where the point has no image of
+    independent check of both (inside the photon sphere lutgen.connect polishes lutgen.rays' ray on
+    the closed-form swept angle: exact to rounding there too). NaN where the point has no image of
     that order (inside the horizon, on the camera-hole axis, non-finite) or the image lies behind the
     camera. hole: (3,) BU; r_s: BU.
     """
     scene = Scene(camera.position, hole, r_s)
     plane = plane_coordinates(np.asarray(points, dtype=np.float64).reshape(-1, 3), scene)
-    if scene.r_obs > 1.5:
-        conn = connect(scene.r_obs, plane.r, plane.phi, order)
-    else:  # no closed-form solver inside the photon sphere: lutgen.rays (checked against DOP853, ~1e-7 rad)
-        from lutgen.rays import RayMap
-        conn = RayMap(scene.r_obs, r_min=1.0 + 1e-6).lookup(plane.r, plane.phi, order)
+    conn = connect(scene.r_obs, plane.r, plane.phi, order)
     sign = 1.0 if order == 1 else -1.0
     direction = np.cos(conn.xi)[:, None] * scene.e1 + (sign * np.sin(conn.xi))[:, None] * plane.e2
     col, row, depth = camera.project(camera.position + direction)
