@@ -146,15 +146,15 @@ def test_observer_range():
 def test_exact_connect_inside_photon_sphere_against_dop853(r_obs):
     """lutgen.connect inside the photon sphere (the table's ray polished on the closed-form swept angle):
     the DOP853 integrator, shot at its xi, sweeps the target's angle at the target's radius after its
-    travel time, to the integrator's own accuracy; the table agrees to 2e-8 rad."""
+    travel time, to the integrator's own accuracy; the table agrees to within its 1e-6 rad."""
     rng = np.random.default_rng(int(r_obs * 1000))
     r = np.concatenate([10 ** rng.uniform(np.log10(1.02), 2, 25), [r_obs * 1.01, r_obs * 0.995]])
     p = rng.uniform(0.02, np.pi - 0.02, r.size)
     for o in (1, 2):
         c = lutgen.connect(r_obs, r, p, o)
         assert not np.isnan(c.xi).any()
-        table = rays.RayMap(r_obs, r_min=1.01).lookup(r, p, o)
-        assert np.max(np.abs(table.xi - c.xi)) < 2e-8
+        table = rays.RayMap(r_obs, r_min=1.001).lookup(r, p, o)
+        assert np.max(np.abs(table.xi - c.xi)) < 1e-6
         for i in range(r.size):
             sweep = p[i] if o == 1 else 2 * np.pi - p[i]
             shot = reference.shoot(r_obs, c.xi[i], side=1 if o == 1 else -1, phi_end=sweep, r_escape=1e6)
