@@ -201,8 +201,8 @@ def report(opt, shots, frames, acc):
               "elevation 25 degrees, looking away from the hole and down (90 degrees); the units and targets of "
               "docs/accuracy.md (mismatch under 0.5% of the covered pixels, screen error p99 under 0.5 px). The "
               "reference tracer's curves are closed forms on the inner branch too (checked against the DOP853 "
-              "integrator); inside the photon sphere its image positions come from lutgen.rays (no closed-form "
-              "solver there), so the screen error measures subdivision and rasterisation.", "",
+              "integrator), and the exact image positions come from lutgen.connect, which solves inside the "
+              "photon sphere too.", "",
               "| observer [r_s] | covered px | mismatch | screen error p99 [px] | sky p99 [px] | shadow differs "
               "[px] | shadow [px] | reference [s] | grlens [ms] |", "|---|---|---|---|---|---|---|---|---|"]
     for r_obs, cov, mis, scr, sky, shm, fell, t_ref, t_poly in acc:
