@@ -61,3 +61,20 @@ def test_images_and_sky_per_pixel_at_1_2_r_s():
     sky = check.metrics["sky"]
     assert sky["shadow_mismatch"] == 0 and sky["fell_ref"] > 1000  # the shadow fills most of the view
     assert sky["sky_angle_px"]["p99"] < 0.05
+
+
+def test_gr_illumination_by_a_light_inside_the_photon_sphere():
+    """A lamp at 1.3 r_s (its rays from lutgen.rays, as the add-on gives it below 1.6 r_s) lights the
+    sphere on its orbit: finite irradiance, both orders, some of it lit (the lamp's light reaches the
+    sphere along rays that cross the photon sphere)."""
+    pts, tris = uv_sphere(radius=0.5)
+    normals = pts[tris] / np.linalg.norm(pts[tris], axis=2, keepdims=True)
+    sphere = pipeline.SourceMesh(pts + np.array([0.0, 3.0, 0.0]), tris, corner_normals=normals)
+    scene = mapping.Scene([20.0, 0.0, 2.0], np.zeros(3), 1.0)
+    lamp = pipeline.Light(np.array([0.0, 1.3, 0.0]), 100.0, rays.RayMap(1.3, r_min=1.02))
+    out = pipeline.build_images(sphere, scene, rays.RayMap(scene.r_obs), pipeline.Settings(16, 5.0, 0.75, 8.0),
+                                light=lamp)
+    for order, mesh in out.items():
+        e = mesh.irradiance
+        assert e is not None and np.all(np.isfinite(e)), order
+        assert (e > 0).any(), order
