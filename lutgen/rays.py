@@ -263,23 +263,7 @@ class Kind:
         j0, wc = _cubic_stencil(cc, n_c)
         flat = data.reshape(-1)
         base = i0 * n_c + j0
-        v = np.zeros(c.size)
-        rows = []
-        for i in range(4):
-            row = np.zeros(c.size)
-            for j in range(4):
-                row += wc[j] * flat.take(base + (i * n_c + j))
-            rows.append(row)
-            v += wr[i] * row
-        out = np.flatnonzero(c != cc)
-        if out.size:  # linear continuation beyond the row's range
-            dw = _derivative_weights(cc[out], n_c)
-            slope = np.zeros(out.size)
-            for i in range(4):
-                for j in range(4):
-                    slope += wr[i, out] * dw[j] * flat.take(base[out] + (i * n_c + j))
-            v[out] += slope * (c[out] - cc[out])
-        return v
+        return _gather(flat, base, wr, wc, n_c) + _linear_tail(flat, base, n_c, c, cc, wr)
 
 
 def build_kind(name, rho_max, step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS, rho_min=RHO_MIN) -> Kind:
@@ -429,6 +413,17 @@ def _b_of(kind, rho):
 def _scale(kind, b):
     """The factor of the stored theta ranges (see :func:`_range_scale`) for kind codes."""
     return np.where(kind == 0, 1.0, np.where(kind == 1, b, 1.0 / b))
+
+
+def _gather(flat, base, wr, wc, n_c):
+    """Bicubic sum of the 4 x 4 nodes of a row-major table (``flat``, ``n_c`` columns) from the flat
+    indices ``base`` (N,), with row and column weights wr, wc (4, N)."""
+    v = np.zeros(base.size)
+    for i in range(4):
+        b = base + i * n_c
+        v += wr[i] * (wc[0] * flat.take(b) + wc[1] * flat.take(b + 1) + wc[2] * flat.take(b + 2)
+                      + wc[3] * flat.take(b + 3))
+    return v
 
 
 def _linear_tail(flat, base, n_c, c, cc, wr):
@@ -692,19 +687,10 @@ class RayMap:
         cc = np.clip(c, 0.0, n_c - 1)
         j0, wc = _cubic_stencil(cc, n_c)
         base = i0 * n_c + j0
-        u = self._gather(fl.u, base, wr, wc, n_c) + _linear_tail(fl.u, base, n_c, c, cc, wr)
+        u = _gather(fl.u, base, wr, wc, n_c) + _linear_tail(fl.u, base, n_c, c, cc, wr)
         if not want_j:
             return u, None
-        return u, self._gather(fl.j, base, wr, wc, n_c) + _linear_tail(fl.j, base, n_c, c, cc, wr)
-
-    @staticmethod
-    def _gather(flat, base, wr, wc, n_c):
-        v = np.zeros(base.size)
-        for i in range(4):
-            b = base + i * n_c
-            v += wr[i] * (wc[0] * flat.take(b) + wc[1] * flat.take(b + 1) + wc[2] * flat.take(b + 2)
-                          + wc[3] * flat.take(b + 3))
-        return v
+        return u, _gather(fl.j, base, wr, wc, n_c) + _linear_tail(fl.j, base, n_c, c, cc, wr)
 
     def _residual(self, seg, d, u, sweep, want=False, near=None):
         """f = u_ray - u on the rays d of segments ``seg`` for targets (u, sweep); ``near`` (mask):
