@@ -286,8 +286,15 @@ def main(argv=None):
     text = report(options(rng), images(), dolly(args.frames, rng))
     print(text)
     if args.write:
+        kept = ""  # the section of benchmarks/bench_moving.py stays
+        if os.path.exists(OUT):
+            with open(OUT) as f:
+                old = f.read()
+            begin, end = "<!-- bench_moving: begin -->", "<!-- bench_moving: end -->"
+            if begin in old and end in old:
+                kept = "\n" + old[old.index(begin):old.index(end) + len(end)] + "\n"
         with open(OUT, "w") as f:
-            f.write(text)
+            f.write(text + kept)
         print(f"wrote {os.path.relpath(OUT)}")
 
 

@@ -53,6 +53,10 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
         items=[("EVERY_DISTANCE", "Every Distance",
                 "Tables from LUT r min out to infinity for any camera distance: a camera or light that moves "
                 "needs no new table per frame (exact tables at fixed distances, interpolated)"),
+               ("ONE_TABLE", "One Table",
+                "One table of light orbits for every camera distance (inside the photon sphere too): a camera "
+                "that moves never waits for a table; each frame solves its points' rays from it (slower per "
+                "frame than Every Distance once its tables exist)"),
                ("FIXED_RANGE", "Fixed Range",
                 "One table over [LUT r min, LUT r max] with LUT rows x LUT columns nodes, built for the camera's "
                 "distance (a new one whenever it changes); geometry outside the range is not imaged")],

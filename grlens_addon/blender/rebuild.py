@@ -16,6 +16,7 @@ import bpy
 import numpy as np
 
 from ..core import culling, losses, mapping, pipeline
+
 from . import gather, lutcache, shading, upload, world
 
 COLLECTION = "grlens"
@@ -188,9 +189,10 @@ def scene_geometry(scene, depsgraph, preview: bool = False):
     r_obs = geo.r_obs
     if r_obs <= 1.0:
         raise RebuildError(f"the camera is inside the event horizon (r = {r_obs:.4g} r_s)")
-    if r_obs <= 1.5:
-        raise RebuildError(f"the camera is inside the photon sphere (r = {r_obs:.4g} r_s): the images need "
-                           "r > 1.5 r_s")
+    from lutgen.rays import R_OBS_MIN
+    if r_obs < R_OBS_MIN:
+        raise RebuildError(f"the camera is too close to the horizon (r = {r_obs:.6g} r_s): the images need "
+                           f"r >= {R_OBS_MIN} r_s")
     orders = tuple(o for o, on in ((1, g.show_order_1), (2, g.show_order_2)) if on)
     settings = pipeline.Settings(max_tess_level=g.max_tess_level, tess_a=g.tess_a, tess_b=g.tess_b,
                                  cull_ratio=g.cull_ratio, orders=orders,
@@ -473,8 +475,10 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
             else:
                 lpos = np.array(g.light.evaluated_get(depsgraph).matrix_world.translation)
                 r_light = float(np.linalg.norm(lpos - geo.hole) / geo.r_s)
-                if r_light <= 1.5:
-                    warn.append(f"the light is inside the photon sphere (r = {r_light:.3g} r_s)")
+                from lutgen.rays import R_OBS_MIN
+                if r_light < R_OBS_MIN:
+                    warn.append(f"the light is too close to the horizon (r = {r_light:.6g} r_s, needs "
+                                f">= {R_OBS_MIN} r_s)")
                 else:
                     light = pipeline.Light(lpos, g.light_intensity,
                                            lutcache.get_table(g, r_light))

@@ -8,7 +8,8 @@ Units and conventions
 ---------------------
 World positions, r_s, distances and light travel times c*dt are in Blender units (BU); internally
 lengths are in units of r_s (as in ``lutgen``), c = 1. The camera is a static observer at
-r_obs = |camera - hole| / r_s (> 1.5). ``e1 = (camera - hole)/|camera - hole|`` is its outward radial
+r_obs = |camera - hole| / r_s (> 1; inside the photon sphere too).
+``e1 = (camera - hole)/|camera - hole|`` is its outward radial
 direction; a ray leaving the camera in the world direction ``d`` makes the angle ``xi`` with e1 (in
 the observer's static orthonormal frame, which grlens identifies with Blender's Euclidean axes at the
 camera) and lies in the plane through the hole spanned by e1 and ``e2 = unit(d - (d.e1) e1)``. In
@@ -27,8 +28,11 @@ w = w_obs + s c Phi (s = +1 for rays that leave towards the hole, cos xi < 0, el
 * plunging orbits (b < b_crit): u = e1 + A (1 - cn(w|k^2)) / (1 + cn(w|k^2)), A = |m + i n - e1|,
   k^2 = (A + m - e1)/(2A), c = sqrt(A);
 
-both the inverse of lutgen.orbit.sweep (``w / c`` is the F(u) of that module). The swept angle is
-therefore exact, however often a ray near the critical impact parameter winds around the hole.
+both the inverse of lutgen.orbit.sweep (``w / c`` is the F(u) of that module). For an observer inside
+the photon sphere (r_obs <= 1.5) the turning rays lie on the inner branch u >= e3 (they climb to an
+apoapsis and fall in): u = (e3 - e2 sn^2(w | k^2)) / cn^2(w | k^2), same k^2 and c, w = 0 at the
+apoapsis, the inverse of the angle swept from it (lutgen.rays._sweep_inner, Carlson's form). The swept
+angle is therefore exact, however often a ray near the critical impact parameter winds around the hole.
 
 Intersections
 -------------
@@ -53,7 +57,8 @@ there is no step-size error; the answers are exact up to rounding (tested agains
 and, for the curve itself, against lutgen.reference's DOP853 integrator).
 
 Light travel time: lutgen.orbit.travel_time from u_obs to u_hit, or, for a hit after the periapsis,
-from u_obs to the periapsis plus from there to u_hit (as lutgen.solver._finish does).
+from u_obs to the periapsis plus from there to u_hit (as lutgen.solver._finish does); on the inner
+branch a Gauss-Legendre quadrature in v, u = e3 + (e3 - e2) sinh^2(v) (lutgen.orbit.travel_time_inner).
 
 Sky
 ---
@@ -92,7 +97,8 @@ import numpy as np
 from scipy.special import ellipj
 
 from lutgen import orbit as _orb
-from lutgen.solver import check_observer_radius, connect
+from lutgen.orbit import sweep_inner as _sweep_inner
+from lutgen.solver import connect, static_observer_radius
 from .culling import side_planes
 from .mapping import Scene, any_perpendicular, plane_coordinates
 from .ragged import group_offsets
@@ -524,7 +530,7 @@ class Rays:
         self.hole = np.asarray(hole, dtype=np.float64).reshape(3)
         self.r_s = float(r_s)
         rel = (self.origin - self.hole) / self.r_s
-        self.r_obs = check_observer_radius(np.linalg.norm(rel))
+        self.r_obs = static_observer_radius(np.linalg.norm(rel))
         if self.r_obs > _R_OBS_MAX:
             raise ValueError(f"the camera is {self.r_obs:.3g} r_s from the hole; above {_R_OBS_MAX:.0e} r_s "
                              "lutgen's orbit roots lose their precision (use a larger r_s for a flat-space limit)")
@@ -564,6 +570,18 @@ class Rays:
         self.f_obs = _orb.sweep(orb, np.full(n, self.uo))
         self.w0 = self.c * self.f_obs
         self.s = np.where(self.inward, 1.0, -1.0)
+        # an observer inside the photon sphere: its turning rays are on the inner branch u >= e3, from the
+        # apoapsis u = e3 (w = 0): u = (e3 - e2 sn^2(w)) / cn^2(w), w = c G, G the angle swept from the
+        # apoapsis (lutgen.rays._sweep_inner), c = sqrt(e3 - e1)/2, the same k^2
+        self.inner = self.turning & (self.uo >= _orb.U_PHOTON)
+        self.g_obs = np.full(n, np.nan)
+        if self.inner.any():
+            i = self.inner
+            oi = orb.subset(i)
+            p_uo = self.uo * self.uo * (1.0 - self.uo) * (cos_xi[i] / sin_xi[i]) ** 2  # P(uo), no cancellation
+            gap = p_uo / ((self.uo - oi.e1) * (self.uo - oi.e2))
+            self.g_obs[i] = _sweep_inner(oi, np.full(int(i.sum()), self.uo), gap)
+            self.w0[i] = self.c[i] * self.g_obs[i]
         with np.errstate(invalid="ignore"):
             f_peri = _orb.sweep_to_turning_point(orb)
         self.f_peri = f_peri
@@ -574,14 +592,20 @@ class Rays:
             f1[p] = _orb.sweep(orb.subset(p), np.ones(int(p.sum())))
         self.phi_end = np.where(~self.inward, self.f_obs - f0,
                                 np.where(self.turning, 2.0 * f_peri - self.f_obs - f0, f1 - self.f_obs))
+        if self.inner.any():  # to the horizon: out to the apoapsis and back, or straight in
+            i = self.inner
+            g1 = _sweep_inner(orb.subset(i), np.ones(int(i.sum())))
+            self.phi_end[i] = np.where(self.inward[i], g1 - self.g_obs[i], g1 + self.g_obs[i])
+            self.phi_peri[i] = np.nan
 
     def __len__(self):
         return len(self.b)
 
     @property
     def falls_in(self) -> np.ndarray:
-        """Rays that cross the horizon (inward and b < b_crit)."""
-        return self.inward & ~self.turning
+        """Rays that cross the horizon (inward and b < b_crit; inside the photon sphere also every ray with
+        b > b_crit)."""
+        return (self.inward & ~self.turning) | self.inner
 
     def u(self, idx, phi):
         """u = r_s/r and du/dPhi of rays ``idx`` at swept angles ``phi`` (arrays of one shape)."""
@@ -594,6 +618,13 @@ class Rays:
             one_p = 1.0 + cn
             u = self.e1r[idx] + amp * np.where(turn, sn * sn, (1.0 - cn) / one_p)
             du = dw * amp * 2.0 * sn * dn * np.where(turn, cn, 1.0 / (one_p * one_p))
+            inner = self.inner[idx]
+            if inner.any():
+                o = self.orbit
+                e2, e3 = o.e2[idx][inner], o.e3[idx][inner]
+                s_, c_, d_ = sn[inner], cn[inner], dn[inner]
+                u[inner] = (e3 - e2 * s_ * s_) / (c_ * c_)
+                du[inner] = dw[inner] * 2.0 * s_ * d_ * (e3 - e2) / (c_ * c_ * c_)
         return u, du
 
     def shell_intervals(self, r_lo: float, r_hi: float, pad: float = 1e-9) -> np.ndarray:
@@ -635,6 +666,29 @@ class Rays:
             lo_c, hi_c = np.where(ok3, u_a, 0.5 * uo), np.where(ok3, hi3, 0.5 * uo)
             a, b = fo - F(hi_c), fo - F(lo_c)
             out[ok3, 0, 0], out[ok3, 0, 1] = a[ok3], b[ok3]
+        if self.inner.any():  # inside the photon sphere: the turning rays' legs on the inner branch
+            i = np.flatnonzero(self.inner)
+            out[i] = np.nan
+            oi = orb.subset(i)
+            g_o = self.g_obs[i]
+            e3 = oi.e3
+
+            def G(u):
+                return _sweep_inner(oi, u)
+
+            with np.errstate(invalid="ignore"):
+                inw = self.inward[i]
+                # inward: u from uo up to 1; outward: from uo down to e3, then (after the apoapsis) up to 1
+                lo, hi = np.maximum(np.where(inw, uo, e3), u_a), np.minimum(np.where(inw, 1.0, uo), u_b)
+                ok = lo <= hi
+                lo_c, hi_c = np.where(ok, lo, e3), np.where(ok, hi, e3)
+                a = np.where(inw, G(lo_c) - g_o, g_o - G(hi_c))
+                b = np.where(inw, G(hi_c) - g_o, g_o - G(lo_c))
+                out[i[ok], 0, 0], out[i[ok], 0, 1] = a[ok], b[ok]
+                lo2, hi2 = np.maximum(e3, u_a), np.minimum(1.0, u_b)
+                ok2 = ~inw & (lo2 <= hi2)
+                lo_c, hi_c = np.where(ok2, lo2, e3), np.where(ok2, hi2, e3)
+                out[i[ok2], 1, 0], out[i[ok2], 1, 1] = (g_o + G(lo_c))[ok2], (g_o + G(hi_c))[ok2]
         out[..., 0] = np.maximum(out[..., 0] - pad, 0.0)
         out[..., 1] += pad
         return out
@@ -642,6 +696,19 @@ class Rays:
     def travel_time(self, idx, phi, u):
         """Light travel time (units of r_s/c) from the observer to the points at swept angle ``phi``
         (inverse radius ``u``) of rays ``idx``."""
+        inner = self.inner[idx]
+        if inner.any():
+            out = np.empty(len(idx))
+            i = idx[inner]
+            oi = self.orbit.subset(i)
+            t_o = _orb.travel_time_inner(oi, np.full(len(i), self.uo))
+            t_u = _orb.travel_time_inner(oi, u[inner])
+            after = ~self.inward[i] & (phi[inner] > self.g_obs[i])
+            out[inner] = np.where(self.inward[i], t_u - t_o, np.where(after, t_o + t_u, t_o - t_u))
+            rest = ~inner
+            if rest.any():
+                out[rest] = self.travel_time(idx[rest], phi[rest], u[rest])
+            return out
         orb = self.orbit.subset(idx)
         after = self.turning[idx] & self.inward[idx] & (phi > self.phi_peri[idx])
         uo = np.full(len(idx), self.uo)
@@ -702,8 +769,10 @@ def image_pixels(points, camera: Camera, hole, r_s, order: int) -> tuple[np.ndar
 
     The direction comes from the exact connecting geodesic (lutgen.connect, the closed-form
     emitter-observer solver), not from a LUT and not from this module's ray tracing, so it is an
-    independent check of both. NaN where the point has no image of that order (inside the horizon,
-    on the camera-hole axis, non-finite) or the image lies behind the camera. hole: (3,) BU; r_s: BU.
+    independent check of both (inside the photon sphere lutgen.connect polishes lutgen.rays' ray on
+    the closed-form swept angle: exact to rounding there too). NaN where the point has no image of
+    that order (inside the horizon, on the camera-hole axis, non-finite) or the image lies behind the
+    camera. hole: (3,) BU; r_s: BU.
     """
     scene = Scene(camera.position, hole, r_s)
     plane = plane_coordinates(np.asarray(points, dtype=np.float64).reshape(-1, 3), scene)
