@@ -331,6 +331,13 @@ def test_the_cache_folder_preference_wins_over_the_environment(addon_prefs, tmp_
     assert lutcache._disk_path("t").startswith(str(tmp_path / "from_prefs") + os.sep)
     monkeypatch.delenv(lutcache.CACHE_ENV)
     assert lutcache._disk_path("t").startswith(str(tmp_path / "from_prefs") + os.sep)
+    import threading
+
+    seen = []
+    worker = threading.Thread(target=lambda: seen.append(lutcache._disk_path("t")))  # (a build thread)
+    worker.start()
+    worker.join()
+    assert seen[0].startswith(str(tmp_path / "from_prefs") + os.sep)
     addon_prefs.lut_cache_dir = ""
     assert lutcache._disk_path("t") is None
     layout = Layout()

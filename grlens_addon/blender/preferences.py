@@ -5,6 +5,7 @@ the preference ``lut_cache_dir`` when it is set, else the environment variable `
 (render farms that set it per job keep working); neither: no disk cache.
 """
 import os
+import threading
 
 import bpy
 
@@ -56,14 +57,18 @@ def addon_preferences():
     return getattr(addon, "preferences", None) if addon is not None else None
 
 
+_last_folder = {"pref": ""}  # the preference as last read on the main thread (see lut_cache_folder)
+
+
 def lut_cache_folder() -> str:
     """The disk cache's folder (absolute; ``//`` relative to the open .blend): the preference if set,
-    else ``GRLENS_LUT_CACHE``; "" for none."""
-    prefs = addon_preferences()
-    folder = getattr(prefs, "lut_cache_dir", "") if prefs is not None else ""
-    if folder:
-        return bpy.path.abspath(folder)
-    return os.environ.get(CACHE_ENV, "")
+    else ``GRLENS_LUT_CACHE``; "" for none. The preference is read on the main thread only (Blender's
+    data is not thread-safe); another thread gets the value last read there."""
+    if threading.current_thread() is threading.main_thread():
+        prefs = addon_preferences()
+        folder = getattr(prefs, "lut_cache_dir", "") if prefs is not None else ""
+        _last_folder["pref"] = bpy.path.abspath(folder) if folder else ""
+    return _last_folder["pref"] or os.environ.get(CACHE_ENV, "")
 
 
 CLASSES = (GRLENS_AddonPreferences,)
