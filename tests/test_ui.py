@@ -220,6 +220,14 @@ def test_add_black_hole_shows_horizon_and_photon_sphere_and_follows_r_s():
     h.scale = (2.0, 2.0, 2.0)  # scaled: still shown at true size
     scene.frame_set(1)
     assert h.empty_display_size == pytest.approx(1.5) and ps.empty_display_size == pytest.approx(2.25)
+    # a hole made for another r_s follows this scene's when it is chosen again
+    scene.grlens.black_hole = None
+    scene.animation_data_clear()
+    scene.grlens.r_s = 1.0
+    h.scale = (1.0, 1.0, 1.0)
+    bpy.context.view_layer.update()  # (the new scale reaches matrix_world)
+    scene.grlens.black_hole = h
+    assert h.empty_display_size == pytest.approx(1.0) and ps.empty_display_size == pytest.approx(1.5)
     # the demo scene's hole is one too
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene, _ = _demo()

@@ -159,8 +159,9 @@ class GRLENS_OT_add_black_hole(bpy.types.Operator):
             collection = scene.collection
         auto, g.auto_update = g.auto_update, False  # (one rebuild at the end, not one per change)
         try:
-            where = self.location if self.properties.is_property_set("location") else scene.cursor.location
-            new, former = hole.add(scene, collection, tuple(where))
+            if not self.properties.is_property_set("location"):
+                self.location = scene.cursor.location  # (then shown, and kept, in the redo panel)
+            new, former = hole.add(scene, collection, tuple(self.location))
             lensed = 0
             for obj in chosen:
                 if not obj.grlens.enabled:

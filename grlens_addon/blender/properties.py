@@ -21,6 +21,15 @@ def _r_s_changed(self, context):
     _changed(self, context)
 
 
+def _hole_changed(self, context):
+    """Black Hole chosen: a hole of Add > Black Hole shows the scene's r_s (it may have been made for
+    another), then rebuild (a mesh as the hole gets its note in the panel and the report)."""
+    from . import hole
+
+    hole.sync(self.id_data)
+    _changed(self, context)
+
+
 def _gr_illumination_changed(self, context):
     """Switching GR illumination on creates its node group at once (for material set-up before any
     rebuild), then rebuilds like any setting."""
@@ -46,7 +55,7 @@ def _is_camera(self, obj) -> bool:
 
 class GRLENS_SceneSettings(bpy.types.PropertyGroup):
     black_hole: PointerProperty(
-        name="Black Hole", type=bpy.types.Object, update=_changed,
+        name="Black Hole", type=bpy.types.Object, update=_hole_changed,
         description="Object whose location is the centre of the black hole (usually an empty)")
     observer: PointerProperty(
         name="Observer", type=bpy.types.Object, update=_changed, poll=_is_camera,
