@@ -111,6 +111,7 @@ def test_the_readme_lists_the_reasons_and_ci_runs_the_check():
     assert "POSIX permission bits" in reasons
     run = (ROOT / ".ci" / "run").read_text()
     assert "--junitxml=" in run and ".ci/check_report.py" in run and "./dev test" in run
+    assert "scripts/build_extension.py --output-dir dist" in run  # the zips users install
 
 
 def test_the_checkout_s_parent_folder_is_not_on_the_import_path():
@@ -136,3 +137,14 @@ def test_a_stray_module_beside_a_checkout_is_not_imported(tmp_path, mode):
     r = subprocess.run([sys.executable, "-m", "pytest", "-q", *args], cwd=checkout, capture_output=True, text=True,
                        timeout=120, env=env)
     assert r.returncode == (0 if mode == "ours" else 1), r.stdout + r.stderr
+
+
+def test_ci_run_fails_when_the_suite_collects_nothing():
+    """.ci/run itself, on this repository, with a selection that matches no test: it fails (pytest's
+    own status 5 would do too; the check says why) and builds nothing."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTEST_ADDOPTS"}
+    r = subprocess.run([str(ROOT / ".ci" / "run"), "-k", "no_test_is_called_this"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=600, env=env)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "ci: no test ran" in r.stderr, r.stdout + r.stderr
+    assert "build_extension" not in r.stdout
