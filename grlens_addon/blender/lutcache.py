@@ -20,7 +20,8 @@ two render-farm processes get identical geometry; packing (``bpy.ops.grlens.pack
 the build time when the file is opened elsewhere. Packed tables live, exactly (float64), as hidden
 custom-property arrays on the Text data-block "grlens LUTs" (fake user), one per table.
 
-A disk cache, when the environment variable ``GRLENS_LUT_CACHE`` names a directory: every table
+A disk cache, when the add-on preference "Table Cache Folder" or else the environment variable
+``GRLENS_LUT_CACHE`` names a directory (preferences.lut_cache_folder): every table
 built is also written there (``grlens-<sha1 of its name>.npz``, float64, exact; about 7 MB per
 family table) and read back by later processes, so a farm machine or a shared directory builds each
 table once, whatever the .blend holds. A file that cannot be read, is damaged, or holds another
@@ -37,6 +38,7 @@ import bpy
 import numpy as np
 
 from ..core.mapping import round_radius
+from . import preferences
 
 STORE = "grlens LUTs"
 _CACHE = OrderedDict()
@@ -54,12 +56,13 @@ family's and fixed-range tables stop at the photon sphere (1.5 r_s), and the fam
 from about 1.6 r_s (its exact tables at 1 + exp(k/8) r_s from 1.51 r_s, four around each radius)."""
 
 
-CACHE_ENV = "GRLENS_LUT_CACHE"
-"""Environment variable naming the directory of the disk cache (unset or empty: no disk cache)."""
+CACHE_ENV = preferences.CACHE_ENV
+"""Environment variable naming the directory of the disk cache (unset or empty: no disk cache), used
+when the add-on preference "Table Cache Folder" is empty (preferences.lut_cache_folder)."""
 
 
 def _disk_path(name):
-    folder = os.environ.get(CACHE_ENV, "")
+    folder = preferences.lut_cache_folder()
     if not folder:
         return None
     return os.path.join(folder, "grlens-" + hashlib.sha1(name.encode()).hexdigest() + ".npz")

@@ -13,6 +13,23 @@ def _changed(self, context):
     handlers.request_rebuild(context.scene if context else None)
 
 
+def _r_s_changed(self, context):
+    """r_s set: the hole of Add > Black Hole shows the new horizon and photon sphere, then rebuild."""
+    from . import hole
+
+    hole.sync(self.id_data)  # (the scene whose r_s this is)
+    _changed(self, context)
+
+
+def _hole_changed(self, context):
+    """Black Hole chosen: a hole of Add > Black Hole shows the scene's r_s (it may have been made for
+    another), then rebuild (a mesh as the hole gets its note in the panel and the report)."""
+    from . import hole
+
+    hole.sync(self.id_data)
+    _changed(self, context)
+
+
 def _gr_illumination_changed(self, context):
     """Switching GR illumination on creates its node group at once (for material set-up before any
     rebuild), then rebuilds like any setting."""
@@ -38,14 +55,14 @@ def _is_camera(self, obj) -> bool:
 
 class GRLENS_SceneSettings(bpy.types.PropertyGroup):
     black_hole: PointerProperty(
-        name="Black Hole", type=bpy.types.Object, update=_changed,
+        name="Black Hole", type=bpy.types.Object, update=_hole_changed,
         description="Object whose location is the centre of the black hole (usually an empty)")
     observer: PointerProperty(
         name="Observer", type=bpy.types.Object, update=_changed, poll=_is_camera,
         description="Camera whose view is lensed (the static observer); empty: the scene's active camera. "
                     "Render through another camera to see the image meshes from outside")
     r_s: FloatProperty(
-        name="Schwarzschild Radius", default=1.0, soft_min=1e-6, soft_max=100.0, unit="LENGTH", update=_changed,
+        name="Schwarzschild Radius", default=1.0, soft_min=1e-6, soft_max=100.0, unit="LENGTH", update=_r_s_changed,
         description="Schwarzschild radius r_s of the black hole, in scene length units (a positive length; "
                     "zero or a negative value is refused with a message, never clamped)")
     lut_mode: EnumProperty(

@@ -168,7 +168,7 @@ def hole_notes(scene) -> list[str]:
     hole = scene.grlens.black_hole
     if hole is not None and hole.type in GEOMETRY_TYPES and not hole.hide_render:
         return [f"the black hole '{hole.name}' is a {hole.type.lower()} and renders inside the shadow: "
-                "use an empty for the hole, or hide it from renders"]
+                "use Add > Black Hole (an empty that never renders), or hide it from renders"]
     return []
 
 
