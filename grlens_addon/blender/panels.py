@@ -57,6 +57,7 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         row.prop(g, "tess_b")
         box.prop(g, "tess_max_error")
         box.prop(g, "tess_max_error_viewport")
+        box.prop(g, "max_triangles")
         box.prop(g, "cull_ratio")
         box = layout.box()
         box.label(text="Lookup table (radii in r_s)")

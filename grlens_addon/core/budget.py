@@ -63,6 +63,31 @@ so these pieces only compete with it for the same pixels. Trades a few map looku
 texture placement next to the axis (a square behind the hole crossed off its centre: 0.92 px ->
 0.33 px, tests/test_stages.py)."""
 
+LIGHT_TRAVEL_TOLERANCE = 0.01
+"""The light-travel-time pass (c*dt, interpolated over a piece) stays within this fraction of the
+exact c*dt everywhere inside a piece (interior.py): the pass's own budget, as relative as the
+quantity it is used for (depth, time delay)."""
+
+SAMPLE_REACH = 0.1
+SAMPLE_MIN_PX = 1.0
+"""Which pieces are measured inside (interior.py). The map bends on the scale of a point's distance
+from the camera (perspective) and from the hole (lensing); over a source triangle smaller than
+SAMPLE_REACH times both it is quadratic to within that fraction, so the level plan's midpoint rule
+judges its edges, and its pieces' insides follow from their edges. Only the pieces of larger source
+triangles are sampled, and of those only the pieces whose image spans more than SAMPLE_MIN_PX pixels
+(the level plan leaves such edges uncut too) or whose own extent exceeds SAMPLE_REACH times their light
+travel distance (a distance bends by about reach^2 / 8 of itself over that reach: 0.00125, far inside
+LIGHT_TRAVEL_TOLERANCE). Lower samples more pieces per frame; higher trusts the plan farther."""
+
+REFINE_ROUNDS = 8
+"""The refine step (pipeline.run_stages, interior.judge). While a kept piece breaks the budget inside
+(error E > 1 in units of the budget, interior.py), its source triangle is split in four and the
+stages run again on the finer source, at most REFINE_ROUNDS times: the level plan then cuts the
+smaller triangles, whose edges bend evenly enough for its midpoint rule, so the cut is graded where
+the error is (a uniform cut of the whole triangle at the level its worst piece needs would make
+several times the pieces on a ground plane). The image triangles of one object are bounded by
+Settings.max_triangles: the worst triangles are split first, and the rounds stop when none fits."""
+
 # --- the level plan -----------------------------------------------------------------------------
 
 RING_MAGNIFICATION = 2.0
