@@ -71,10 +71,10 @@ quantity it is used for (depth, time delay)."""
 SAMPLE_REACH = 0.1
 SAMPLE_MIN_PX = 1.0
 """Which pieces are measured inside (interior.py). The map bends on the scale of a point's distance
-from the camera (perspective) and from the hole (lensing); over a source triangle smaller than
-SAMPLE_REACH times both it is quadratic to within that fraction, so the level plan's midpoint rule
-judges its edges, and its pieces' insides follow from their edges. Only the pieces of larger source
-triangles are sampled, and of those only the pieces whose image spans more than SAMPLE_MIN_PX pixels
+from the camera (perspective) and from the hole (lensing); over a source edge shorter than
+SAMPLE_REACH times both (at its nearer end) it is quadratic to within that fraction, so the level
+plan's midpoint rule judges it, and the insides of pieces of triangles with such edges follow from
+their edges. Only the pieces of source triangles with a longer edge are sampled, and of those only the pieces whose image spans more than SAMPLE_MIN_PX pixels
 (the level plan leaves such edges uncut too) or whose own extent exceeds SAMPLE_REACH times their light
 travel distance (a distance bends by about reach^2 / 8 of itself over that reach: 0.00125, far inside
 LIGHT_TRAVEL_TOLERANCE). Lower samples more pieces per frame; higher trusts the plan farther."""
@@ -160,9 +160,11 @@ fold behind it fills in (margin 0: the sphere's mismatch at 170 deg 0.21% -> 0.3
 
 BACK_FACE_MIN_PIECES = 4096
 """Back faces are looked for only when the subdivided triangles of an order would make at least this
-many pieces (and at least as many as the mesh has triangles): the test looks up the rays of their
-corners and checks that the mesh is closed, which costs more than it saves on a mesh that is hardly
-subdivided."""
+many pieces (and at least as many as the mesh has triangles), or, on a dense mesh, when this many of
+its triangles are in view (then among all of them, split or not: half of a dense closed mesh is
+hidden behind its front, and its images, corner values and upload cost more than the test): the
+test looks up the rays of their corners and checks that the mesh is closed, which costs more than
+it saves on a mesh that is hardly subdivided."""
 
 # --- axis patches ---------------------------------------------------------------------------------
 

@@ -104,23 +104,18 @@ def midpoint_errors(frame, qa, qb, la, lb, mid) -> tuple[np.ndarray, np.ndarray]
     return px, lt
 
 
-def reach_ratio(frame, source) -> np.ndarray:
-    """(T,) each source triangle's longest side over the smallest distance of a corner from the camera
-    or the hole (dimensionless; budget.SAMPLE_REACH)."""
-    pts, tris = source.positions, source.tris
-    scene = frame.scene
-    dist = np.minimum(row_norm(pts - scene.camera), row_norm(pts - scene.hole)).take(tris)
-    s = pts.take(tris, axis=0)
-    reach = np.maximum(np.maximum(row_norm(s[:, 1] - s[:, 0]), row_norm(s[:, 2] - s[:, 1])),
-                       row_norm(s[:, 0] - s[:, 2]))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return reach / dist.min(axis=1)
-
-
 def sampled_sources(frame, source) -> np.ndarray:
-    """(T,) bool: the source triangles whose pieces are measured (budget.SAMPLE_REACH): longest side
-    (BU) above SAMPLE_REACH times the smallest distance of a corner from the camera or the hole."""
-    return reach_ratio(frame, source) > B.SAMPLE_REACH
+    """(T,) bool: the source triangles whose pieces are measured (budget.SAMPLE_REACH): those with an
+    edge longer (BU) than SAMPLE_REACH times the distance of its nearer end from the camera or the
+    hole. Per vertex and per edge, so that a dense mesh costs one pass over its edges."""
+    pts, ev = source.positions, source.edges.verts
+    scene = frame.scene
+    scale = np.minimum(row_norm(pts - scene.camera), row_norm(pts - scene.hole))
+    length = row_norm(pts.take(ev[:, 1], axis=0) - pts.take(ev[:, 0], axis=0))
+    if not length.max(initial=0.0) > B.SAMPLE_REACH * scale.min(initial=np.inf):
+        return np.zeros(len(source.tris), bool)
+    long = length > B.SAMPLE_REACH * np.minimum(scale.take(ev[:, 0]), scale.take(ev[:, 1]))
+    return long.take(source.edges.of_tri).any(axis=1)
 
 
 @dataclass
@@ -177,6 +172,9 @@ def judge(frame, st, memo=None, last: bool = False) -> Verdict:
     if not frame.budget.active or n_src == 0 or not st.orders:
         return verdict
     sampled = sampled_sources(frame, source)
+    if not sampled.any():
+        verdict.per_order = {o: Beyond() for o, s in st.orders.items() if s.keep is not None}
+        return verdict
     tol, lt_tol = frame.budget.tolerance_px, B.LIGHT_TRAVEL_TOLERANCE
     worst = np.zeros(n_src)
     pieces = np.zeros(n_src)

@@ -229,17 +229,21 @@ class Subdivided:
         return carry_rows(self.row_bary, self.row_src, self.corner_row, values, self.n_unit_rows)
 
 
-def carry_rows(row_bary, row_src, corner_row, values, n_unit=0) -> np.ndarray:
+def carry_rows(row_bary, row_src, corner_row, values, n_unit=0, unit=False) -> np.ndarray:
     """(F, 3, K) corner values of faces whose corners are rows ``corner_row`` (F, 3) of barycentric
     coordinates ``row_bary`` (R, 3) in the source triangles ``row_src`` (R,), from those triangles'
     corner values ``values`` (T, 3, K) (see :class:`Subdivided`). The first ``n_unit`` rows are the
     corners of whole source triangles (barycentrics (1, 0, 0), (0, 1, 0), (0, 0, 1) in turn, as
-    Subdivided.n_unit_rows): their values are taken, not interpolated."""
+    Subdivided.n_unit_rows): their values are taken, not interpolated. ``unit``: the values are unit
+    vectors (normals): the interpolated ones are normalised again (once per row)."""
     values = np.asarray(values)
     per_row = np.empty((len(row_bary), values.shape[2]))
     if n_unit:
         per_row[:n_unit] = values[row_src[:n_unit], np.arange(n_unit) % 3]
-    per_row[n_unit:] = np.einsum("rj,rjk->rk", row_bary[n_unit:], values.take(row_src[n_unit:], axis=0))
+    mixed = np.einsum("rj,rjk->rk", row_bary[n_unit:], values.take(row_src[n_unit:], axis=0))
+    if unit:
+        mixed /= np.maximum(np.sqrt(np.einsum("rk,rk->r", mixed, mixed)), 1e-300)[:, None]
+    per_row[n_unit:] = mixed
     return per_row.take(corner_row, axis=0)
 
 

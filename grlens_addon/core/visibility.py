@@ -27,6 +27,7 @@ class Sight:
         self.frame, self.source, self.coarse = frame, source, coarse
         self._closed = None
         self._d = {}
+        self._normals = None
 
     def closed(self) -> bool:
         """True for a closed, outward-wound surface seen from outside (computed once)."""
@@ -50,11 +51,27 @@ class Sight:
 
     def turned_away(self, tri_idx, orders) -> np.ndarray:
         """(len(tri_idx),) bool: the source triangles ``tri_idx`` turned away (BACK_FACE_MARGIN) along
-        the rays of every order in ``orders``; only their corners are looked up."""
-        corners, pts, local = silhouette.compact(self.source.positions, self.source.tris.take(tri_idx, axis=0))
-        away = np.ones(len(tri_idx), bool)
+        the rays of every order in ``orders`` (silhouette.turned_away, corner by corner: only the
+        triangles turned away at the corners before are looked at the next)."""
+        src = self.source
+        if self._normals is None:  # unit geometric normals of every triangle, once
+            n = silhouette.normals(src.positions, src.tris)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                n /= mapping.row_norm(n)[:, None]
+            self._normals = n
+        tri_idx = np.asarray(tri_idx, dtype=np.int64)
+        rows = np.arange(len(tri_idx))
         for o in orders:
-            away &= silhouette.turned_away(pts, local, self.leaving(corners, o), B.BACK_FACE_MARGIN)
+            self.leaving(np.zeros(0, np.int64), o)  # (every vertex's, once per order)
+            d = self._d[o]
+            for k in range(3):
+                t = tri_idx.take(rows)
+                corner = src.tris[:, k].take(t)
+                with np.errstate(invalid="ignore"):
+                    dots = np.einsum("fx,fx->f", self._normals.take(t, axis=0), d.take(corner, axis=0))
+                rows = rows[dots < -B.BACK_FACE_MARGIN]  # NaN (no ray): not turned away
+        away = np.zeros(len(tri_idx), bool)
+        away[rows] = True
         return away
 
     def hidden(self, tri_idx, orders) -> np.ndarray:
@@ -88,9 +105,12 @@ class Sight:
     def back_faces(self, selected, tri_level, order) -> np.ndarray:
         """The indices among ``selected`` (source triangles, with their levels ``tri_level``) hidden
         behind the surface's front in ``order``, looked for only when their pieces would be many
-        (BACK_FACE_MIN_PIECES)."""
+        (BACK_FACE_MIN_PIECES): among the split ones, or among all of them on a mesh that has that many
+        triangles itself (a dense mesh, whose back faces would otherwise all be drawn)."""
         split = selected[tri_level > 1]
         n_tris = len(self.source.tris)
+        if len(selected) >= B.BACK_FACE_MIN_PIECES and self.closed():  # a dense mesh: every triangle
+            return selected[self.turned_away(selected, (order,))]
         if split.size and int((tri_level[tri_level > 1] ** 2).sum()) >= max(B.BACK_FACE_MIN_PIECES, n_tris) \
                 and self.closed():
             return split[self.turned_away(split, (order,))]
