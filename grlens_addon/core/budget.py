@@ -79,14 +79,14 @@ their edges. Only the pieces of source triangles with a longer edge are sampled,
 travel distance (a distance bends by about reach^2 / 8 of itself over that reach: 0.00125, far inside
 LIGHT_TRAVEL_TOLERANCE). Lower samples more pieces per frame; higher trusts the plan farther."""
 
-REFINE_ROUNDS = 8
-"""The refine step (pipeline.run_stages, interior.judge). While a kept piece breaks the budget inside
-(error E > 1 in units of the budget, interior.py), its source triangle is split in four and the
-stages run again on the finer source, at most REFINE_ROUNDS times: the level plan then cuts the
-smaller triangles, whose edges bend evenly enough for its midpoint rule, so the cut is graded where
-the error is (a uniform cut of the whole triangle at the level its worst piece needs would make
-several times the pieces on a ground plane). The image triangles of one object are bounded by
-Settings.max_triangles: the worst triangles are split first, and the rounds stop when none fits."""
+REFINE_ROUNDS = 12
+"""The refine step (interior.refine, run by pipeline.run_stages after the culling). A kept piece that
+breaks the budget inside (error E > 1 in units of the budget, interior.measure) is cut in four at its
+edges' midpoints (its neighbours in two across a cut edge, so that the mesh stays watertight), and
+the new pieces are measured again, at most REFINE_ROUNDS times (each round halves a piece's size and
+quarters its error where the map is smooth: 12 rounds reach 4096 times finer). Only the pieces that
+break the budget are cut, so the cut is graded where the error is, and nothing caps it but this and
+Settings.max_triangles (the image triangles of one object; the worst pieces are cut first)."""
 
 # --- the level plan -----------------------------------------------------------------------------
 

@@ -131,95 +131,202 @@ class Beyond:
     lt_rel: float = 0.0
 
 
-@dataclass
-class Verdict:
-    """:func:`judge`'s answer: ``split_levels`` (E,) per source edge for the next round (None: no
-    round), ``per_order`` {order: Beyond} and ``bound_reached`` (a split was left out for
-    Settings.max_triangles); for :meth:`carry`, ``memo``: per order the measured figures per source
-    triangle (pieces sampled, pieces beyond, largest screen px, largest lt rel; (4, T)) and the
-    source's ``of_tri``."""
+def refine(frame, source, pieces, keep, order, room, sampled=None):
+    """The refine step of one order: the kept pieces of the source triangles that are sampled
+    (:func:`sampled_sources`, or ``sampled`` (T,) bool when given) are measured (:func:`measure`);
+    those beyond the budget are cut in four at their edges' midpoints, their neighbours in two
+    across a cut edge (in four when two of their edges are cut), so that the mesh stays watertight,
+    and the new pieces are measured again, at most budget.REFINE_ROUNDS times. The worst pieces are
+    cut first, and no cut is made that would bring the kept pieces beyond ``room`` image triangles
+    (Settings.max_triangles less the other orders'). Cut pieces stay in ``pieces`` (not kept); their
+    parts are appended, each corner's values interpolated in its source triangle like the cut's.
 
-    split_levels: np.ndarray | None
-    per_order: dict = field(default_factory=dict)
-    bound_reached: bool = False
-    memo: dict = field(default_factory=dict, repr=False)
-    of_tri: np.ndarray | None = field(default=None, repr=False)
-
-    def carry(self, parent) -> dict:
-        """The figures of the next round's source triangles, whose triangles of this round are
-        ``parent`` (T',), that are known already: those of the triangles that were not split (all
-        three edges at level 1: the same triangle with the same edges, so the same pieces); NaN
-        for the others."""
-        whole = (self.split_levels.take(self.of_tri).max(axis=1) == 1).take(parent)
-        out = {}
-        for order, m in self.memo.items():
-            carried = np.full((4, len(parent)), np.nan)
-            carried[:, whole] = m[:, parent[whole]]
-            out[order] = carried
-        return out
-
-
-def judge(frame, st, memo=None, last: bool = False) -> Verdict:
-    """Measure the kept pieces of every order of the stages ``st`` (pipeline.Stages) and decide the
-    refine step's next split (budget.REFINE_ROUNDS): the source triangles with a piece beyond the
-    budget (error E > 1), each split in four, the worst first, as many as keep the estimated image
-    triangles (each split triangle's pieces times E) within Settings.max_triangles. ``memo``: the
-    figures carried from the previous round (Verdict.carry: the triangles measured already are not
-    measured again); ``last``: measure only."""
-    source = st.source
-    n_src = len(source.tris)
-    verdict = Verdict(None, of_tri=None if source.edges is None else source.edges.of_tri)
-    if not frame.budget.active or n_src == 0 or not st.orders:
-        return verdict
-    sampled = sampled_sources(frame, source)
+    Returns (pieces, keep, Beyond, bound_reached, added): the pieces and keep mask (new ones when
+    something was cut), the figures of the kept pieces after the last round, whether ``room`` stopped
+    a cut, and the pieces added."""
+    beyond = Beyond()
+    if not frame.budget.active or pieces is None or keep is None:
+        return pieces, keep, beyond, False, 0
+    if sampled is None:
+        sampled = sampled_sources(frame, source)
     if not sampled.any():
-        verdict.per_order = {o: Beyond() for o, s in st.orders.items() if s.keep is not None}
-        return verdict
-    tol, lt_tol = frame.budget.tolerance_px, B.LIGHT_TRAVEL_TOLERANCE
-    worst = np.zeros(n_src)
-    pieces = np.zeros(n_src)
-    total = 0
-    for order, s in st.orders.items():
-        if s.keep is None:
-            continue
-        kept = np.flatnonzero(s.keep)
-        total += kept.size + s.report.patch_faces
-        face_src = s.pieces.face_src
-        kept_src = face_src.take(kept)
-        pieces += np.bincount(kept_src, minlength=n_src)
-        known = memo.get(order) if memo else None
-        m = np.zeros((4, n_src))  # sampled, beyond, screen px, lt rel per source triangle
-        todo = sampled.copy()
-        if known is not None:
-            have = ~np.isnan(known[0])
-            m[:, have] = known[:, have]
-            todo &= ~have
-        cand = kept[todo.take(kept_src)] if todo.any() else kept[:0]
-        if cand.size:
-            sub = s.pieces.sub
-            err, scr, ltr = measure(frame, sub.positions, sub.tris, s.pieces.images, order, cand)
-            fs = face_src.take(cand)
-            e = np.nan_to_num(err.take(cand))
-            m[0] += np.bincount(fs, weights=(e > 0), minlength=n_src)
-            m[1] += np.bincount(fs, weights=(e > 1.0), minlength=n_src)
-            np.fmax.at(m[2], fs, np.nan_to_num(scr.take(cand)))
-            np.fmax.at(m[3], fs, np.nan_to_num(ltr.take(cand)))
-        verdict.memo[order] = m
-        verdict.per_order[order] = Beyond(int(m[0].sum()), int(m[1].sum()), float(m[2].max(initial=0.0)),
-                                          float(m[3].max(initial=0.0)))
-        worst = np.maximum(worst, np.where(m[1] > 0, np.maximum(m[2] / tol, m[3] / lt_tol), 0.0))
-    bad = np.flatnonzero(worst > 1.0)
-    if bad.size == 0 or last:
-        return verdict
-    e = worst.take(bad)
-    grow = np.maximum(pieces.take(bad) * e, 4.0)  # estimated image triangles after the split
-    rank = np.argsort(-e, kind="stable")
-    fits = np.cumsum(grow.take(rank) - pieces.take(bad).take(rank)) <= frame.settings.max_triangles - total
-    take = bad.take(rank[:int(np.count_nonzero(fits))])  # the growth is positive, so ``fits`` is a prefix
-    verdict.bound_reached = take.size < bad.size
-    if take.size == 0:
-        return verdict
-    levels = np.ones(len(source.edges.verts), np.int64)
-    levels[source.edges.of_tri.take(take, axis=0).ravel()] = 2
-    verdict.split_levels = levels
-    return verdict
+        return pieces, keep, beyond, False, 0
+    sub, img = pieces.sub, pieces.images
+    cand = np.flatnonzero(keep & sampled.take(pieces.face_src))
+    if cand.size == 0:
+        return pieces, keep, beyond, False, 0
+    err, scr, ltr = measure(frame, sub.positions, sub.tris, img, order, cand)
+    over = cand[np.nan_to_num(err.take(cand)) > 1.0]
+    bound = False
+    added = 0
+    if over.size:
+        mesh = _Editable(sub, img, keep, pieces.selected)
+        mesh.err, mesh.scr, mesh.ltr = err, scr, ltr
+        for _ in range(B.REFINE_ROUNDS):
+            if over.size == 0:
+                break
+            free = room - int(np.count_nonzero(mesh.keep))
+            rank = over[np.argsort(-mesh.err.take(over), kind="stable")]
+            fit = rank[:max(0, free // 6)]  # a piece cut in four (and its neighbours in two) adds about 3 + 3
+            if fit.size < over.size:
+                bound = True
+            if fit.size == 0:
+                break
+            new = mesh.cut(fit, frame, order)
+            e, sc, lt = measure(frame, mesh.positions, mesh.tris, mesh.images, order, new)
+            mesh.set_figures(new, e, sc, lt)
+            over = new[np.nan_to_num(e.take(new)) > 1.0]
+        added = mesh.n_faces - len(sub.tris)
+        pieces, keep = mesh.result(pieces)
+        err, scr, ltr = mesh.err, mesh.scr, mesh.ltr
+    kept = np.flatnonzero(keep)
+    m = kept[sampled.take(pieces.face_src.take(kept))]
+    e = np.nan_to_num(err.take(m))
+    beyond = Beyond(int(np.count_nonzero(e > 0)), int(np.count_nonzero(e > 1.0)),
+                    float(np.nan_to_num(scr.take(m)).max(initial=0.0)), float(np.nan_to_num(ltr.take(m)).max(initial=0.0)))
+    return pieces, keep, beyond, bound, added
+
+
+class _Editable:
+    """A cut (subdivision.Subdivided, its images and keep mask) that :meth:`cut` refines in place:
+    faces are never removed (a cut one is no longer kept), parts and new vertices are appended."""
+
+    def __init__(self, sub, img, keep, selected):
+        n_f = len(sub.tris)
+        if sub.identity:  # every corner its own row (barycentrics of the unit triangle)
+            row_bary = np.tile(np.eye(3), (n_f, 1))
+            row_src = np.repeat(np.arange(n_f), 3)
+            corner_row = np.arange(3 * n_f).reshape(-1, 3)
+            n_unit = 3 * n_f
+        else:
+            row_bary, row_src, corner_row, n_unit = sub.row_bary, sub.row_src, sub.corner_row, sub.n_unit_rows
+        self.sub, self.n_unit, self.selected = sub, n_unit, selected
+        self.positions, self.tris, self.source_tri = sub.positions, sub.tris, sub.source_tri
+        self.row_bary, self.row_src, self.corner_row = row_bary, row_src, corner_row
+        self.vertex_key = sub.vertex_key
+        self.images = img
+        self.keep = keep.copy()
+        self.err = self.scr = self.ltr = None
+
+    @property
+    def n_faces(self):
+        return len(self.tris)
+
+    def set_figures(self, faces, e, sc, lt):
+        self.err[faces], self.scr[faces], self.ltr[faces] = e.take(faces), sc.take(faces), lt.take(faces)
+
+    def cut(self, faces, frame, order) -> np.ndarray:
+        """Cut the kept ``faces`` in four and their neighbours as needed (see :func:`refine`); returns
+        the indices of the new faces."""
+        tris, keep = self.tris, self.keep
+        n_v = len(self.positions)
+        red = np.zeros(len(tris), bool)
+        red[faces] = True
+
+        def keys(t):  # (K, 3) undirected edge keys of the faces ``t`` (corner k -> k + 1)
+            a, b = tris.take(t, axis=0), np.roll(tris.take(t, axis=0), -1, axis=1)
+            return np.minimum(a, b) * n_v + np.maximum(a, b)
+
+        marked = np.unique(keys(faces))
+        kept = np.flatnonzero(keep)
+        while True:  # closure: a kept face with two cut edges is cut in four
+            near = np.zeros(n_v, bool)
+            near[np.unique(marked // n_v)] = True
+            near[np.unique(marked % n_v)] = True
+            around = kept[near.take(tris.take(kept, axis=0)).sum(axis=1) >= 2]
+            around = around[~red.take(around)]
+            hit = np.isin(keys(around), marked)
+            two = around[hit.sum(axis=1) >= 2]
+            if two.size == 0:
+                break
+            red[two] = True
+            marked = np.union1d(marked, keys(two).ravel())
+        reds = np.flatnonzero(red)
+        green = around[hit.sum(axis=1) == 1]
+        green_k = np.argmax(hit[hit.sum(axis=1) == 1], axis=1)
+        # the new vertices: one per cut edge, at its midpoint (source space), mapped
+        lo, hi = marked // n_v, marked % n_v
+        mid = 0.5 * (self.positions.take(lo, axis=0) + self.positions.take(hi, axis=0))
+        new_img = frame.map.images(mid, (order,))[order]
+        vid = n_v + np.arange(marked.size)
+        self.positions = np.concatenate([self.positions, mid])
+        self.vertex_key = np.concatenate([self.vertex_key, self.vertex_key.max(initial=0) + 1 + np.arange(marked.size)])
+        self.images = _append_images(self.images, new_img)
+
+        def mid_of(t, k):  # (K,) vertex index of the midpoint of side k of faces t
+            a, b = tris[t, k], tris[t, (k + 1) % 3]
+            return vid.take(np.searchsorted(marked, np.minimum(a, b) * n_v + np.maximum(a, b)))
+
+        def mid_row(t, k):  # (K, 3) barycentrics (in each face's source triangle) of that midpoint
+            rows = self.corner_row
+            return 0.5 * (self.row_bary.take(rows[t, k], axis=0) + self.row_bary.take(rows[t, (k + 1) % 3], axis=0))
+
+        new_tris, new_src, new_rows, row_bary, row_src = [], [], [], [], []
+        n_r = len(self.row_bary)
+        # red: (c0, m01, m20), (m01, c1, m12), (m20, m12, c2), (m01, m12, m20)
+        if reds.size:
+            c = tris.take(reds, axis=0)
+            r = self.corner_row.take(reds, axis=0)
+            m = np.stack([mid_of(reds, k) for k in range(3)], axis=1)
+            mr = n_r + np.arange(3 * reds.size).reshape(-1, 3)  # rows of m01, m12, m20
+            row_bary.append(np.stack([mid_row(reds, k) for k in range(3)], axis=1).reshape(-1, 3))
+            row_src.append(np.repeat(self.row_src.take(r[:, 0]), 3))
+            n_r += 3 * reds.size
+            for vs, rs in (((c[:, 0], m[:, 0], m[:, 2]), (r[:, 0], mr[:, 0], mr[:, 2])),
+                           ((m[:, 0], c[:, 1], m[:, 1]), (mr[:, 0], r[:, 1], mr[:, 1])),
+                           ((m[:, 2], m[:, 1], c[:, 2]), (mr[:, 2], mr[:, 1], r[:, 2])),
+                           ((m[:, 0], m[:, 1], m[:, 2]), (mr[:, 0], mr[:, 1], mr[:, 2]))):
+                new_tris.append(np.stack(vs, axis=1))
+                new_rows.append(np.stack(rs, axis=1))
+                new_src.append(self.source_tri.take(reds))
+        # green: side k cut: (A, M, C), (M, B, C) with A, B, C corners k, k + 1, k + 2
+        if green.size:
+            k = green_k
+            rows_g = np.arange(green.size)
+            a = tris[green, k]
+            b = tris[green, (k + 1) % 3]
+            cc = tris[green, (k + 2) % 3]
+            ra = self.corner_row[green, k]
+            rb = self.corner_row[green, (k + 1) % 3]
+            rc = self.corner_row[green, (k + 2) % 3]
+            mg = mid_of(green, k)
+            mrow = n_r + rows_g
+            row_bary.append(mid_row(green, k))
+            row_src.append(self.row_src.take(ra))
+            n_r += green.size
+            new_tris += [np.stack([a, mg, cc], axis=1), np.stack([mg, b, cc], axis=1)]
+            new_rows += [np.stack([ra, mrow, rc], axis=1), np.stack([mrow, rb, rc], axis=1)]
+            new_src += [self.source_tri.take(green)] * 2
+        first = len(tris)
+        self.tris = np.concatenate([tris] + new_tris)
+        self.corner_row = np.concatenate([self.corner_row] + new_rows)
+        self.source_tri = np.concatenate([self.source_tri] + new_src)
+        self.row_bary = np.concatenate([self.row_bary] + row_bary)
+        self.row_src = np.concatenate([self.row_src] + row_src)
+        n_new = len(self.tris) - first
+        self.keep = np.concatenate([self.keep, np.ones(n_new, bool)])
+        self.keep[reds] = False
+        self.keep[green] = False
+        for name in ("err", "scr", "ltr"):
+            setattr(self, name, np.concatenate([getattr(self, name), np.zeros(n_new)]))
+        return first + np.arange(n_new)
+
+    def result(self, pieces):
+        """(pieces, keep) of the refined cut."""
+        from .subdivision import Pieces, Subdivided
+
+        sub = Subdivided(self.positions, self.tris, self.source_tri, self.row_bary, self.row_src, self.corner_row,
+                         self.vertex_key, identity=False, n_pass=self.sub.n_pass, n_unit_rows=self.n_unit)
+        return Pieces(sub, self.selected.take(self.source_tri), self.selected, self.images), self.keep
+
+
+def _append_images(a, b):
+    """mapping.Images of the points of ``a`` then those of ``b`` (positions, directions, distances,
+    validity, table values)."""
+    from .mapping import Images
+
+    return Images(position=np.concatenate([a.position, b.position]), direction=np.concatenate([a.direction, b.direction]),
+                  distance=np.concatenate([a.distance, b.distance]), valid=np.concatenate([a.valid, b.valid]),
+                  plane=None, xi=np.concatenate([a.xi, b.xi]), dt=np.concatenate([a.dt, b.dt]), ux=None, uy=None)
+
+

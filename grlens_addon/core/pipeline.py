@@ -28,7 +28,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import axis_patch, culling, interior, level_plan, subdivision, visibility
-from . import budget as B
 from .assemble import ImageMesh, assemble, empty_image
 from .frame import (DiscEmitter, Light, Settings, SourceMesh, Source, clean_source, frame_context,  # noqa: F401
                     map_source, prepare_source)
@@ -88,10 +87,9 @@ def run_stages(frame, src: SourceMesh) -> Stages:
     """The method's stages for ``src`` in ``frame``, in order, up to the culling (build_images then
     assembles the images; tests and benchmarks read the stages' outputs).
 
-    Refine: the kept pieces are measured where the renderer interpolates them (interior.py); while
-    some break the budget, their source triangles are split (refine_levels) and the stages run again
-    on the finer source, at most REFINE_ROUNDS times and within Settings.max_triangles image triangles
-    (the last round's figures are in each order's report: CullReport.over_budget)."""
+    Refine (interior.refine): the kept pieces are measured where the renderer interpolates them, and
+    those beyond the budget are cut further, within Settings.max_triangles image triangles (each
+    order's report says what is left: CullReport.over_budget, refined, triangle_bound)."""
     source = prepare_source(frame, src)
     if source.empty:
         return Stages(source)
@@ -99,27 +97,21 @@ def run_stages(frame, src: SourceMesh) -> Stages:
     sight = visibility.see(frame, source, coarse)
     levels = level_plan.presplit(frame, source, coarse, sight)
     if levels is not None:  # a first split next to the axis; the stages run again on the smaller triangles
-        source, _ = _split(frame, source, levels)
+        source = _split(frame, source, levels)
         coarse = map_source(frame, source)
         sight = visibility.see(frame, source, coarse)
-    refined, memo = 0, None
-    for round_ in range(B.REFINE_ROUNDS + 1):
-        st = _stages(frame, source, coarse, sight)
-        verdict = interior.judge(frame, st, memo, last=round_ == B.REFINE_ROUNDS)
-        levels = verdict.split_levels
-        if levels is None:
-            break
-        first = source.presplit
-        source, parent = _split(frame, source, levels)
-        refined += source.presplit
-        source.presplit = first
-        memo = verdict.carry(parent)
-        coarse = map_source(frame, source)
-        sight = visibility.see(frame, source, coarse)
-    for s in st.orders.values():
-        s.report.refined = refined
-        s.report.over_budget = verdict.per_order.get(s.plan.order)
-        s.report.triangle_bound = verdict.bound_reached
+    st = _stages(frame, source, coarse, sight)
+    # refine: pieces beyond the budget inside are cut further (interior.refine), within max_triangles
+    sampled = interior.sampled_sources(frame, source) if frame.budget.active else None
+    counts = {o: 0 if s.keep is None else int(np.count_nonzero(s.keep)) for o, s in st.orders.items()}
+    for order, s in st.orders.items():
+        room = frame.settings.max_triangles - sum(n for o, n in counts.items() if o != order)
+        s.pieces, s.keep, beyond, bound, added = interior.refine(frame, source, s.pieces, s.keep, order, room, sampled)
+        if s.keep is not None:
+            kept = int(np.count_nonzero(s.keep))
+            s.report.kept += kept - counts[order]
+            counts[order] = kept
+        s.report.refined, s.report.over_budget, s.report.triangle_bound = added, beyond, bound
     return st
 
 
@@ -137,8 +129,8 @@ def _stages(frame, source, coarse, sight) -> Stages:
 
 
 def _split(frame, source: Source, levels) -> Source:
-    """The prepared source cut at the per-edge ``levels`` (level_plan.presplit, interior.judge), its
-    triangles traced back to the caller's, and (T',) the triangle of ``source`` each came from."""
+    """The prepared source cut at the per-edge ``levels`` (level_plan.presplit), its
+    triangles traced back to the caller's."""
     sub = subdivision.subdivide(source.positions, source.tris, source.edges, levels)
     mesh = source.mesh
 
@@ -147,11 +139,9 @@ def _split(frame, source: Source, levels) -> Source:
 
     fine = SourceMesh(sub.positions, sub.tris, carried(mesh.corner_uv), mesh.material[sub.source_tri],
                       carried(mesh.corner_normals))
-    out = prepare_source(frame, fine, origin=np.arange(len(sub.tris)), n_bad=source.n_bad)
-    parent = sub.source_tri.take(out.origin)  # (the cleaning may drop a sliver)
-    out.origin = source.origin.take(parent)
+    out = prepare_source(frame, fine, origin=source.origin[sub.source_tri], n_bad=source.n_bad)
     out.presplit = len(sub.tris) - len(source.tris)
-    return out, parent
+    return out
 
 
 def _report_of_nothing(source: Source) -> culling.CullReport:
