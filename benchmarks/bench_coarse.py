@@ -83,7 +83,7 @@ def settings_for(cam, mod=pipeline):
 
 def piece_errors(images, cam, table, settings):
     """(screen px p99, max; lt rel p99, max) of every kept piece of ``images`` ({order: ImageMesh})
-    measured inside (interior.measure at its SAMPLES; patch faces included)."""
+    measured inside (interior.measure: centroid and edge midpoints; patch faces included)."""
     scene = mapping.Scene(cam.position, np.zeros(3), 1.0)
     fr = frame.frame_context(scene, table, settings)
     scr, lt = [], []

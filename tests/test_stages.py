@@ -102,7 +102,8 @@ def test_map_stage_is_the_connecting_rays(table):
 def test_culling_owns_every_count(table, name):
     """The report accounts for every piece the subdivision made and every source triangle set aside
     before it: pieces = no image + degenerate + ring + frustum (of the pieces) + under a patch + kept
-    pieces; kept = the image's faces; patch faces are counted once, under kept."""
+    pieces + pieces the refine step cut further (replaced by their parts, which are among the kept);
+    kept = the image's faces; patch faces are counted once, under kept."""
     for order, s in _run(table, SCENES[name]()).items():
         rep, image = s["report"], s["image"]
         assert rep.kept == len(image.tris)
@@ -112,7 +113,7 @@ def test_culling_owns_every_count(table, name):
         n_pieces = len(s["pieces"].sub.tris)
         frustum_pieces = rep.outside_frustum - s["plan"].set_aside["outside_frustum"]
         assert n_pieces == (rep.invalid_vertex + rep.degenerate_source + rep.einstein_ring + frustum_pieces
-                            + rep.patch_covered + rep.kept - rep.patch_faces)
+                            + rep.patch_covered + rep.kept - rep.patch_faces + rep.refined)
         assert rep.patch_faces == sum(int(k.sum()) for k in s["patch_keep"] if k is not None)
         assert rep.back_face == s["plan"].set_aside["back_face"]
         assert len(s["source"].tris) == (s["plan"].set_aside["outside_frustum"] + rep.back_face
@@ -129,7 +130,7 @@ def test_subdivision_is_watertight(table, name):
         if s["pieces"] is None:
             continue
         sub, source = s["pieces"].sub, s["source"]
-        t = sub.tris
+        t = sub.tris if s["pieces"].cut is None else sub.tris[~s["pieces"].cut]  # (cut pieces: their parts)
         fwd = np.stack([t, np.roll(t, -1, axis=1)], 2).reshape(-1, 2)
         n = len(sub.positions)
         key = fwd[:, 0] * n + fwd[:, 1]

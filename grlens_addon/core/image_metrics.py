@@ -36,10 +36,10 @@ Per image order o (1, 2, and "all" = orders 1 and 2 together) the comparison rep
 
 A texture (:func:`checker_torn`): checker cells from the UVs (``cells`` per unit of U and of V),
 compared per pixel where both show the same object in the same order: ``wrong`` pixels show the
-other cell's colour; ``torn`` are the wrong ones whose 3x3 neighbourhood in the reference is all one
-cell of the same object and order, i.e. wrong more than a pixel away from every checker edge (a
+other cell's colour; ``torn`` are the wrong ones whose 3x3 neighbourhood in the reference is all in
+one cell of the same object and order, i.e. wrong more than a pixel away from every checker edge (a
 texture drawn within the budget is wrong only next to its edges; a torn one is wrong in the middle of
-its cells).
+its cells; where cells are under a pixel there is no inside to be torn).
 
 The sky (:func:`compare_sky`): on the pixels whose ray meets no object in the reference, a model of
 the lensed world (the direction each ray travels at infinity, NaN for rays that fall in) against the
@@ -280,13 +280,15 @@ def checker_torn(ref, test, cells: int, orders=(1, 2)) -> dict:
     both = (kr == kt) & (kr >= 0) & (pr >= 0) & (pt >= 0)
     wrong = both & (pr != pt)
     h, w = kr.shape
+    with np.errstate(invalid="ignore"):  # the reference's cell (not only its colour: cells under a pixel)
+        cell = np.nan_to_num(np.floor(np.asarray(ref.uv, np.float64) * cells), nan=-1.0)
     kp = np.pad(kr, 1, constant_values=-2)
-    pp = np.pad(pr, 1, constant_values=-2)
+    cp = np.pad(cell, ((1, 1), (1, 1), (0, 0)), constant_values=-2.0)
     inside = np.ones((h, w), bool)
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
             win = (slice(1 + dy, 1 + dy + h), slice(1 + dx, 1 + dx + w))
-            inside &= (kp[win] == kr) & (pp[win] == pr)
+            inside &= (kp[win] == kr) & (cp[win] == cell).all(axis=-1)
     return {"matched": int(both.sum()), "wrong": int(wrong.sum()), "torn": int((wrong & inside).sum())}
 
 

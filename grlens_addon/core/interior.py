@@ -12,8 +12,8 @@ c*dt_i) is therefore drawn
 * in the light-travel pass with sum_i b_i c*dt_i, where the exact value is its own c*dt: their
   difference relative to c*dt.
 
-:func:`measure` samples every piece that can be off at all at the points SAMPLES (the centroid and
-the three edge midpoints) and returns its error in units of the budget (budget.Budget.tolerance_px on
+:func:`measure` samples every piece that can be off at all at its centroid and its three edge
+midpoints and returns its error in units of the budget (budget.Budget.tolerance_px on
 the screen, budget.LIGHT_TRAVEL_TOLERANCE relative for the pass): above 1, the piece breaks the
 budget and the refine step (pipeline) cuts its source triangle further. A piece whose image spans at
 most budget.SAMPLE_MIN_PX pixels and whose source extent is at most budget.SAMPLE_MIN_REACH of its
@@ -32,20 +32,16 @@ from dataclasses import dataclass, field
 from . import budget as B
 from .mapping import row_norm
 
-SAMPLES = np.array([[1 / 3, 1 / 3, 1 / 3], [0.5, 0.5, 0.0], [0.0, 0.5, 0.5], [0.5, 0.0, 0.5]])
-"""Barycentric sample points of a piece: its centroid and its edge midpoints. Where the map is
-quadratic over a piece the edge midpoints bound the error everywhere inside (the deviation at b is
-sum_{i<j} 4 b_i b_j m_ij for midpoint deviations m_ij); the centroid catches the larger pieces where
-it is not."""
-
-
 def measure(frame, positions, tris, images, order, faces=None):
     """(errors (F,), screen_px (F,), lt_rel (F,)) of the pieces ``tris`` (F, 3) with source corners
     ``positions`` (V, 3; BU) and images ``images`` (mapping.Images of those V points, order ``order``),
     only for the ``faces`` (indices; None: all): errors in units of the budget (the larger of
     screen_px / tolerance and lt_rel / LIGHT_TRAVEL_TOLERANCE; 0 where not sampled, NaN where a
     sample has no image), screen_px the largest screen error (pixels) and lt_rel the largest relative
-    light-travel-time error at the SAMPLES."""
+    light-travel-time error at the samples: each piece's centroid and its edges' midpoints. Where the
+    map is quadratic over a piece the edge midpoints bound the error everywhere inside (the deviation at
+    b is sum_{i<j} 4 b_i b_j m_ij for the midpoint deviations m_ij); the centroid catches the larger
+    pieces where it is not. Each edge's midpoint is mapped once, for both pieces beside it."""
     n = len(tris)
     err, scr, ltr = np.zeros(n), np.zeros(n), np.zeros(n)
     budget = frame.budget
@@ -68,11 +64,14 @@ def measure(frame, positions, tris, images, order, faces=None):
     k = np.flatnonzero(big)
     if k.size == 0:
         return err, scr, ltr
-    f, q, dist, s = f[k], q[k], dist[k], s[k]
-    m = len(SAMPLES)
-    pts = np.einsum("mi,kix->kmx", SAMPLES, s).reshape(-1, 3)
-    drawn = np.einsum("mi,kix->kmx", SAMPLES, q).reshape(-1, 3)
-    drawn_lt = np.einsum("mi,ki->km", SAMPLES, dist).reshape(-1)
+    f, q, dist, s, t = f[k], q[k], dist[k], s[k], t[k]
+    # the samples: each piece's centroid and each of its edges' midpoints, once per edge (shared)
+    lo, hi = np.minimum(t, np.roll(t, -1, axis=1)), np.maximum(t, np.roll(t, -1, axis=1))
+    _, first, side = np.unique((lo * len(positions) + hi).ravel(), return_index=True, return_inverse=True)
+    ea, eb = lo.ravel().take(first), hi.ravel().take(first)
+    pts = np.concatenate([s.mean(axis=1), 0.5 * (positions.take(ea, axis=0) + positions.take(eb, axis=0))])
+    drawn = np.concatenate([q.mean(axis=1), 0.5 * (images.position.take(ea, axis=0) + images.position.take(eb, axis=0))])
+    drawn_lt = np.concatenate([dist.mean(axis=1), 0.5 * (images.distance.take(ea) + images.distance.take(eb))])
     true = frame.map.images(pts, (order,))[order]
     cam = frame.scene.camera
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -82,10 +81,12 @@ def measure(frame, positions, tris, images, order, faces=None):
         chord = row_norm(v - true.direction)
         ang = 2.0 * np.arcsin(np.clip(0.5 * chord, 0.0, 1.0)) / budget.pixel_angle
         lt = np.abs(drawn_lt - true.distance) / true.distance
-    ang = np.where(true.valid, ang, np.nan).reshape(-1, m)
-    lt = np.where(true.valid, lt, np.nan).reshape(-1, m)
-    scr[f] = ang.max(axis=1)
-    ltr[f] = lt.max(axis=1)
+    ang = np.where(true.valid, ang, np.nan)
+    lt = np.where(true.valid, lt, np.nan)
+    n_c = len(f)
+    side = side.reshape(-1, 3) + n_c
+    scr[f] = np.maximum(ang[:n_c], ang.take(side).max(axis=1))
+    ltr[f] = np.maximum(lt[:n_c], lt.take(side).max(axis=1))
     err[f] = np.maximum(scr[f] / budget.tolerance_px, ltr[f] / B.LIGHT_TRAVEL_TOLERANCE)
     return err, scr, ltr
 
@@ -141,9 +142,9 @@ def refine(frame, source, pieces, keep, order, room, sampled=None):
     (Settings.max_triangles less the other orders'). Cut pieces stay in ``pieces`` (not kept); their
     parts are appended, each corner's values interpolated in its source triangle like the cut's.
 
-    Returns (pieces, keep, Beyond, bound_reached, added): the pieces and keep mask (new ones when
-    something was cut), the figures of the kept pieces after the last round, whether ``room`` stopped
-    a cut, and the pieces added."""
+    Returns (pieces, keep, Beyond, bound_reached, cut): the pieces and keep mask (new ones when
+    something was cut; Pieces.cut marks the pieces replaced by their parts), the figures of the kept
+    pieces after the last round, whether ``room`` stopped a cut, and the number of pieces cut."""
     beyond = Beyond()
     if not frame.budget.active or pieces is None or keep is None:
         return pieces, keep, beyond, False, 0
@@ -176,8 +177,8 @@ def refine(frame, source, pieces, keep, order, room, sampled=None):
             e, sc, lt = measure(frame, mesh.positions, mesh.tris, mesh.images, order, new)
             mesh.set_figures(new, e, sc, lt)
             over = new[np.nan_to_num(e.take(new)) > 1.0]
-        added = mesh.n_faces - len(sub.tris)
         pieces, keep = mesh.result(pieces)
+        added = int(pieces.cut.sum())
         err, scr, ltr = mesh.err, mesh.scr, mesh.ltr
     kept = np.flatnonzero(keep)
     m = kept[sampled.take(pieces.face_src.take(kept))]
@@ -206,6 +207,7 @@ class _Editable:
         self.vertex_key = sub.vertex_key
         self.images = img
         self.keep = keep.copy()
+        self.replaced = np.zeros(n_f, bool)
         self.err = self.scr = self.ltr = None
 
     @property
@@ -307,6 +309,8 @@ class _Editable:
         self.keep = np.concatenate([self.keep, np.ones(n_new, bool)])
         self.keep[reds] = False
         self.keep[green] = False
+        self.replaced = np.concatenate([self.replaced, np.zeros(n_new, bool)])
+        self.replaced[reds] = self.replaced[green] = True
         for name in ("err", "scr", "ltr"):
             setattr(self, name, np.concatenate([getattr(self, name), np.zeros(n_new)]))
         return first + np.arange(n_new)
@@ -317,7 +321,7 @@ class _Editable:
 
         sub = Subdivided(self.positions, self.tris, self.source_tri, self.row_bary, self.row_src, self.corner_row,
                          self.vertex_key, identity=False, n_pass=self.sub.n_pass, n_unit_rows=self.n_unit)
-        return Pieces(sub, self.selected.take(self.source_tri), self.selected, self.images), self.keep
+        return Pieces(sub, self.selected.take(self.source_tri), self.selected, self.images, self.replaced), self.keep
 
 
 def _append_images(a, b):

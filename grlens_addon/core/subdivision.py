@@ -512,12 +512,14 @@ class Pieces:
     """One order's source cut into pieces: ``sub`` (:class:`Subdivided`, over the selected source
     triangles), ``face_src`` (F,) each face's source triangle (index into the prepared source's tris),
     ``selected`` (the level plan's selection: sub's triangle t is source triangle selected[t]) and
-    ``images`` (mapping.Images of sub's vertices, in the plan's order)."""
+    ``images`` (mapping.Images of sub's vertices, in the plan's order); ``cut`` (F,) bool: the faces the
+    refine step replaced by their parts (interior.refine; None: none)."""
 
     sub: Subdivided
     face_src: np.ndarray
     selected: np.ndarray
     images: object
+    cut: np.ndarray | None = None
 
 
 def cut(frame, source, plan, coarse_images) -> Pieces:
