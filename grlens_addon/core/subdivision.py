@@ -105,6 +105,7 @@ class Edges:
 
     verts: np.ndarray
     of_tri: np.ndarray
+    closed: bool | None = None  # every edge used twice, once each way (visibility.is_closed_outward)
 
 
 def mesh_edges(tris: np.ndarray) -> Edges:

@@ -33,8 +33,11 @@ class Sight:
         """True for a closed, outward-wound surface seen from outside (computed once)."""
         if self._closed is None:
             src = self.source
+            cam = self.frame.scene.camera
+            lo, hi = src.positions.min(axis=0), src.positions.max(axis=0)
+            outside_box = bool(np.any(cam < lo) or np.any(cam > hi))  # a closed surface winds 0 times there
             self._closed = bool(is_closed_outward(src.positions, src.tris, src.edges)
-                                and winding_number(src.positions, src.tris, self.frame.scene.camera) < 0.5)
+                                and (outside_box or winding_number(src.positions, src.tris, cam) < 0.5))
         return self._closed
 
     def leaving(self, vertices, order) -> np.ndarray:
@@ -181,16 +184,20 @@ def is_closed_outward(points, tris, edges: subdivision.Edges | None = None) -> b
     if len(tris) == 0:
         return False
     edges = edges if edges is not None else subdivision.mesh_edges(tris)
-    forward = np.where(tris < np.roll(tris, -1, axis=1), 1, -1)  # edge k: corner k -> k+1
-    n_e = len(edges.verts)
-    uses = np.bincount(edges.of_tri.ravel(), minlength=n_e)
-    balance = np.bincount(edges.of_tri.ravel(), weights=forward.ravel(), minlength=n_e)
-    if not (np.all(uses == 2) and np.all(balance == 0)):
+    if edges.closed is None:  # topology only: kept with the edges (frame._edges_of keeps those per topology)
+        forward = np.where(tris < np.roll(tris, -1, axis=1), 1, -1)  # edge k: corner k -> k+1
+        n_e = len(edges.verts)
+        uses = np.bincount(edges.of_tri.ravel(), minlength=n_e)
+        balance = np.bincount(edges.of_tri.ravel(), weights=forward.ravel(), minlength=n_e)
+        edges.closed = bool(np.all(uses == 2) and np.all(balance == 0))
+    if not edges.closed:
         return False
     p = np.asarray(points, dtype=np.float64)
     p = p - p[tris[0, 0]]  # volume about a vertex: no cancellation far from the origin
     p0, p1, p2 = (p.take(tris[:, k], axis=0) for k in range(3))
-    return bool(np.einsum("ij,ij->", p0, np.cross(p1, p2)) > 0)
+    cross = np.stack([p1[:, 1] * p2[:, 2] - p1[:, 2] * p2[:, 1], p1[:, 2] * p2[:, 0] - p1[:, 0] * p2[:, 2],
+                      p1[:, 0] * p2[:, 1] - p1[:, 1] * p2[:, 0]], axis=1)
+    return bool(np.einsum("ij,ij->", p0, cross) > 0)
 
 
 def winding_number(points, tris, query) -> float:
