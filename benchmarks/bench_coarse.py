@@ -14,8 +14,11 @@ them (image_metrics.checker_torn). Per scene and resolution: build_images (both 
 default settings and table; best of --repeat), the image triangles per order, what the refine step
 did (source triangles added, pieces beyond the budget after it), the reference (raytrace.trace), and
 the metrics of docs/accuracy.md (coverage mismatch, screen error of the texture, light travel time)
-plus the checker's wrong and torn pixels, and the kept pieces' own errors measured inside
-(interior.measure over every kept piece, sampled or not: p99 and max in pixels and relative c*dt).
+plus the checker's wrong and torn pixels, the kept pieces' own errors measured inside
+(interior.measure over every kept piece, sampled or not: p99 and max in pixels and relative c*dt),
+and (this checkout) the GR irradiance of a point light 20 r_s above the hole as the renderer
+interpolates it over a piece against its exact value at the piece's centroid (it does not drive the
+cutting).
 
 ``--base REV`` adds the same for git revision REV's core (bench_budget.base_core), alternated in one
 process. ``--write`` writes docs/coarse.md. Times vary by tens of percent on the shared machine:
@@ -43,7 +46,7 @@ sys.path.insert(0, HERE)
 
 import bench_accuracy as BA  # noqa: E402
 from provenance import code_version  # noqa: E402
-from grlens_addon.core import budget, frame, image_metrics, interior, mapping, pipeline, rasterize, raytrace  # noqa: E402
+from grlens_addon.core import frame, illumination, image_metrics, interior, mapping, pipeline, rasterize, raytrace  # noqa: E402
 from lutgen import LUTFamily  # noqa: E402
 
 R_OBS = 25.0
@@ -100,7 +103,37 @@ def piece_errors(images, cam, table, settings):
     return q(s, 99), q(s, 100), q(l_, 99), q(l_, 100)
 
 
-def run(name, mesh, cam, table, variants, repeat):
+LIGHT = np.array([0.0, 0.0, 20.0])
+"""A point light 20 r_s above the hole for the GR irradiance column (illumination.irradiance)."""
+
+
+def irradiance_error(pts, tris, uv, cam, table, light_table):
+    """(p99, max) of the relative error of the GR irradiance as the renderer interpolates it (the mean
+    of a piece's corner values) against its exact value at the piece's centroid (faces lit by more
+    than 1% of the brightest), with the meshes' flat normals (towards the camera's side)."""
+    n = np.cross(pts[tris[:, 1]] - pts[tris[:, 0]], pts[tris[:, 2]] - pts[tris[:, 0]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.where(((CAMERA - pts[tris[:, 0]]) * n).sum(axis=1, keepdims=True) < 0, -n, n)
+    src = pipeline.SourceMesh(pts, tris, uv, corner_normals=np.repeat(n[:, None], 3, axis=1))
+    scene = mapping.Scene(cam.position, np.zeros(3), 1.0)
+    light = pipeline.Light(LIGHT, 1000.0, light_table)
+    images = pipeline.build_images(src, scene, table, settings_for(cam), light, cam.frustum_planes())
+    rel = []
+    for m in images.values():
+        if not len(m.tris):
+            continue
+        centre = m.source_position.take(m.tris, axis=0).mean(axis=1)
+        normal = m.corner_normal.mean(axis=1)
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        exact, _ = illumination.irradiance(centre, normal, LIGHT, np.zeros(3), 1.0, light_table, 1000.0)
+        drawn = m.irradiance.mean(axis=1)
+        lit = exact > 0.01 * exact.max(initial=0.0)
+        rel.append(np.abs(drawn[lit] - exact[lit]) / exact[lit])
+    rel = np.concatenate(rel) if rel else np.zeros(0)
+    return (float(np.percentile(rel, 99)), float(rel.max())) if rel.size else (float("nan"), float("nan"))
+
+
+def run(name, mesh, cam, table, variants, repeat, light_table=None):
     """One scene at one resolution: a markdown row per variant."""
     pts, tris, uv = mesh
     ref, t_ref = BA.reference_image(raytrace.TriangleScene(pts, tris, uv), cam)
@@ -123,12 +156,16 @@ def run(name, mesh, cam, table, variants, repeat):
         rep = images[1].report
         over = [im.report.over_budget for im in images.values() if getattr(im.report, "over_budget", None)]
         beyond = (f"{sum(b.count for b in over)} ({max(b.screen_px for b in over):.2f} px)" if over else "-")
+        irr = (irradiance_error(pts, tris, uv, cam, table, light_table)
+               if light_table is not None and mod is pipeline else None)
+        irr_cell = "-" if irr is None else f"{irr[0]:.1e} / {irr[1]:.1e}"
         rows.append(
             f"| {name} | {cam.width}x{cam.height} | {label} | {1e3 * best:.0f} | "
             f"{' / '.join(str(len(im.tris)) for im in images.values())} | {getattr(rep, 'refined', '-')} | {beyond} | "
             f"{100 * a['mismatch_frac']:.2f}% | {a['screen_px']['p50']:.3f} / {a['screen_px']['p99']:.3f} / "
             f"{a['screen_px']['max']:.2f} | {a['lt_rel']['p99']:.1e} / {a['lt_rel']['max']:.1e} | "
-            f"{tex['wrong']} / {tex['torn']} | {pe[0]:.3f} / {pe[1]:.2f} | {pe[2]:.1e} / {pe[3]:.1e} | {t_ref:.1f} |")
+            f"{tex['wrong']} / {tex['torn']} | {pe[0]:.3f} / {pe[1]:.2f} | {pe[2]:.1e} / {pe[3]:.1e} | {irr_cell} | "
+            f"{t_ref:.1f} |")
         print(rows[-1], flush=True)
     return rows
 
@@ -147,6 +184,7 @@ def main(argv=None):
     if args.ref_cache:
         os.makedirs(args.ref_cache, exist_ok=True)
     table = LUTFamily().at(R_OBS)
+    light_table = LUTFamily().at(float(np.linalg.norm(LIGHT)))
     variants = [("this", pipeline)]
     if args.base:
         import bench_budget
@@ -161,14 +199,15 @@ def main(argv=None):
              "| scene | resolution | core | build_images [ms] (best) | image triangles (order 1 / 2) | "
              "source triangles added by the refine step | pieces beyond the budget after it (worst) | mismatch / covered | "
              "screen err p50 / p99 / max [px] | c*dt rel. err p99 / max | checker pixels wrong / torn | "
-             "pieces inside: screen p99 / max [px] | pieces inside: c*dt rel. p99 / max | reference [s] |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "pieces inside: screen p99 / max [px] | pieces inside: c*dt rel. p99 / max | "
+             "GR irradiance interpolated, rel. err p99 / max | reference [s] |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     print("\n".join(lines), flush=True)
     for res in args.resolutions.split(","):
         w, h = (int(v) for v in res.lower().split("x"))
         cam = camera(w, h)
         for name in names:
-            lines += run(name, meshes[name], cam, table, variants, args.repeat)
+            lines += run(name, meshes[name], cam, table, variants, args.repeat, light_table)
     if args.write:
         path = os.path.join(ROOT, "docs", "coarse.md")
         head = ["# Coarse meshes against the per-pixel reference", "", __doc__.split("\n\n")[1], ""]

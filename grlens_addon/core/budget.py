@@ -1,10 +1,14 @@
 """The error budget of the per-frame core, and every parameter the core is tuned by, in one place.
 
 The budget. Every drawn piece of an image is a flat triangle standing in for a curved one. Its
-error on screen is measured one way everywhere: the sagitta, in pixels, by which a straight side
-falls off the curved image it stands for.
+error is measured where the renderer interpolates it, perspective-correct over the image triangle:
+how far, in pixels, a source point drawn with the interpolated position and UV lies from its exact
+image, everywhere inside the piece, and how far the interpolated light travel time lies from the
+exact c*dt, relative (LIGHT_TRAVEL_TOLERANCE; interior.py measures both at a piece's centroid and
+edge midpoints, and the refine step cuts the pieces beyond).
 
-* An edge mapped through the table bends: its sagitta is rho * chord (subdivision.edge_levels).
+* An edge mapped through the table bends: its midpoint, drawn halfway between its ends' images, is
+  off its exact image (interior.midpoint_errors, subdivision.edge_levels).
 * Next to an Einstein ring the mapping turns azimuth about the observer-hole axis into position
   along the ring, so a piece covering the azimuth D at R pixels from the hole's direction has sides
   R (1 - cos(D/2)) inside the ring (culling.ring_sagitta).
@@ -12,8 +16,9 @@ falls off the curved image it stands for.
 
 The budget gives each piece a tolerance in pixels:
 
-* ``tolerance``: Settings.max_error_px (pixels): every piece, whatever it draws. The level plan
-  cuts pieces to it and the culling drops a piece whose ring sagitta exceeds it: one measure for
+* ``tolerance``: Settings.max_error_px (pixels): every piece, whatever it draws, everywhere inside
+  it. The level plan cuts pieces to it, the refine step cuts further the pieces still beyond it
+  inside (interior.refine), and the culling drops a piece whose ring sagitta exceeds it: one measure for
   both (culling.ring_sagitta / culling.max_ring_span), so a piece the plan made is never culled for
   being too wide (RING_LEVEL_MARGIN leaves room for the unequal pieces of a triangle cut uniformly
   in space).
