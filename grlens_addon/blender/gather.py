@@ -217,7 +217,7 @@ def _placed(part: Part, matrices: np.ndarray, with_normals: bool):
                 inv = _inverse(m[:3, :3][None])[0]
                 gram = inv @ inv.T
                 scale = np.trace(gram) / 3.0
-                if np.allclose(gram, scale * np.eye(3), rtol=0.0, atol=1e-9 * scale):
+                if scale > 0 and np.allclose(gram, scale * np.eye(3), rtol=0.0, atol=1e-9 * scale):
                     # rotation and uniform scale: unit normals stay unit after one factor
                     nrm = part.corner_normals @ (inv / np.sqrt(scale))
                 else:
