@@ -130,8 +130,9 @@ def test_square_off_the_axis_shows_the_patch_not_coarse_pieces(lut):
     """A square of two triangles (2 r_s) behind the hole, crossed by the axis off its centre: the
     complete axis patch draws the surface around the crossing, and the kept triangles' pieces under
     it that are too wide (drawn beyond the tolerance at their centroid) are dropped
-    (budget.UNDER_PATCH_FACTOR), else they would show through the patch on the same plane, the texture
-    up to 1.7 px off (found by this check: screen p99 0.92 px at 320x180)."""
+    (budget.UNDER_PATCH_FACTOR) or cut finer by the refine step (core/interior.py), else they would
+    show through the patch on the same plane, the texture up to 1.7 px off (found by this check:
+    screen p99 0.92 px at 320x180)."""
     pts = np.array([(-4, -0.7, -0.8), (-4, 1.3, -0.8), (-4, 1.3, 1.2), (-4, -0.7, 1.2)], float)
     tris = np.array([[0, 1, 2], [0, 2, 3]])
     uv = np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]]], float)
@@ -150,7 +151,7 @@ def test_square_off_the_axis_shows_the_patch_not_coarse_pieces(lut):
     img = pipeline.build_images(pipeline.SourceMesh(pts, tris, uv), scene, lut, settings,
                                 frustum_planes=cam.frustum_planes())[1]
     rep = img.report  # the dropped pieces are counted (culling.CullReport.patch_covered), not kept
-    assert rep.patch_covered > 0 and rep.kept == len(img.tris)
+    assert (rep.patch_covered > 0 or rep.refined > 0) and rep.kept == len(img.tris)
 
 
 def _rotate_towards_z(d, angle):

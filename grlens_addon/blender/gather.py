@@ -196,6 +196,12 @@ def _inverse(lin):
     return out
 
 
+def _unit_rows(n) -> np.ndarray:
+    """``n`` (..., 3) with each row scaled to unit length (in place; zero rows stay zero)."""
+    n /= np.maximum(np.sqrt(np.einsum("...k,...k->...", n, n)), 1e-300)[..., None]
+    return n
+
+
 def _placed(part: Part, matrices: np.ndarray, with_normals: bool):
     """World positions (K V, 3), triangles (K T, 3), corner UVs, corner normals (unit) of ``part``
     placed by the (K, 4, 4) ``matrices``; triangles of mirroring matrices (negative determinant) are
@@ -208,8 +214,14 @@ def _placed(part: Part, matrices: np.ndarray, with_normals: bool):
         if np.linalg.det(m[:3, :3]) >= 0:
             nrm = None
             if with_normals and part.corner_normals is not None:
-                nrm = part.corner_normals @ _inverse(m[:3, :3][None])[0]  # the inverse transpose, on rows
-                nrm /= np.maximum(np.linalg.norm(nrm, axis=2, keepdims=True), 1e-300)
+                inv = _inverse(m[:3, :3][None])[0]
+                gram = inv @ inv.T
+                scale = np.trace(gram) / 3.0
+                if scale > 0 and np.allclose(gram, scale * np.eye(3), rtol=0.0, atol=1e-9 * scale):
+                    # rotation and uniform scale: unit normals stay unit after one factor
+                    nrm = part.corner_normals @ (inv / np.sqrt(scale))
+                else:
+                    nrm = _unit_rows(part.corner_normals @ inv)  # the inverse transpose, on rows
             return pos, part.tris, part.corner_uv, nrm
     else:
         pos = (np.einsum("kij,vj->kvi", lin, part.co) + matrices[:, None, :3, 3]).reshape(-1, 3)
@@ -232,9 +244,7 @@ def _placed(part: Part, matrices: np.ndarray, with_normals: bool):
         n = np.einsum("kij,tcj->ktci", inv_t, part.corner_normals)
         if flip.any():
             n[flip] = n[flip][:, :, order]
-        n = n.reshape(-1, 3, 3)
-        n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-300)
-        nrm = n
+        nrm = _unit_rows(n.reshape(-1, 3, 3))
     return pos, tris.reshape(-1, 3), uv, nrm
 
 

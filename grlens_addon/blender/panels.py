@@ -169,6 +169,7 @@ class VIEW3D_PT_grlens_advanced(_Sub, bpy.types.Panel):
         col.prop(g, "tess_a")
         col.prop(g, "tess_b")
         col.prop(g, "cull_ratio")
+        col.prop(g, "max_triangles")
 
 
 class OBJECT_PT_grlens(bpy.types.Panel):

@@ -109,6 +109,11 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
         description="Screen-space tolerance in pixels of the automatic updates in the viewport (frame changes, "
                     "edits), for fast scrubbing; the larger of this and Tess Max Error is used. Renders and the "
                     "Rebuild operator always use Tess Max Error. 0: the viewport uses Tess Max Error too")
+    max_triangles: IntProperty(
+        name="Max Triangles", default=1_000_000, min=1000, soft_max=10_000_000, update=_changed,
+        description="Most image triangles one object may get (both orders) from the cutting that keeps every "
+                    "piece within Tess Max Error inside; when this stops it, the report names the object "
+                    "and how far off its pieces are")
     cull_ratio: FloatProperty(
         name="Cull Ratio", default=8.0, min=1.0, soft_max=100.0, update=_changed,
         description="Drop image triangles whose circumference exceeds this many times the undistorted one "

@@ -15,8 +15,7 @@ import uuid
 import bpy
 import numpy as np
 
-from ..core import culling, losses, mapping, pipeline
-
+from ..core import budget, culling, losses, mapping, pipeline
 from . import gather, lutcache, shading, upload, world
 
 COLLECTION = "grlens"
@@ -197,7 +196,7 @@ def scene_geometry(scene, depsgraph, preview: bool = False):
     settings = pipeline.Settings(max_tess_level=g.max_tess_level, tess_a=g.tess_a, tess_b=g.tess_b,
                                  cull_ratio=g.cull_ratio, orders=orders,
                                  pixel_angle=_pixel_angle(scene, cam_eval),
-                                 max_error_px=max_error_px(g, preview))
+                                 max_error_px=max_error_px(g, preview), max_triangles=g.max_triangles)
     return geo, settings, cam_eval
 
 
@@ -401,6 +400,24 @@ def not_imaged_line(name, mesh, images, geo, lut, orders) -> str | None:
     return None
 
 
+def over_budget_line(name, images, settings) -> str | None:
+    """The report line of an object whose kept pieces are not all within the error budget inside
+    (core.interior: the refine step stopped at ``settings.max_triangles``, or after its last round),
+    saying how far off they are, or None when they all are."""
+    reps = [img.report for img in images.values()]
+    over = [r.over_budget for r in reps if r.over_budget is not None and r.over_budget.count]
+    if not over:
+        return None
+    count = sum(b.count for b in over)
+    px = max(b.screen_px for b in over)
+    lt = max(b.lt_rel for b in over)
+    why = (f"the triangle bound (Max Triangles {settings.max_triangles:,}) stopped the cutting"
+           if any(r.triangle_bound for r in reps) else "the cutting stopped after its last round")
+    return (f"{name}: {_plural(count, 'piece')} beyond the error budget ({why}): drawn up to {px:.2g} px off "
+            f"(tolerance {settings.max_error_px:.2g} px), light travel time up to {100 * lt:.2g}% off (tolerance "
+            f"{100 * budget.LIGHT_TRAVEL_TOLERANCE:.2g}%)")
+
+
 def _stats(images) -> dict:
     """{order: {reason: count}} of the pieces each image dropped (core CullReport; pieces of the
     subdivided mesh), for the report's stats."""
@@ -411,7 +428,9 @@ def _stats(images) -> dict:
                       "einstein_ring": r.einstein_ring, "outside_frustum": r.outside_frustum,
                       "below_pixel": r.below_pixel, "back_face": r.back_face, "patch_covered": r.patch_covered,
                       "patch_replaced": r.patch_replaced, "patch_faces": r.patch_faces,
-                      "bad_source_triangles": int(r.extra.get("bad_source_triangles", 0))}
+                      "bad_source_triangles": int(r.extra.get("bad_source_triangles", 0)),
+                      "refined": r.refined, "triangle_bound": r.triangle_bound,
+                      "over_budget": 0 if r.over_budget is None else r.over_budget.count}
     return out
 
 
@@ -580,9 +599,10 @@ def _rebuild_source(scene, src, src_dg, inst, geo, settings, lut, light, planes,
         return "lensed"
     images = pipeline.build_images(mesh, geo, lut, settings, light, planes, disc)
     lines = []
-    line = not_imaged_line(src.name, mesh, images, geo, lut, settings.orders)
-    if line:
-        lines.append(line)
+    for line in (not_imaged_line(src.name, mesh, images, geo, lut, settings.orders),
+                 over_budget_line(src.name, images, settings)):
+        if line:
+            lines.append(line)
     stats = _stats(images)
     key = _remember_inputs(objs.values(), inputs, lines, stats)
     entry = {}

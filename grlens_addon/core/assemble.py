@@ -91,11 +91,14 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
         v_pos, v_dir = np.concatenate([v_pos, p_pos]), np.concatenate([v_dir, p_dir])
         v_dist, v_src = np.concatenate([v_dist, p_dist]), np.concatenate([v_src, p_spos])
 
-    def corner_values(values):  # (F, 3, K) per face corner, subdivided faces then patch faces
-        own = _carry(values, src_tri, rows)
+    def corner_values(values, unit=False):  # (F, 3, K) per face corner, subdivided faces then patch faces
+        own = _carry(values, src_tri, rows, unit)
         if patch_corners is None:
             return own
-        return np.concatenate([own, _patch_corner_values(values, p_src, *patch_corners)])
+        patch = _patch_corner_values(values, p_src, *patch_corners)
+        if unit:
+            patch /= np.maximum(np.linalg.norm(patch, axis=2, keepdims=True), 1e-300)
+        return np.concatenate([own, patch])
 
     mesh = source.mesh
     corner_uv = None
@@ -104,8 +107,7 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
     irr = n = None
     scene, light = frame.scene, frame.light
     if mesh.corner_normals is not None:  # interpolated like the UVs (a flat face's stay its normal)
-        n = corner_values(mesh.corner_normals)
-        n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-300)
+        n = corner_values(mesh.corner_normals, unit=True)
     if light is not None and n is not None:
         pts = v_src.take(image_tris.ravel(), axis=0)
         e, _ = illumination.irradiance(pts, n.reshape(-1, 3), light.position, scene.hole, scene.r_s,
@@ -176,12 +178,13 @@ def _patch_corner_values(values, face_src, bary, vertex_tri, vertex_bary, corner
     return own
 
 
-def _carry(corner_values, src_tri, rows):
+def _carry(corner_values, src_tri, rows, unit=False):
     """Corner values (F, 3, K) of the image faces from the source triangles' corner values (T, 3, K):
     the faces' own source triangles' (``src_tri``) when ``rows`` is None, else interpolated at the
-    rows (row_bary, row_src, corner_row, n_unit) of subdivision.carry_rows."""
+    rows (row_bary, row_src, corner_row, n_unit) of subdivision.carry_rows (``unit``: unit vectors,
+    normalised again where interpolated; the source's own are unit already)."""
     corner_values = np.asarray(corner_values, dtype=np.float64)
     if rows is None:
         return corner_values.take(src_tri, axis=0)
     row_bary, row_src, corner_row, n_unit = rows
-    return subdivision.carry_rows(row_bary, row_src, corner_row, corner_values, n_unit)
+    return subdivision.carry_rows(row_bary, row_src, corner_row, corner_values, n_unit, unit)

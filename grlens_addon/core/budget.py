@@ -1,10 +1,14 @@
 """The error budget of the per-frame core, and every parameter the core is tuned by, in one place.
 
 The budget. Every drawn piece of an image is a flat triangle standing in for a curved one. Its
-error on screen is measured one way everywhere: the sagitta, in pixels, by which a straight side
-falls off the curved image it stands for.
+error is measured where the renderer interpolates it, perspective-correct over the image triangle:
+how far, in pixels, a source point drawn with the interpolated position and UV lies from its exact
+image, everywhere inside the piece, and how far the interpolated light travel time lies from the
+exact c*dt, relative (LIGHT_TRAVEL_TOLERANCE; interior.py measures both at a piece's centroid and
+edge midpoints, and the refine step cuts the pieces beyond).
 
-* An edge mapped through the table bends: its sagitta is rho * chord (subdivision.edge_levels).
+* An edge mapped through the table bends: its midpoint, drawn halfway between its ends' images, is
+  off its exact image (interior.midpoint_errors, subdivision.edge_levels).
 * Next to an Einstein ring the mapping turns azimuth about the observer-hole axis into position
   along the ring, so a piece covering the azimuth D at R pixels from the hole's direction has sides
   R (1 - cos(D/2)) inside the ring (culling.ring_sagitta).
@@ -12,8 +16,9 @@ falls off the curved image it stands for.
 
 The budget gives each piece a tolerance in pixels:
 
-* ``tolerance``: Settings.max_error_px (pixels): every piece, whatever it draws. The level plan
-  cuts pieces to it and the culling drops a piece whose ring sagitta exceeds it: one measure for
+* ``tolerance``: Settings.max_error_px (pixels): every piece, whatever it draws, everywhere inside
+  it. The level plan cuts pieces to it, the refine step cuts further the pieces still beyond it
+  inside (interior.refine), and the culling drops a piece whose ring sagitta exceeds it: one measure for
   both (culling.ring_sagitta / culling.max_ring_span), so a piece the plan made is never culled for
   being too wide (RING_LEVEL_MARGIN leaves room for the unequal pieces of a triangle cut uniformly
   in space).
@@ -62,6 +67,31 @@ from its true image (None: never): inside its outer circle a complete patch draw
 so these pieces only compete with it for the same pixels. Trades a few map lookups per patch for
 texture placement next to the axis (a square behind the hole crossed off its centre: 0.92 px ->
 0.33 px, tests/test_stages.py)."""
+
+LIGHT_TRAVEL_TOLERANCE = 0.01
+"""The light-travel-time pass (c*dt, interpolated over a piece) stays within this fraction of the
+exact c*dt everywhere inside a piece (interior.py): the pass's own budget, as relative as the
+quantity it is used for (depth, time delay)."""
+
+SAMPLE_REACH = 0.1
+SAMPLE_MIN_PX = 1.0
+"""Which pieces are measured inside (interior.py). The map bends on the scale of a point's distance
+from the camera (perspective) and from the hole (lensing); over a source edge shorter than
+SAMPLE_REACH times both (at its nearer end) it is quadratic to within that fraction, so the level
+plan's midpoint rule judges it, and the insides of pieces of triangles with such edges follow from
+their edges. Only the pieces of source triangles with a longer edge are sampled, and of those only the pieces whose image spans more than SAMPLE_MIN_PX pixels
+(the level plan leaves such edges uncut too) or whose own extent exceeds SAMPLE_REACH times their light
+travel distance (a distance bends by about reach^2 / 8 of itself over that reach: 0.00125, far inside
+LIGHT_TRAVEL_TOLERANCE). Lower samples more pieces per frame; higher trusts the plan farther."""
+
+REFINE_ROUNDS = 12
+"""The refine step (interior.refine, run by pipeline.run_stages after the culling). A kept piece that
+breaks the budget inside (error E > 1 in units of the budget, interior.measure) is cut in four at its
+edges' midpoints (its neighbours in two across a cut edge, so that the mesh stays watertight), and
+the new pieces are measured again, at most REFINE_ROUNDS times (each round halves a piece's size and
+quarters its error where the map is smooth: 12 rounds reach 4096 times finer). Only the pieces that
+break the budget are cut, so the cut is graded where the error is, and nothing caps it but this and
+Settings.max_triangles (the image triangles of one object; the worst pieces are cut first)."""
 
 # --- the level plan -----------------------------------------------------------------------------
 
@@ -135,9 +165,11 @@ fold behind it fills in (margin 0: the sphere's mismatch at 170 deg 0.21% -> 0.3
 
 BACK_FACE_MIN_PIECES = 4096
 """Back faces are looked for only when the subdivided triangles of an order would make at least this
-many pieces (and at least as many as the mesh has triangles): the test looks up the rays of their
-corners and checks that the mesh is closed, which costs more than it saves on a mesh that is hardly
-subdivided."""
+many pieces (and at least as many as the mesh has triangles), or, on a dense mesh, when this many of
+its triangles are in view (then among all of them, split or not: half of a dense closed mesh is
+hidden behind its front, and its images, corner values and upload cost more than the test): the
+test looks up the rays of their corners and checks that the mesh is closed, which costs more than
+it saves on a mesh that is hardly subdivided."""
 
 # --- axis patches ---------------------------------------------------------------------------------
 

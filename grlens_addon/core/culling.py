@@ -35,6 +35,9 @@ class CullReport:
     presplit: int = 0  # source triangles added by the level plan's first split next to the axis (counted above)
     back_face: int = 0  # source triangles hidden behind the front of a closed surface (budget.BACK_FACE_MARGIN)
     patch_covered: int = 0  # pieces that a complete patch draws more exactly (budget.UNDER_PATCH_FACTOR)
+    refined: int = 0  # pieces the refine step cut further (interior.refine: replaced by their parts, in ``kept``)
+    over_budget: object = None  # interior.Beyond: the kept pieces measured inside after the refine step
+    triangle_bound: bool = False  # the refine step stopped at Settings.max_triangles
     extra: dict = field(default_factory=dict)
 
     def total_culled(self) -> int:

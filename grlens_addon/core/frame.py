@@ -47,6 +47,7 @@ class Settings:
     orders: tuple = (1, 2)
     pixel_angle: float | None = None  # radians per pixel on the view sphere (caps subdivision)
     max_error_px: float | None = 0.25  # the error budget's tolerance, pixels (with pixel_angle; see budget.py)
+    max_triangles: int = 1_000_000  # image triangles of one object (all orders) the refine step may make
 
 
 @dataclass

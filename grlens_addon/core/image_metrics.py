@@ -34,6 +34,13 @@ Per image order o (1, 2, and "all" = orders 1 and 2 together) the comparison rep
 
   each as p50 / p99 / max (NaN if there is nothing to measure).
 
+A texture (:func:`checker_torn`): checker cells from the UVs (``cells`` per unit of U and of V),
+compared per pixel where both show the same object in the same order: ``wrong`` pixels show the
+other cell's colour; ``torn`` are the wrong ones whose 3x3 neighbourhood in the reference is all in
+one cell of the same object and order, i.e. wrong more than a pixel away from every checker edge (a
+texture drawn within the budget is wrong only next to its edges; a torn one is wrong in the middle of
+its cells; where cells are under a pixel there is no inside to be torn).
+
 The sky (:func:`compare_sky`): on the pixels whose ray meets no object in the reference, a model of
 the lensed world (the direction each ray travels at infinity, NaN for rays that fall in) against the
 reference's ``PixelBuffers.sky``: ``sky_angle_px`` (angle between the two directions, in pixels of the
@@ -252,6 +259,37 @@ def angle_between(a, b) -> np.ndarray:
     for tiny angles); NaN where either is NaN."""
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.einsum("...k,...k->...", a, b))
+
+
+def checker_parity(uv, cells: int) -> np.ndarray:
+    """(S,) int: the checker cell's colour (0 or 1) of the UVs ``uv`` (S, 2) with ``cells`` cells per
+    unit of U and of V; -1 where the UV is not finite."""
+    with np.errstate(invalid="ignore"):
+        c = np.floor(np.asarray(uv, np.float64) * cells)
+        ok = np.isfinite(c).all(axis=-1)
+        return np.where(ok, np.mod(np.nan_to_num(c[..., 0]) + np.nan_to_num(c[..., 1]), 2), -1).astype(np.int64)
+
+
+def checker_torn(ref, test, cells: int, orders=(1, 2)) -> dict:
+    """The checker texture measure of the module docstring between ``ref`` and ``test`` (buffers of
+    shape (height, width)): {"matched": pixels both show the same object in the same order, "wrong":
+    those of the other checker colour, "torn": those wrong more than a pixel from every checker edge
+    and silhouette of the reference}."""
+    kr, kt = pixel_keys(ref, orders), pixel_keys(test, orders)
+    pr, pt = checker_parity(ref.uv, cells), checker_parity(test.uv, cells)
+    both = (kr == kt) & (kr >= 0) & (pr >= 0) & (pt >= 0)
+    wrong = both & (pr != pt)
+    h, w = kr.shape
+    with np.errstate(invalid="ignore"):  # the reference's cell (not only its colour: cells under a pixel)
+        cell = np.nan_to_num(np.floor(np.asarray(ref.uv, np.float64) * cells), nan=-1.0)
+    kp = np.pad(kr, 1, constant_values=-2)
+    cp = np.pad(cell, ((1, 1), (1, 1), (0, 0)), constant_values=-2.0)
+    inside = np.ones((h, w), bool)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            win = (slice(1 + dy, 1 + dy + h), slice(1 + dx, 1 + dx + w))
+            inside &= (kp[win] == kr) & (cp[win] == cell).all(axis=-1)
+    return {"matched": int(both.sum()), "wrong": int(wrong.sum()), "torn": int((wrong & inside).sum())}
 
 
 def compare_sky(ref, sky, pixel_angle: float, rays=None, checker_size: float = CHECKER_SIZE) -> dict:

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import axis_patch, culling, mapping, silhouette, subdivision
+from . import axis_patch, culling, interior, mapping, silhouette, subdivision
 from . import budget as B
 from .frame import Frame, Source, SourceImages
 
@@ -104,13 +104,19 @@ def plan_levels(frame: Frame, source: Source, coarse: SourceImages, sight, patch
     d = img_v.direction
     rho = subdivision.rho(d.take(edges.verts[probe, 0], axis=0), d.take(edges.verts[probe, 1], axis=0),
                           img_m.direction)
+    err_px = lt_units = None
+    if budget.active:  # the edges' midpoints where the renderer draws them against their exact images
+        ev = edges.verts.take(probe, axis=0)
+        err_px, lt_units = interior.midpoint_errors(
+            frame, img_v.position.take(ev[:, 0], axis=0), img_v.position.take(ev[:, 1], axis=0),
+            img_v.distance.take(ev[:, 0]), img_v.distance.take(ev[:, 1]), img_m)
     levels = np.ones(len(edges.verts), dtype=np.int64)  # edges not probed keep level 1
     levels[probe] = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
-                                            chord[probe], budget.pixel_angle, tol)
+                                            chord[probe], budget.pixel_angle, tol, err_px, lt_units)
     strip_tri = None
     if budget.active:
         strip_tri = _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, levels, rho, chord,
-                                         probe, tol, cov)
+                                         probe, tol, cov, err_px, lt_units)
     # the selection: the frustum, the patches' triangles, back faces
     selected, plan.outside_bits = sight.inside_frustum(img_v, img_m, probe)
     plan.set_aside["outside_frustum"] = len(tris) - len(selected)
@@ -136,7 +142,8 @@ def plan_levels(frame: Frame, source: Source, coarse: SourceImages, sight, patch
     return plan
 
 
-def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, levels, rho, chord, probe, tol, cov):
+def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, levels, rho, chord, probe, tol, cov,
+                         err_px=None, lt_units=None):
     """Steps 2-3 of the plan (see the module docstring), raising ``levels`` in place; returns the mask
     (T,) of the triangles cut into strips, or None."""
     settings, edges, tris = frame.settings, source.edges, source.tris
@@ -144,7 +151,7 @@ def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, lev
     # silhouette edges (and the ring levels of silhouette triangles) aim at the coverage tolerance;
     # the silhouette is found only around the edges whose level that would change
     tight = subdivision.edge_levels(rho, settings.max_tess_level, settings.tess_a, settings.tess_b,
-                                    chord[probe], pixel_angle, cov)
+                                    chord[probe], pixel_angle, cov, err_px, lt_units)
     raise_edges = tight != levels[probe]
     replaced = cap = on_sheets = None
     if order_patches:

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import axis_patch, culling, level_plan, subdivision, visibility
+from . import axis_patch, culling, interior, level_plan, subdivision, visibility
 from .assemble import ImageMesh, assemble, empty_image
 from .frame import (DiscEmitter, Light, Settings, SourceMesh, Source, clean_source, frame_context,  # noqa: F401
                     map_source, prepare_source)
@@ -85,7 +85,11 @@ class Stages:
 
 def run_stages(frame, src: SourceMesh) -> Stages:
     """The method's stages for ``src`` in ``frame``, in order, up to the culling (build_images then
-    assembles the images; tests and benchmarks read the stages' outputs)."""
+    assembles the images; tests and benchmarks read the stages' outputs).
+
+    Refine (interior.refine): the kept pieces are measured where the renderer interpolates them, and
+    those beyond the budget are cut further, within Settings.max_triangles image triangles (each
+    order's report says what is left: CullReport.over_budget, refined, triangle_bound)."""
     source = prepare_source(frame, src)
     if source.empty:
         return Stages(source)
@@ -96,6 +100,23 @@ def run_stages(frame, src: SourceMesh) -> Stages:
         source = _split(frame, source, levels)
         coarse = map_source(frame, source)
         sight = visibility.see(frame, source, coarse)
+    st = _stages(frame, source, coarse, sight)
+    # refine: pieces beyond the budget inside are cut further (interior.refine), within max_triangles
+    sampled = interior.sampled_sources(frame, source) if frame.budget.active else None
+    counts = {o: 0 if s.keep is None else int(np.count_nonzero(s.keep)) for o, s in st.orders.items()}
+    for order, s in st.orders.items():
+        room = frame.settings.max_triangles - sum(n for o, n in counts.items() if o != order)
+        s.pieces, s.keep, beyond, bound, added = interior.refine(frame, source, s.pieces, s.keep, order, room, sampled)
+        if s.keep is not None:
+            kept = int(np.count_nonzero(s.keep))
+            s.report.kept += kept - counts[order]
+            counts[order] = kept
+        s.report.refined, s.report.over_budget, s.report.triangle_bound = added, beyond, bound
+    return st
+
+
+def _stages(frame, source, coarse, sight) -> Stages:
+    """One pass of the stages after the map stage: patches, level plan, cut and cull per order."""
     patches = axis_patch.build_patches(frame, source, sight)
     probes = level_plan.probe_edges(frame, source, coarse)
     st = Stages(source, coarse, sight, patches, probes)
@@ -108,8 +129,8 @@ def run_stages(frame, src: SourceMesh) -> Stages:
 
 
 def _split(frame, source: Source, levels) -> Source:
-    """The prepared source cut at the per-edge ``levels`` (level_plan.presplit), its triangles traced
-    back to the caller's."""
+    """The prepared source cut at the per-edge ``levels`` (level_plan.presplit), its
+    triangles traced back to the caller's."""
     sub = subdivision.subdivide(source.positions, source.tris, source.edges, levels)
     mesh = source.mesh
 

@@ -16,15 +16,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mapping import row_norm
+from .mapping import row_norm, used_vertices
 
 
 def compact(points, tris):
     """(corners, corner points, local tris): the vertex indices that the triangles ``tris`` (T, 3) use
     (sorted), their ``points``, and ``tris`` re-indexed into them, so that the functions below (and the
     rays they need) run on those corners only."""
-    corners, local = np.unique(tris, return_inverse=True)
-    return corners, points.take(corners, axis=0), local.reshape(-1, 3)
+    tris = np.asarray(tris, dtype=np.int64)
+    corners = used_vertices(tris, len(points))  # (a mask, not a sort: dense meshes pass every triangle)
+    index = np.empty(len(points), np.int64)
+    index[corners] = np.arange(corners.size)
+    return corners, points.take(corners, axis=0), index.take(tris)
 
 
 def normals(points, tris) -> np.ndarray:
@@ -32,7 +35,12 @@ def normals(points, tris) -> np.ndarray:
     (BU^2, not normalised; right-handed with the winding)."""
     tris = np.asarray(tris, dtype=np.int64)
     p0, p1, p2 = (points.take(tris[:, k], axis=0) for k in range(3))
-    return np.cross(p1 - p0, p2 - p0)
+    a, b = p1 - p0, p2 - p0
+    out = np.empty_like(a)  # the cross product, by components (np.cross is several times slower)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
 
 
 def facing_signs(points, tris, directions) -> np.ndarray:

@@ -44,7 +44,8 @@ GRID = 64  # largest level (GPU tessellators' usual maximum, as in seed 000)
 
 def edge_levels(rho: np.ndarray, max_tess_level: int, a: float, b: float,
                 chord: np.ndarray | None = None, pixel_angle: float | None = None,
-                max_error_px: float | None = None) -> np.ndarray:
+                max_error_px: float | None = None, error_px: np.ndarray | None = None,
+                lt_units: np.ndarray | None = None) -> np.ndarray:
     """Per-edge subdivision levels (integers 1 .. min(max_tess_level, 64), shape of ``rho``).
 
     The level is eq. (19), ceil(MaxTessLevel * clamp(a rho^b, 0, 1)), at least 1, and, when ``chord``
@@ -53,10 +54,12 @@ def edge_levels(rho: np.ndarray, max_tess_level: int, a: float, b: float,
 
     * at most the number of pixels the edge spans (sub-edges are at least a pixel long), so images
       smaller than a pixel are not subdivided at all;
-    * with ``max_error_px``: at most ceil(sqrt(s / max_error_px)), where s = rho * chord is the
-      sagitta of the edge's image in pixels (the distance of the mapped midpoint from the straight
-      chord). An arc cut into n pieces deviates from its chords by about s / n^2, so this is the
-      smallest level that keeps the straight sub-edges within ``max_error_px`` of the curved image.
+    * with ``max_error_px``: at most ceil(sqrt(e)), where e is the edge's error at its midpoint in
+      units of the budget: ``error_px`` / ``max_error_px`` (pixels: how far from where the renderer
+      draws the edge's midpoint its exact image lies, interior.midpoint_errors; without it the
+      sagitta rho * chord in pixels), or ``lt_units`` (the light-travel pass's error there in units
+      of its tolerance) if larger. A curve cut into n pieces deviates from its chords by about
+      e / n^2, so this is the smallest level that keeps the pieces' edges within the budget.
 
     NaN rho (an end point without an image) gives level 1: such edges are culled later anyway.
     """
@@ -69,8 +72,10 @@ def edge_levels(rho: np.ndarray, max_tess_level: int, a: float, b: float,
             chord_px = chord / pixel_angle
             n = np.minimum(n, np.nan_to_num(np.ceil(chord_px), nan=1.0))
             if max_error_px:
-                sagitta_px = r * chord_px
-                n = np.minimum(n, np.nan_to_num(np.ceil(np.sqrt(sagitta_px / max_error_px)), nan=1.0))
+                units = (r * chord_px if error_px is None else error_px) / max_error_px
+                if lt_units is not None:
+                    units = np.fmax(units, lt_units)
+                n = np.minimum(n, np.nan_to_num(np.ceil(np.sqrt(units)), nan=1.0))
     return np.clip(n, 1, top).astype(np.int64)
 
 
@@ -100,6 +105,7 @@ class Edges:
 
     verts: np.ndarray
     of_tri: np.ndarray
+    closed: bool | None = None  # every edge used twice, once each way (visibility.is_closed_outward)
 
 
 def mesh_edges(tris: np.ndarray) -> Edges:
@@ -224,17 +230,21 @@ class Subdivided:
         return carry_rows(self.row_bary, self.row_src, self.corner_row, values, self.n_unit_rows)
 
 
-def carry_rows(row_bary, row_src, corner_row, values, n_unit=0) -> np.ndarray:
+def carry_rows(row_bary, row_src, corner_row, values, n_unit=0, unit=False) -> np.ndarray:
     """(F, 3, K) corner values of faces whose corners are rows ``corner_row`` (F, 3) of barycentric
     coordinates ``row_bary`` (R, 3) in the source triangles ``row_src`` (R,), from those triangles'
     corner values ``values`` (T, 3, K) (see :class:`Subdivided`). The first ``n_unit`` rows are the
     corners of whole source triangles (barycentrics (1, 0, 0), (0, 1, 0), (0, 0, 1) in turn, as
-    Subdivided.n_unit_rows): their values are taken, not interpolated."""
+    Subdivided.n_unit_rows): their values are taken, not interpolated. ``unit``: the values are unit
+    vectors (normals): the interpolated ones are normalised again (once per row)."""
     values = np.asarray(values)
     per_row = np.empty((len(row_bary), values.shape[2]))
     if n_unit:
         per_row[:n_unit] = values[row_src[:n_unit], np.arange(n_unit) % 3]
-    per_row[n_unit:] = np.einsum("rj,rjk->rk", row_bary[n_unit:], values.take(row_src[n_unit:], axis=0))
+    mixed = np.einsum("rj,rjk->rk", row_bary[n_unit:], values.take(row_src[n_unit:], axis=0))
+    if unit:
+        mixed /= np.maximum(np.sqrt(np.einsum("rk,rk->r", mixed, mixed)), 1e-300)[:, None]
+    per_row[n_unit:] = mixed
     return per_row.take(corner_row, axis=0)
 
 
@@ -503,12 +513,14 @@ class Pieces:
     """One order's source cut into pieces: ``sub`` (:class:`Subdivided`, over the selected source
     triangles), ``face_src`` (F,) each face's source triangle (index into the prepared source's tris),
     ``selected`` (the level plan's selection: sub's triangle t is source triangle selected[t]) and
-    ``images`` (mapping.Images of sub's vertices, in the plan's order)."""
+    ``images`` (mapping.Images of sub's vertices, in the plan's order); ``cut`` (F,) bool: the faces the
+    refine step replaced by their parts (interior.refine; None: none)."""
 
     sub: Subdivided
     face_src: np.ndarray
     selected: np.ndarray
     images: object
+    cut: np.ndarray | None = None
 
 
 def cut(frame, source, plan, coarse_images) -> Pieces:

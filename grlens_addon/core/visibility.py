@@ -27,13 +27,17 @@ class Sight:
         self.frame, self.source, self.coarse = frame, source, coarse
         self._closed = None
         self._d = {}
+        self._normals = None
 
     def closed(self) -> bool:
         """True for a closed, outward-wound surface seen from outside (computed once)."""
         if self._closed is None:
             src = self.source
+            cam = self.frame.scene.camera
+            lo, hi = src.positions.min(axis=0), src.positions.max(axis=0)
+            outside_box = bool(np.any(cam < lo) or np.any(cam > hi))  # a closed surface winds 0 times there
             self._closed = bool(is_closed_outward(src.positions, src.tris, src.edges)
-                                and winding_number(src.positions, src.tris, self.frame.scene.camera) < 0.5)
+                                and (outside_box or winding_number(src.positions, src.tris, cam) < 0.5))
         return self._closed
 
     def leaving(self, vertices, order) -> np.ndarray:
@@ -50,11 +54,27 @@ class Sight:
 
     def turned_away(self, tri_idx, orders) -> np.ndarray:
         """(len(tri_idx),) bool: the source triangles ``tri_idx`` turned away (BACK_FACE_MARGIN) along
-        the rays of every order in ``orders``; only their corners are looked up."""
-        corners, pts, local = silhouette.compact(self.source.positions, self.source.tris.take(tri_idx, axis=0))
-        away = np.ones(len(tri_idx), bool)
+        the rays of every order in ``orders`` (silhouette.turned_away, corner by corner: only the
+        triangles turned away at the corners before are looked at the next)."""
+        src = self.source
+        if self._normals is None:  # unit geometric normals of every triangle, once
+            n = silhouette.normals(src.positions, src.tris)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                n /= mapping.row_norm(n)[:, None]
+            self._normals = n
+        tri_idx = np.asarray(tri_idx, dtype=np.int64)
+        rows = np.arange(len(tri_idx))
         for o in orders:
-            away &= silhouette.turned_away(pts, local, self.leaving(corners, o), B.BACK_FACE_MARGIN)
+            self.leaving(np.zeros(0, np.int64), o)  # (every vertex's, once per order)
+            d = self._d[o]
+            for k in range(3):
+                t = tri_idx.take(rows)
+                corner = src.tris[:, k].take(t)
+                with np.errstate(invalid="ignore"):
+                    dots = np.einsum("fx,fx->f", self._normals.take(t, axis=0), d.take(corner, axis=0))
+                rows = rows[dots < -B.BACK_FACE_MARGIN]  # NaN (no ray): not turned away
+        away = np.zeros(len(tri_idx), bool)
+        away[rows] = True
         return away
 
     def hidden(self, tri_idx, orders) -> np.ndarray:
@@ -88,9 +108,12 @@ class Sight:
     def back_faces(self, selected, tri_level, order) -> np.ndarray:
         """The indices among ``selected`` (source triangles, with their levels ``tri_level``) hidden
         behind the surface's front in ``order``, looked for only when their pieces would be many
-        (BACK_FACE_MIN_PIECES)."""
+        (BACK_FACE_MIN_PIECES): among the split ones, or among all of them on a mesh that has that many
+        triangles itself (a dense mesh, whose back faces would otherwise all be drawn)."""
         split = selected[tri_level > 1]
         n_tris = len(self.source.tris)
+        if len(selected) >= B.BACK_FACE_MIN_PIECES and self.closed():  # a dense mesh: every triangle
+            return selected[self.turned_away(selected, (order,))]
         if split.size and int((tri_level[tri_level > 1] ** 2).sum()) >= max(B.BACK_FACE_MIN_PIECES, n_tris) \
                 and self.closed():
             return split[self.turned_away(split, (order,))]
@@ -161,16 +184,20 @@ def is_closed_outward(points, tris, edges: subdivision.Edges | None = None) -> b
     if len(tris) == 0:
         return False
     edges = edges if edges is not None else subdivision.mesh_edges(tris)
-    forward = np.where(tris < np.roll(tris, -1, axis=1), 1, -1)  # edge k: corner k -> k+1
-    n_e = len(edges.verts)
-    uses = np.bincount(edges.of_tri.ravel(), minlength=n_e)
-    balance = np.bincount(edges.of_tri.ravel(), weights=forward.ravel(), minlength=n_e)
-    if not (np.all(uses == 2) and np.all(balance == 0)):
+    if edges.closed is None:  # topology only: kept with the edges (frame._edges_of keeps those per topology)
+        forward = np.where(tris < np.roll(tris, -1, axis=1), 1, -1)  # edge k: corner k -> k+1
+        n_e = len(edges.verts)
+        uses = np.bincount(edges.of_tri.ravel(), minlength=n_e)
+        balance = np.bincount(edges.of_tri.ravel(), weights=forward.ravel(), minlength=n_e)
+        edges.closed = bool(np.all(uses == 2) and np.all(balance == 0))
+    if not edges.closed:
         return False
     p = np.asarray(points, dtype=np.float64)
     p = p - p[tris[0, 0]]  # volume about a vertex: no cancellation far from the origin
     p0, p1, p2 = (p.take(tris[:, k], axis=0) for k in range(3))
-    return bool(np.einsum("ij,ij->", p0, np.cross(p1, p2)) > 0)
+    cross = np.stack([p1[:, 1] * p2[:, 2] - p1[:, 2] * p2[:, 1], p1[:, 2] * p2[:, 0] - p1[:, 0] * p2[:, 2],
+                      p1[:, 0] * p2[:, 1] - p1[:, 1] * p2[:, 0]], axis=1)
+    return bool(np.einsum("ij,ij->", p0, cross) > 0)
 
 
 def winding_number(points, tris, query) -> float:
