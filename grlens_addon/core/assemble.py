@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import budget as B
-from . import culling, illumination, mapping, subdivision, thin_disc
+from . import culling, illumination, observer_view, subdivision, thin_disc
 from .frame import DiscEmitter, Frame, Source
 
 
@@ -66,7 +66,7 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
     everything = bool(keep.all())
     kept = None if everything else np.flatnonzero(keep)
     tris = sub.tris if everything else sub.tris.take(kept, axis=0)
-    used = mapping.used_vertices(tris, len(sub.positions))
+    used = observer_view.used_vertices(tris, len(sub.positions))
     if used.size == len(sub.positions):  # every vertex is used: indices stay as they are
         image_tris = tris
     else:
@@ -142,7 +142,7 @@ def _patch_parts(patches, patch_keep, order, offset):
         faces = p.tris[ok]
         if len(faces) == 0:
             continue
-        used = mapping.used_vertices(faces, len(p.source_position))
+        used = observer_view.used_vertices(faces, len(p.source_position))
         remap = np.full(len(p.source_position), -1, dtype=np.int64)
         remap[used] = np.arange(used.size)
         out[0].append(remap.take(faces) + offset)

@@ -9,13 +9,16 @@ unit vector of p's component perpendicular to e1, so p has polar coordinates (r,
 phi in [0, pi] in the plane (e1, e2). The observer sees the order-1 image in the direction
 cos(xi) e1 + sin(xi) e2 and the order-2 image in cos(xi) e1 - sin(xi) e2, both in its static
 orthonormal frame, which grlens identifies with Blender's Euclidean axes at the camera. Each image
-is placed at its light-travel-time distance dt * r_s from the camera.
+is placed at its light-travel-time distance dt * r_s from the camera. That step from the table's
+values to the world is observer_view.place_images.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+
+from .observer_view import any_perpendicular, place_images, row_norm
 
 # A vertex this close to the observer-hole axis (|p_perp| / |p|) has no unique plane: it is seen as
 # an Einstein ring, which a mesh cannot show. Such vertices are flagged and their triangles culled.
@@ -101,28 +104,6 @@ def plane_coordinates(points: np.ndarray, scene: Scene) -> PlaneCoordinates:
     return PlaneCoordinates(r=r, phi=phi, e2=e2, on_axis=on_axis)
 
 
-def row_norm(v) -> np.ndarray:
-    """(N,) Euclidean lengths of the rows of ``v`` (N, 3): as np.linalg.norm(v, axis=1) to the last bit
-    or so, several times faster on long arrays (one fused pass instead of a reduction per row)."""
-    return np.sqrt(np.einsum("ij,ij->i", v, v))
-
-
-def used_vertices(tris, n_vertices) -> np.ndarray:
-    """Sorted indices, among ``n_vertices`` points, of those the triangles ``tris`` (T, 3) use (like
-    np.unique of their indices, without sorting)."""
-    mask = np.zeros(n_vertices, dtype=bool)
-    mask[np.asarray(tris).ravel()] = True
-    return np.flatnonzero(mask)
-
-
-def any_perpendicular(e1):
-    """A unit vector perpendicular to the unit vector ``e1`` (3,), chosen deterministically (from the z
-    axis, or the x axis when e1 is close to z)."""
-    a = np.array([0.0, 0.0, 1.0]) if abs(e1[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    v = a - (a @ e1) * e1
-    return v / np.linalg.norm(v)
-
-
 @dataclass
 class Images:
     """Lensed images of N vertices for one order.
@@ -169,12 +150,8 @@ class Mapper:
         out = {}
         for order in orders:
             look = looks[order]
-            sign = 1.0 if order == 1 else -1.0
-            c, s = np.cos(look.xi), np.sin(look.xi)
-            direction = c[:, None] * scene.e1 + (sign * s)[:, None] * plane.e2
-            distance = look.dt * scene.r_s
-            position = scene.camera + distance[:, None] * direction
-            valid = np.isfinite(distance) & np.isfinite(c) & ~plane.on_axis
+            direction, distance, position, finite = place_images(look.xi, look.dt, plane.e2, scene, order)
+            valid = finite & ~plane.on_axis
             position[~valid] = np.nan
             out[order] = Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
                                 xi=look.xi, dt=look.dt, ux=look.ux, uy=look.uy)

@@ -94,7 +94,8 @@ from scipy.special import ellipj
 from lutgen import orbit as _orb
 from lutgen.solver import check_observer_radius, connect
 from .culling import side_planes
-from .mapping import Scene, any_perpendicular, plane_coordinates
+from .mapping import Scene, plane_coordinates
+from .observer_view import any_perpendicular, ray_planes, view_directions
 from .ragged import group_offsets
 
 TWO_PI = 2.0 * np.pi
@@ -530,23 +531,15 @@ class Rays:
                              "lutgen's orbit roots lose their precision (use a larger r_s for a flat-space limit)")
         self.e1 = rel / self.r_obs
         self.uo = 1.0 / self.r_obs
-        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-        d = d / np.linalg.norm(d, axis=1, keepdims=True)
-        cos_xi = np.clip(d @ self.e1, -1.0, 1.0)
-        perp = d - cos_xi[:, None] * self.e1
-        sin_xi = np.linalg.norm(perp, axis=1)
-        fallback = any_perpendicular(self.e1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            self.e2 = np.where((sin_xi > 1e-300)[:, None], perp / sin_xi[:, None], fallback)
+        self.xi, cos_xi, sin_xi, self.e2 = ray_planes(directions, self.e1)
         self.normal = np.cross(self.e1, self.e2)
-        self.xi = np.arctan2(sin_xi, cos_xi)
         k = np.sqrt(1.0 - self.uo)
         self.b = np.maximum(sin_xi / (self.uo * k), _B_MIN)
         self.inward = cos_xi < 0.0
         orb = _orb.orbit_from_b(self.b)
         self.orbit = orb
         self.turning = np.asarray(orb.real, dtype=bool)
-        n = len(d)
+        n = len(self.xi)
         self.amp = np.empty(n)   # e2 - e1 (turning) or A (plunging)
         self.mk = np.empty(n)    # elliptic parameter k^2
         self.c = np.empty(n)     # dw / dPhi
@@ -708,8 +701,7 @@ def image_pixels(points, camera: Camera, hole, r_s, order: int) -> tuple[np.ndar
     scene = Scene(camera.position, hole, r_s)
     plane = plane_coordinates(np.asarray(points, dtype=np.float64).reshape(-1, 3), scene)
     conn = connect(scene.r_obs, plane.r, plane.phi, order)
-    sign = 1.0 if order == 1 else -1.0
-    direction = np.cos(conn.xi)[:, None] * scene.e1 + (sign * np.sin(conn.xi))[:, None] * plane.e2
+    direction = view_directions(conn.xi, plane.e2, scene.e1, order)
     col, row, depth = camera.project(camera.position + direction)
     with np.errstate(invalid="ignore"):
         bad = plane.on_axis | ~(depth > 0)
