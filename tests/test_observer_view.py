@@ -122,3 +122,196 @@ def test_reference_tracer_takes_the_step_in_observer_view():
         assert ok.sum() > 5
         np.testing.assert_array_equal(col[ok], c2[ok])
         np.testing.assert_array_equal(row[ok], r2[ok])
+
+
+# --------------------------------------------------------------------------------------------------
+# A moving observer
+# --------------------------------------------------------------------------------------------------
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _boost(beta):
+    """The 4x4 Lorentz boost (components (t, x, y, z), c = 1) from the static frame to the frame moving
+    with velocity ``beta`` (3,): a matrix, built from its definition, not from the aberration formula."""
+    b = np.asarray(beta, float)
+    b2 = b @ b
+    g = 1 / np.sqrt(1 - b2)
+    L = np.eye(4)
+    L[0, 0] = g
+    L[0, 1:] = L[1:, 0] = -g * b
+    L[1:, 1:] += (g - 1) * np.outer(b, b) / b2
+    return L
+
+
+BETAS = [np.array([0.4, 0.0, 0.0]), np.array([0.1, -0.3, 0.25]), np.array([-0.55, 0.6, -0.5]), np.array([0, 0, 0.97])]
+
+
+@pytest.mark.parametrize("beta", BETAS)
+def test_aberration_and_doppler_are_a_boost_of_the_photons_four_momentum(beta):
+    """aberrate (closed form in the angle to beta) equals boosting the photon's 4-momentum (1, k),
+    k = -d, with the Lorentz matrix and reading off -p'/|p'|; doppler_factor equals its energy p'^t."""
+    L = _boost(beta)
+    eta = np.diag([-1.0, 1, 1, 1])
+    np.testing.assert_allclose(L.T @ eta @ L, eta, atol=1e-13)  # the test's matrix is a Lorentz transformation
+    d = _unit(np.random.default_rng(5).normal(size=(2000, 3)))
+    p = np.column_stack([np.ones(len(d)), -d]) @ L.T
+    np.testing.assert_allclose(observer_view.aberrate(d, beta), -_unit(p[:, 1:]), atol=1e-13)
+    np.testing.assert_allclose(observer_view.doppler_factor(d, beta), p[:, 0], rtol=1e-13)
+    np.testing.assert_allclose(np.linalg.norm(observer_view.aberrate(d, beta), axis=1), 1.0, atol=1e-15)
+
+
+@pytest.mark.parametrize("beta", BETAS)
+def test_unaberrate_undoes_aberrate(beta):
+    d = _unit(np.random.default_rng(6).normal(size=(2000, 3)))
+    np.testing.assert_allclose(observer_view.unaberrate(observer_view.aberrate(d, beta), beta), d, atol=2e-13)
+    np.testing.assert_allclose(observer_view.aberrate(observer_view.unaberrate(d, beta), beta), d, atol=2e-13)
+
+
+def test_aberration_special_cases_and_bad_input():
+    """Light from ahead stays ahead; light the static observer sees at right angles to the motion
+    comes, for the moving observer, from cos theta' = beta (the headlight effect); beta = 0 changes
+    nothing (the same array); |beta| >= 1 is refused."""
+    beta = np.array([0.0, 0.6, 0.0])
+    d = np.array([[0, 1.0, 0], [0, -1.0, 0], [1.0, 0, 0], [np.nan, 0, 0]])
+    out = observer_view.aberrate(d, beta)
+    np.testing.assert_allclose(out[:2], d[:2], atol=1e-16)
+    np.testing.assert_allclose(out[2] @ [0, 1, 0], 0.6, atol=1e-15)
+    assert np.isnan(out[3]).all()
+    np.testing.assert_allclose(observer_view.doppler_factor(d[:3], beta), [2.0, 0.5, 1.25], rtol=1e-15)
+    assert observer_view.aberrate(d, np.zeros(3)) is d
+    np.testing.assert_array_equal(observer_view.doppler_factor(d[:3], np.zeros(3)), 1.0)
+    for bad in ([1.0, 0, 0], [0.8, 0.7, 0], [np.nan, 0, 0]):
+        with pytest.raises(ValueError, match="speed of light"):
+            observer_view.aberrate(d, bad)
+
+
+def _spherical(x):
+    """r, theta, phi and the unit vectors r_hat, theta_hat, phi_hat of points x (N, 3)."""
+    r = np.linalg.norm(x, axis=1)
+    th = np.arccos(x[:, 2] / r)
+    ph = np.arctan2(x[:, 1], x[:, 0])
+    r_hat = x / r[:, None]
+    th_hat = np.column_stack([np.cos(th) * np.cos(ph), np.cos(th) * np.sin(ph), -np.sin(th)])
+    ph_hat = np.column_stack([-np.sin(ph), np.cos(ph), np.zeros_like(ph)])
+    return r, th, r_hat, th_hat, ph_hat
+
+
+def test_static_frame_beta_is_the_static_tetrads_view_of_the_four_velocity():
+    """static_frame_beta against the 4-velocity in Schwarzschild coordinates (t, r, theta, phi),
+    u = u^t (1, dr/dt, dtheta/dt, dphi/dt) normalised with the metric, projected on the static
+    observer's orthonormal tetrad: gamma = -g(u, e_t), gamma beta^i = g(u, e_i)."""
+    rng = np.random.default_rng(8)
+    hole, r_s, c = np.array([1.0, -2.0, 0.5]), 1.7, 2.3  # BU, BU, BU per frame
+    x = rng.normal(size=(500, 3))
+    x *= (rng.uniform(1.05, 30, 500) / np.linalg.norm(x, axis=1))[:, None]  # r_s units, outside the horizon
+    r, th, r_hat, th_hat, ph_hat = _spherical(x)
+    f = 1 - 1 / r
+    # coordinate velocities (units of c) with a static-frame speed below 1
+    w = rng.normal(size=(500, 3)) * 0.3
+    w *= np.minimum(1, 0.95 / np.linalg.norm(w, axis=1))[:, None]
+    dr, r_dth, r_s_dph = w[:, 0] * f, w[:, 1] * np.sqrt(f), w[:, 2] * np.sqrt(f)
+    v_world = dr[:, None] * r_hat + r_dth[:, None] * th_hat + r_s_dph[:, None] * ph_hat  # dx/dt, units of c
+    ut = 1 / np.sqrt(f - dr**2 / f - r_dth**2 - r_s_dph**2)
+    u = np.column_stack([ut, ut * dr, ut * r_dth / r, ut * r_s_dph / (r * np.sin(th))])
+    metric = np.stack([-f, 1 / f, r**2, (r * np.sin(th)) ** 2], axis=1)
+    tetrad = [np.column_stack([1 / np.sqrt(f), 0 * r, 0 * r, 0 * r]), np.column_stack([0 * r, np.sqrt(f), 0 * r, 0 * r]),
+              np.column_stack([0 * r, 0 * r, 1 / r, 0 * r]), np.column_stack([0 * r, 0 * r, 0 * r, 1 / (r * np.sin(th))])]
+    proj = [np.einsum("ij,ij,ij->i", metric, u, e) for e in tetrad]
+    gamma = -proj[0]
+    expect = (proj[1][:, None] * r_hat + proj[2][:, None] * th_hat + proj[3][:, None] * ph_hat) / gamma[:, None]
+    got = observer_view.static_frame_beta(hole + r_s * x, c * v_world, hole, r_s, c)
+    np.testing.assert_allclose(got, expect, atol=1e-12)
+    np.testing.assert_allclose(1 / np.sqrt(1 - np.einsum("ij,ij->i", got, got)), gamma, rtol=1e-12)
+    # one position as a (3,) vector
+    np.testing.assert_allclose(observer_view.static_frame_beta(hole + r_s * x[0], c * v_world[0], hole, r_s, c),
+                               expect[:1], atol=1e-12)
+    with pytest.raises(ValueError, match="horizon"):
+        observer_view.static_frame_beta(hole + [0.9 * r_s, 0, 0], [0, 0, 0], hole, r_s, c)
+    for bad_c in (0.0, -1.0, np.nan):
+        with pytest.raises(ValueError, match="speed of light"):
+            observer_view.static_frame_beta(hole + r_s * x, v_world, hole, r_s, bad_c)
+
+
+def _four_velocity(beta, r, phi):
+    """Coordinate components (t, r, theta, phi) at (r, theta = pi/2, phi) of the observer moving with
+    ``beta`` (N, 3) (world axes; the plane of the geodesic is the x-y plane) in the local static frame."""
+    f = 1 - 1 / r
+    r_hat = np.column_stack([np.cos(phi), np.sin(phi), 0 * phi])
+    ph_hat = np.column_stack([-np.sin(phi), np.cos(phi), 0 * phi])
+    g = 1 / np.sqrt(1 - np.einsum("ij,ij->i", beta, beta))
+    b_r, b_ph, b_th = np.einsum("ij,ij->i", beta, r_hat), np.einsum("ij,ij->i", beta, ph_hat), -beta[:, 2]
+    return np.column_stack([g / np.sqrt(f), g * b_r * np.sqrt(f), g * b_th / r, g * b_ph / r])
+
+
+def _minus_p_dot_u(p, u, r):
+    """-g(p, u) with the Schwarzschild metric at (r, theta = pi/2)."""
+    f = 1 - 1 / r
+    return f * p[:, 0] * u[:, 0] - p[:, 1] * u[:, 1] / f - r**2 * (p[:, 2] * u[:, 2] + p[:, 3] * u[:, 3])
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_frequency_ratio_is_the_ratio_of_the_invariants_minus_p_dot_u(order):
+    """g by the static-frame formula against (-p.u_observer) / (-p.u_emitter) with the Schwarzschild
+    metric in coordinates, for real connecting photons (lutgen.connect: its xi at the observer and
+    its tangent at the emitter give the photon's coordinate momentum at both ends) and observers
+    and emitters moving every way at up to 0.7 c."""
+    rng = np.random.default_rng(9 + order)
+    n, r_o = 300, 8.0
+    r_e = rng.uniform(1.2, 15, n)
+    phi = rng.uniform(0.05, np.pi - 0.05, n)
+    conn = connect(r_o, r_e, phi, order)
+    ok = np.isfinite(conn.xi)
+    r_e, phi, xi, ux, uy = r_e[ok], phi[ok], conn.xi[ok], conn.ux[ok], conn.uy[ok]
+    m = len(r_e)
+    assert m > 200
+    f_o, f_e = 1 - 1 / r_o, 1 - 1 / r_e
+    side = 1.0 if order == 1 else -1.0
+    # future-directed photon momenta (the table's rays are traced backwards from the observer)
+    p_o = np.column_stack([np.full(m, 1 / np.sqrt(f_o)), -np.sqrt(f_o) * np.cos(xi), 0 * xi, -side * np.sin(xi) / r_o])
+    p_e = np.column_stack([np.sqrt(f_o) / f_e, -(ux * np.cos(phi) + uy * np.sin(phi)), 0 * xi,
+                           -(-ux * np.sin(phi) + uy * np.cos(phi)) / r_e])
+    beta_o = np.array([0.3, -0.5, 0.35])
+    beta_e = rng.normal(size=(m, 3)) * 0.35
+    beta_e *= np.minimum(1, 0.7 / np.linalg.norm(beta_e, axis=1))[:, None]
+    expect = (_minus_p_dot_u(p_o, _four_velocity(np.tile(beta_o, (m, 1)), np.full(m, r_o), 0 * xi), np.full(m, r_o))
+              / _minus_p_dot_u(p_e, _four_velocity(beta_e, r_e, phi), r_e))
+    e1, e2 = np.array([1.0, 0, 0]), np.tile([0, 1.0, 0], (m, 1))
+    k_o = -observer_view.view_directions(xi, e2, e1, order)
+    scene = mapping.Scene(np.array([r_o, 0, 0]), np.zeros(3), 1.0)
+    plane = mapping.PlaneCoordinates(r=r_e, phi=phi, e2=e2, on_axis=np.zeros(m, bool))
+    k_e = mapping.leaving_direction(plane, scene, ux, uy)
+    got = observer_view.frequency_ratio(r_e, r_o, k_o, beta_o, k_e, beta_e)
+    np.testing.assert_allclose(got, expect, rtol=1e-10)
+    # emitters at rest: only the gravitational shift and the observer's motion
+    rest = _minus_p_dot_u(p_o, _four_velocity(np.tile(beta_o, (m, 1)), np.full(m, r_o), 0 * xi), np.full(m, r_o)) \
+        / _minus_p_dot_u(p_e, _four_velocity(np.zeros((m, 3)), r_e, phi), r_e)
+    np.testing.assert_allclose(observer_view.frequency_ratio(r_e, r_o, k_o, beta_o), rest, rtol=1e-10)
+
+
+def test_frequency_ratio_limits_and_bad_input():
+    """The sky seen by a static observer is blue-shifted by 1 / sqrt(1 - r_s/r); far from the hole g is
+    special relativity's Doppler factor (receding: sqrt((1 - beta) / (1 + beta)); co-moving: 1; light
+    arriving across the motion: gamma); an
+    observer moving towards the source sees g > 1; emitters inside the horizon or at c give NaN."""
+    k = np.array([[1.0, 0, 0]])
+    for r in (1.01, 3.0, 20.0):
+        np.testing.assert_allclose(observer_view.frequency_ratio(np.array([np.inf]), r, k), 1 / np.sqrt(1 - 1 / r),
+                                   rtol=1e-15)
+    far, b = 1e12, 0.6
+    away = observer_view.frequency_ratio(np.array([far]), far, k, [b, 0, 0])
+    np.testing.assert_allclose(away, np.sqrt((1 - b) / (1 + b)), rtol=1e-11)
+    np.testing.assert_allclose(observer_view.frequency_ratio(np.array([far]), far, k, [-b, 0, 0]),
+                               np.sqrt((1 + b) / (1 - b)), rtol=1e-11)
+    np.testing.assert_allclose(observer_view.frequency_ratio(np.array([far]), far, k, [b, 0.2, 0], k, [b, 0.2, 0]), 1.0,
+                               rtol=1e-11)
+    # light arriving at right angles to the motion (in the static frame): time dilation alone, gamma
+    np.testing.assert_allclose(observer_view.frequency_ratio(np.array([far]), far, k, [0, 0.5, 0]), 1 / np.sqrt(0.75),
+                               rtol=1e-11)
+    out = observer_view.frequency_ratio(np.array([0.9, 5.0]), 10.0, np.tile(k, (2, 1)), None, np.tile(k, (2, 1)),
+                                        np.array([[0, 0, 0], [1.0, 0, 0]]))
+    assert np.isnan(out).all()
+    with pytest.raises(ValueError, match="horizon"):
+        observer_view.frequency_ratio(np.array([5.0]), 1.0, k)
+    with pytest.raises(ValueError, match="speed of light"):
+        observer_view.frequency_ratio(np.array([5.0]), 4.0, k, [0, 1.0, 0])

@@ -16,6 +16,13 @@ other side and sweeps 2 pi - phi) in cos(xi) e1 - sin(xi) e2 (:func:`view_direct
 is placed at its light-travel-time distance c dt = dt r_s BU from the camera (:func:`place_images`).
 :func:`ray_planes` is the inverse step: a world direction leaving the camera -> (xi, e2).
 
+A moving observer: the table is the static observer's view. An observer at the same event moving
+with the velocity beta (units of c) in the local static frame (:func:`static_frame_beta`, from a
+coordinate velocity) sees every direction aberrated towards its motion (:func:`aberrate`, exact;
+:func:`unaberrate` takes its directions back to the static frame) and every frequency multiplied by
+gamma (1 + beta . d) for the static frame's apparent direction d (:func:`doppler_factor`);
+:func:`frequency_ratio` is g = 1 / (1 + z) between an emitter and the observer, both possibly moving.
+
 Axis geometry: coordinates (x, y, z) relative to the hole with z along the observer-hole axis
 towards the camera and x, y across it (:func:`axis_coordinates`, a fixed perpendicular pair from
 :func:`any_perpendicular`); where the axis crosses triangles, their distance from it, the azimuth
@@ -284,3 +291,121 @@ def near_axis(source_points, tris, camera, hole, margin=1e-9, axis_xyz=None) -> 
     x, y, z = axis_coordinates(source_points, camera, hole) if axis_xyz is None else axis_xyz
     tol = margin * np.sqrt(x * x + y * y + z * z)  # margin times the distance from the hole (orthonormal axes)
     return _beside_axis(x, y, tris, tol) == 0
+
+
+# --------------------------------------------------------------------------------------------------
+# A moving observer: its velocity in the local static frame, aberration, the shift of frequencies
+# --------------------------------------------------------------------------------------------------
+def static_frame_beta(position, velocity, hole, r_s, speed_of_light) -> np.ndarray:
+    """The velocity beta (N, 3; in units of c, world axes) that the local static observer measures for
+    bodies at ``position`` (N, 3 or 3; BU) moving with the coordinate velocity ``velocity`` (same shape;
+    BU per unit of coordinate time, e.g. BU per frame when frames measure Schwarzschild coordinate
+    time t) about a hole at ``hole`` (3,; BU) of Schwarzschild radius ``r_s`` (BU), with the speed of
+    light ``speed_of_light`` (BU per the same unit of time).
+
+    Blender's Euclidean axes are Schwarzschild's: a point is at r = |x - hole| / r_s (units of r_s) in
+    the direction n = (x - hole) / |x - hole|. With v_r = v . n and v_t = v - v_r n, proper radial
+    length is dr / sqrt(1 - r_s/r) and proper time sqrt(1 - r_s/r) dt, so
+
+        beta = (v_r / (1 - r_s/r) n + v_t / sqrt(1 - r_s/r)) / c.
+
+    Raises ValueError for a position at or inside the horizon (r <= 1 r_s) or a speed of light that is
+    not positive. |beta| >= 1 is returned as it is (:func:`lorentz_gamma` refuses it)."""
+    c = float(speed_of_light)
+    if not (np.isfinite(c) and c > 0):
+        raise ValueError(f"the speed of light must be a positive number of Blender units per frame, got {c}")
+    x = (np.asarray(position, dtype=np.float64) - np.asarray(hole, dtype=np.float64)) / float(r_s)
+    x = np.atleast_2d(x)
+    r = row_norm(x)
+    if not np.all(r > 1.0):
+        raise ValueError(f"a moving observer at r = {np.min(r):.6g} r_s is not outside the horizon (r > 1 r_s)")
+    n = x / r[:, None]
+    v = np.atleast_2d(np.asarray(velocity, dtype=np.float64)) / c
+    f = 1.0 - 1.0 / r
+    v_r = np.einsum("ij,ij->i", v, n)
+    v_t = v - v_r[:, None] * n
+    return (v_r / f)[:, None] * n + v_t / np.sqrt(f)[:, None]
+
+
+def lorentz_gamma(beta) -> float:
+    """gamma = 1 / sqrt(1 - |beta|^2) of one velocity ``beta`` (3,; units of c). Raises ValueError for
+    |beta| >= 1 or a non-finite beta (no observer moves at or above the speed of light)."""
+    beta = np.asarray(beta, dtype=np.float64).reshape(3)
+    b2 = float(beta @ beta)
+    if not (np.isfinite(b2) and b2 < 1.0):
+        raise ValueError(f"the observer moves at {np.sqrt(b2):.6g} c in the local static frame; it must stay "
+                         "below the speed of light (raise speed_of_light or slow the camera)")
+    return 1.0 / np.sqrt(1.0 - b2)
+
+
+def aberrate(directions, beta) -> np.ndarray:
+    """(N, 3) unit directions in which an observer moving with ``beta`` (3,; units of c, world axes =
+    the local static frame's) sees the light that the static observer at the same event sees from the
+    unit ``directions`` (N, 3) (apparent directions, i.e. opposite to the photons' direction of travel).
+
+    Special-relativistic aberration, exact: with theta the angle between a direction and beta,
+    cos theta' = (cos theta + |beta|) / (1 + |beta| cos theta) and sin theta' = sin theta / (gamma
+    (1 + |beta| cos theta)), in the same plane through beta: everything crowds towards the direction
+    of motion. beta = 0 returns ``directions`` itself (the same array). Raises ValueError for
+    |beta| >= 1. NaN directions stay NaN. :func:`unaberrate` is the inverse."""
+    beta = np.asarray(beta, dtype=np.float64).reshape(3)
+    gamma = lorentz_gamma(beta)
+    b = float(np.sqrt(beta @ beta))
+    if b == 0.0:
+        return directions
+    d = np.asarray(directions, dtype=np.float64)
+    b_hat = beta / b
+    cos_t = d @ b_hat
+    across = d - cos_t[..., None] * b_hat
+    den = 1.0 + b * cos_t
+    out = ((cos_t + b) / den)[..., None] * b_hat + across / (gamma * den)[..., None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return out / np.sqrt(np.einsum("...j,...j->...", out, out))[..., None]
+
+
+def unaberrate(directions, beta) -> np.ndarray:
+    """The inverse of :func:`aberrate`: the static observer's apparent directions (N, 3) of light that
+    the observer moving with ``beta`` (3,; units of c) sees from the unit ``directions`` (N, 3) (e.g.
+    a moving camera's pixel rays, taken back to the static frame before the deflection)."""
+    return aberrate(directions, -np.asarray(beta, dtype=np.float64).reshape(3))
+
+
+def doppler_factor(directions, beta) -> np.ndarray:
+    """(N,) nu_moving / nu_static: the ratio of the frequencies that the observer moving with ``beta``
+    (3,; units of c) and the static observer at the same event measure for light they see from the
+    unit apparent ``directions`` (N, 3) of the *static* frame: gamma (1 + beta . d) = gamma (1 - beta . k),
+    k = -d the photon's direction of travel. Above 1 towards the direction of motion. Raises
+    ValueError for |beta| >= 1."""
+    beta = np.asarray(beta, dtype=np.float64).reshape(3)
+    gamma = lorentz_gamma(beta)
+    return gamma * (1.0 + np.asarray(directions, dtype=np.float64) @ beta)
+
+
+def frequency_ratio(r_emit, r_obs, k_obs, beta_obs=None, k_emit=None, beta_emit=None) -> np.ndarray:
+    """g = nu_observed / nu_emitted = 1 / (1 + z) of light from emitters at radii ``r_emit`` (N,; units
+    of r_s; np.inf for the sky) received by the observer at ``r_obs`` (units of r_s):
+
+        g = sqrt((1 - r_s/r_e) / (1 - r_s/r_o)) gamma_o (1 - beta_o . k_o) / (gamma_e (1 - beta_e . k_e)),
+
+    ``k_obs`` (N, 3): the photon's unit direction of travel where it arrives, in the observer's local
+    static frame (minus the static observer's apparent direction); ``beta_obs`` (3,): the observer's
+    velocity in that frame (units of c; None: at rest); ``k_emit`` (N, 3): the photon's unit direction
+    of travel where it leaves the emitter, in the emitter's static frame, and ``beta_emit`` (N, 3 or 3)
+    the emitter's velocity there (None: emitters at rest, and ``k_emit`` is not needed). An observer
+    moving towards the source sees g > 1. NaN for emitters at or inside the horizon or moving at or
+    above c; raises ValueError for r_obs <= 1 or |beta_obs| >= 1."""
+    r_obs = float(r_obs)
+    if not r_obs > 1.0:
+        raise ValueError(f"the observer at r = {r_obs:.6g} r_s is not outside the horizon (r > 1 r_s)")
+    r_e = np.asarray(r_emit, dtype=np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        g = np.sqrt((1.0 - 1.0 / r_e) / (1.0 - 1.0 / r_obs))
+        g = np.where(r_e > 1.0, g, np.nan)
+        if beta_obs is not None:
+            g = g * doppler_factor(-np.asarray(k_obs, dtype=np.float64), beta_obs)
+        if beta_emit is not None:
+            be = np.asarray(beta_emit, dtype=np.float64)
+            b2 = np.einsum("...j,...j->...", be, be)
+            gamma_e = np.where(b2 < 1.0, 1.0 / np.sqrt(1.0 - np.minimum(b2, 1.0)), np.nan)
+            g = g / (gamma_e * (1.0 - np.einsum("...j,...j->...", be, np.asarray(k_emit, dtype=np.float64))))
+    return g
