@@ -215,8 +215,9 @@ def test_static_frame_beta_is_the_static_tetrads_view_of_the_four_velocity():
     ut = 1 / np.sqrt(f - dr**2 / f - r_dth**2 - r_s_dph**2)
     u = np.column_stack([ut, ut * dr, ut * r_dth / r, ut * r_s_dph / (r * np.sin(th))])
     metric = np.stack([-f, 1 / f, r**2, (r * np.sin(th)) ** 2], axis=1)
-    tetrad = [np.column_stack([1 / np.sqrt(f), 0 * r, 0 * r, 0 * r]), np.column_stack([0 * r, np.sqrt(f), 0 * r, 0 * r]),
-              np.column_stack([0 * r, 0 * r, 1 / r, 0 * r]), np.column_stack([0 * r, 0 * r, 0 * r, 1 / (r * np.sin(th))])]
+    tetrad = [np.zeros((len(r), 4)) for _ in range(4)]  # the static observer's orthonormal tetrad
+    for k, e in enumerate((1 / np.sqrt(f), np.sqrt(f), 1 / r, 1 / (r * np.sin(th)))):
+        tetrad[k][:, k] = e
     proj = [np.einsum("ij,ij,ij->i", metric, u, e) for e in tetrad]
     gamma = -proj[0]
     expect = (proj[1][:, None] * r_hat + proj[2][:, None] * th_hat + proj[3][:, None] * ph_hat) / gamma[:, None]
