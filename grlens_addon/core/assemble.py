@@ -29,9 +29,11 @@ class ImageMesh:
     the source's unit shading normal (world space) at each corner's source point, or None when the
     source has no normals; report: culling counts;
     source_tri (F,) the source triangle of each face; source_position (V, 3) BU: the undistorted
-    world point each image vertex shows; with a :class:`DiscEmitter`: redshift (V,) 1 + z (0 where
-    gas has no circular orbit: r <= 1.5 r_s or on the disc axis) and disc_colour (V, 3) linear RGB
-    (black there), else None. source_tri indexes the caller's SourceMesh.tris.
+    world point each image vertex shows; redshift (V,) 1 + z of the light each vertex shows
+    (:func:`image_redshift`), with a :class:`DiscEmitter` or a scene with a velocity (physical time;
+    0 where there is none: disc gas without a circular orbit, r <= 1.5 r_s or on the disc axis), else
+    None; with a disc, disc_colour (V, 3) linear RGB (black there), else None. source_tri indexes the
+    caller's SourceMesh.tris.
     """
 
     order: int
@@ -114,17 +116,34 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
     if patch_corners is not None:
         src_tri = np.concatenate([src_tri, p_src])
     redshift = colour = None
+    if disc is not None or scene.beta is not None:
+        redshift = image_redshift(scene, v_src, v_dir, disc)
     if disc is not None:
-        redshift = thin_disc.vertex_redshift_from_direction(v_src, scene.hole, scene.camera, scene.r_s,
-                                                            disc.axis, v_dir, disc.prograde)
         r = np.linalg.norm(v_src - scene.hole, axis=1) / scene.r_s
         colour = np.nan_to_num(thin_disc.disc_colour(r, redshift, disc.mode, r_in=disc.r_in,
                                                      t_peak=disc.t_peak, exposure=disc.exposure))
+    if redshift is not None:
         redshift = np.nan_to_num(redshift, nan=0.0)  # 0: no circular orbit there (r <= 1.5 r_s, axis)
     return ImageMesh(order=order, positions=v_pos, tris=image_tris, corner_uv=corner_uv,
                      material=mesh.material[src_tri], light_travel_time=v_dist, irradiance=irr, report=report,
                      source_tri=source.origin[src_tri], source_position=v_src, redshift=redshift,
                      disc_colour=colour, corner_normal=n)
+
+
+def image_redshift(scene, points, directions, disc: DiscEmitter | None = None) -> np.ndarray:
+    """(N,) 1 + z = nu_emitted / nu_seen of the light from the source ``points`` (N, 3; BU) that the
+    camera of ``scene`` sees in the image ``directions`` (N, 3; its own frame: aberrated when the scene
+    has a velocity ``beta``). Emitters at rest in their static frames (the gravitational shift and
+    the camera's motion: observer_view.frequency_ratio), or a thin disc's gas on circular orbits
+    (thin_disc, its shift for the static observer, divided by the camera's Doppler factor). NaN where
+    there is none (r <= 1 r_s; disc gas at r <= 1.5 r_s or on the disc axis)."""
+    static = directions if scene.beta is None else observer_view.unaberrate(directions, scene.beta)
+    if disc is not None:
+        z1 = thin_disc.vertex_redshift_from_direction(points, scene.hole, scene.camera, scene.r_s, disc.axis, static,
+                                                      disc.prograde)
+        return z1 if scene.beta is None else z1 / observer_view.doppler_factor(static, scene.beta)
+    r = np.linalg.norm(points - scene.hole, axis=1) / scene.r_s
+    return 1.0 / observer_view.frequency_ratio(r, scene.r_obs, -static, scene.beta)
 
 
 def _patch_parts(patches, patch_keep, order, offset):

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .observer_view import any_perpendicular, place_images, row_norm
+from .observer_view import any_perpendicular, lorentz_gamma, place_images, row_norm
 
 # A vertex this close to the observer-hole axis (|p_perp| / |p|) has no unique plane: it is seen as
 # an Einstein ring, which a mesh cannot show. Such vertices are flagged and their triangles culled.
@@ -40,11 +40,16 @@ def round_radius(r_obs) -> float:
 
 @dataclass
 class Scene:
-    """Camera and hole in world space (BU) and the Schwarzschild radius r_s (BU)."""
+    """Camera and hole in world space (BU) and the Schwarzschild radius r_s (BU); ``beta`` (3,), when
+    frames measure physical time: the camera's velocity in its local static frame (units of c, world
+    axes; observer_view.static_frame_beta), which aberrates every image direction and shifts every
+    image's light (assemble's 1 + z); None: a still, seen by the static observer (beta = 0 aberrates
+    nothing but still gives every image its 1 + z)."""
 
     camera: np.ndarray  # (3,)
     hole: np.ndarray  # (3,)
     r_s: float
+    beta: np.ndarray | None = None
 
     def __post_init__(self):
         self.camera = np.asarray(self.camera, dtype=np.float64).reshape(3)
@@ -56,6 +61,9 @@ class Scene:
             raise ValueError("camera and black hole positions must be finite")
         if not np.linalg.norm(self.camera - self.hole) > 0:
             raise ValueError("the camera is at the centre of the black hole")
+        if self.beta is not None:
+            self.beta = np.asarray(self.beta, dtype=np.float64).reshape(3)
+            lorentz_gamma(self.beta)  # refuses |beta| >= 1
 
     @property
     def r_obs(self) -> float:
