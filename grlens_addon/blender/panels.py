@@ -29,6 +29,7 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         col = layout.column()
         col.prop(g, "black_hole")
         col.prop(g, "r_s")
+        col.prop(g, "speed_of_light")
         col.prop(g, "observer")
         note = panorama_note(context.scene)
         if note:

@@ -48,6 +48,14 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
         name="Schwarzschild Radius", default=1.0, soft_min=1e-6, soft_max=100.0, unit="LENGTH", update=_changed,
         description="Schwarzschild radius r_s of the black hole, in scene length units (a positive length; "
                     "zero or a negative value is refused with a message, never clamped)")
+    speed_of_light: FloatProperty(
+        name="Speed of Light", default=0.0, soft_min=0.0, soft_max=100.0, precision=4, update=_changed,
+        description="Speed of light c in scene length units per frame. 0: infinite, every frame a still seen by "
+                    "a camera at rest (as without it). Above 0, frames measure Schwarzschild coordinate time (the "
+                    "clock of a distant observer at rest; a fall seen in this time slows near the horizon): the "
+                    "camera's motion, read from its animation, aberrates the images and shifts their light "
+                    "(point attribute grlens_redshift = 1 + z), and the black hole must stay at rest. A negative "
+                    "value is refused with a message")
     lut_mode: EnumProperty(
         name="Lookup Table", default="EVERY_DISTANCE", update=_changed,
         items=[("EVERY_DISTANCE", "Every Distance",

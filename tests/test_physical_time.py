@@ -1,0 +1,208 @@
+"""Physical time in the Blender layer (pip `bpy` 4.5): scene.grlens.speed_of_light, the observer's
+velocity read from its own animation without changing the frame (blender/motion.py), the images of a
+moving camera and their grlens_redshift attribute, and the messages for what physical time refuses.
+
+Units: Blender units (BU); r_s = 2 BU in the demo scene (camera at 20 r_s = 40 BU); speeds in BU per
+frame."""
+import math
+
+import numpy as np
+import pytest
+
+import bpy  # noqa: E402
+import mathutils  # noqa: E402
+
+from blender_session import empty_file, registered  # noqa: E402,F401  (autouse fixtures)
+from grlens_addon.blender import motion, rebuild
+from grlens_addon.core import mapping, observer_view, pipeline
+
+R_S = 2.0
+
+
+def _demo():
+    assert bpy.ops.grlens.demo_scene(r_s=R_S) == {"FINISHED"}
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = 160, 90
+    sphere = bpy.data.objects["OrbitingSphere"]
+    sphere.animation_data_clear()
+    sphere.parent = None
+    sphere.location = (0.0, 3 * R_S, 0.02 * R_S)
+    return scene, scene.camera, sphere
+
+
+def _key_linear(obj, path, frames_values):
+    for f, v in frames_values:
+        setattr(obj, path, v)
+        obj.keyframe_insert(path, frame=f)
+    for fc in motion._fcurves(obj):
+        for kp in fc.keyframe_points:
+            kp.interpolation = "LINEAR"
+
+
+def _attr(obj, name):
+    a = obj.data.attributes.get(name)
+    if a is None:
+        return None
+    out = np.empty(len(obj.data.vertices), np.float32)
+    a.data.foreach_get("value", out)
+    return out
+
+
+@pytest.mark.parametrize("mode", ["XYZ", "ZXY", "QUATERNION", "AXIS_ANGLE"])
+def test_world_matrices_from_keyframes_match_blenders(mode):
+    """motion.world_matrix_at (keyframes evaluated at any frame, composed with the deltas and the
+    parent's animated matrix) equals the matrix Blender evaluates at that frame; the velocity equals
+    the difference of Blender's own matrices half a frame either side."""
+    scene = bpy.context.scene
+    parent = bpy.data.objects.new("Parent", None)
+    child = bpy.data.objects.new("Child", None)
+    for o in (parent, child):
+        scene.collection.objects.link(o)
+    child.parent = parent
+    child.matrix_parent_inverse = mathutils.Matrix(((1, 0, 0, 0.5), (0, 0.8, -0.6, 0), (0, 0.6, 0.8, -1), (0, 0, 0, 1)))
+    child.rotation_mode = mode
+    child.delta_location = (0.1, -0.2, 0.3)
+    child.delta_scale = (1.0, 1.5, 1.0)
+    if mode == "QUATERNION":
+        child.delta_rotation_quaternion = (0.9, 0.1, 0.3, 0.0)
+    elif mode != "AXIS_ANGLE":
+        child.delta_rotation_euler = (0.2, -0.1, 0.4)
+    rot_path = {"QUATERNION": "rotation_quaternion", "AXIS_ANGLE": "rotation_axis_angle"}.get(mode, "rotation_euler")
+    rot_vals = {"rotation_quaternion": [(1, 0, 0, 0), (0.7, 0.3, -0.2, 0.6), (0.2, 0.9, 0.1, -0.3)],
+                "rotation_axis_angle": [(0.1, 0, 0, 1), (1.2, 0.3, 0.4, 0.8), (2.0, -0.6, 0.2, 0.7)],
+                "rotation_euler": [(0, 0, 0), (0.4, 1.1, -0.3), (1.5, -0.2, 0.9)]}[rot_path]
+    keys = zip((1, 6, 15), ((0, 0, 0), (3, 1, -2), (5, -4, 1)), rot_vals, ((1, 1, 1), (2, 1, 1), (1, 1, 3)))
+    for f, loc, rot, sc in keys:
+        child.location, child.scale = loc, sc
+        setattr(child, rot_path, rot)
+        for p in ("location", rot_path, "scale"):
+            child.keyframe_insert(p, frame=f)
+        parent.location = (f * 0.3, -f * 0.1, 2.0)
+        parent.rotation_euler = (0.0, 0.05 * f, 0.1 * f)
+        parent.keyframe_insert("location", frame=f)
+        parent.keyframe_insert("rotation_euler", frame=f)
+    for f in (3, 7.25, 12):
+        scene.frame_set(int(f), subframe=f - int(f))
+        got = np.array(motion.world_matrix_at(child, f))
+        np.testing.assert_allclose(got, np.array(child.matrix_world), atol=2e-5)
+        v = motion.velocity(scene, child, child.evaluated_get(bpy.context.evaluated_depsgraph_get()))
+        ends = []
+        for g in (f + motion.STEP, f - motion.STEP):
+            scene.frame_set(int(math.floor(g)), subframe=g - math.floor(g))
+            ends.append(np.array(child.matrix_world.translation))
+        np.testing.assert_allclose(v, (ends[0] - ends[1]) / (2 * motion.STEP), atol=5e-5)
+        assert np.linalg.norm(v) > 0.1
+
+
+def test_velocity_of_linear_keys_and_what_it_refuses():
+    """Linear keys: the exact speed; no animation: at rest; a turning constraint (Track To) is
+    allowed; a constraint that moves the object, or a driver, is refused with the reason."""
+    scene = bpy.context.scene
+    obj = bpy.data.objects.new("Mover", None)
+    target = bpy.data.objects.new("Target", None)
+    for o in (obj, target):
+        scene.collection.objects.link(o)
+    _key_linear(obj, "location", [(1, (0.0, 0.0, 0.0)), (11, (2.0, -1.0, 0.5))])
+    scene.frame_set(4)
+    np.testing.assert_allclose(motion.velocity(scene, obj), [0.2, -0.1, 0.05], atol=1e-7)
+    np.testing.assert_array_equal(motion.velocity(scene, target), 0.0)
+    con = obj.constraints.new("TRACK_TO")
+    con.target = target
+    scene.frame_set(5)
+    dg = bpy.context.evaluated_depsgraph_get()
+    np.testing.assert_allclose(motion.velocity(scene, obj, obj.evaluated_get(dg)), [0.2, -0.1, 0.05], atol=1e-7)
+    obj.constraints.new("COPY_LOCATION").target = target
+    with pytest.raises(motion.MotionError, match="copy location constraint"):
+        motion.velocity(scene, obj, obj.evaluated_get(dg))
+    obj.constraints.clear()
+    drv = obj.driver_add("location", 2).driver
+    drv.expression = "frame * 0.1"
+    scene.frame_set(6)
+    with pytest.raises(motion.MotionError, match="keyframes alone"):
+        motion.velocity(scene, obj, obj.evaluated_get(bpy.context.evaluated_depsgraph_get()))
+
+
+def test_a_moving_camera_aberrates_the_images_and_writes_their_1_plus_z():
+    """With speed_of_light > 0 the camera's keyed motion gives beta (static frame), the images are the
+    core's for that beta, every image vertex carries grlens_redshift = 1 + z (as the core computes
+    it, to float32), and the status says the camera's speed; back to 0, the images are the stills'
+    again, without the attribute."""
+    scene, cam, sphere = _demo()
+    x0 = np.array(cam.location)
+    _key_linear(cam, "location", [(1, tuple(x0)), (21, tuple(x0 + np.array([-4.0, 6.0, 1.0])))])
+    scene.frame_set(11)
+    still = {o: np.array([v.co[:] for v in bpy.data.objects[f"OrbitingSphere.GR{o}"].data.vertices]) for o in (1, 2)}
+    assert _attr(bpy.data.objects["OrbitingSphere.GR1"], "grlens_redshift") is None
+    c = 1.5  # BU per frame
+    scene.grlens.speed_of_light = c
+    assert bpy.ops.grlens.rebuild() == {"FINISHED"}
+    v = np.array([-4.0, 6.0, 1.0]) / 20
+    pos = np.array(cam.matrix_world.translation)
+    beta = observer_view.static_frame_beta(pos, v, np.zeros(3), R_S, c)[0]
+    assert f"camera at {np.linalg.norm(beta):.3g} c" in scene.grlens.status, scene.grlens.status
+    geo = mapping.Scene(pos, np.zeros(3), R_S, beta=beta)
+    dg = bpy.context.evaluated_depsgraph_get()
+    src = rebuild._extract(sphere.evaluated_get(dg))
+    settings = rebuild.scene_geometry(scene, dg)[1]
+    from grlens_addon.blender import lutcache
+
+    expect = pipeline.build_images(src, geo, lutcache.get_table(scene.grlens, geo.r_obs), settings, None,
+                                   rebuild.frustum_planes(scene, cam))
+    for order in (1, 2):
+        obj = bpy.data.objects[f"OrbitingSphere.GR{order}"]
+        got = np.array([vv.co[:] for vv in obj.data.vertices])
+        assert got.shape == expect[order].positions.shape
+        np.testing.assert_allclose(got, expect[order].positions, atol=1e-5 * 40)
+        z = _attr(obj, "grlens_redshift")
+        np.testing.assert_allclose(z, expect[order].redshift, rtol=1e-5)  # the keys' float32 velocity
+        assert got.shape != still[order].shape or not np.allclose(got, still[order], atol=1e-3)
+    scene.grlens.speed_of_light = 0.0
+    assert bpy.ops.grlens.rebuild() == {"FINISHED"}
+    for order in (1, 2):
+        obj = bpy.data.objects[f"OrbitingSphere.GR{order}"]
+        np.testing.assert_array_equal(np.array([vv.co[:] for vv in obj.data.vertices]), still[order])
+        assert _attr(obj, "grlens_redshift") is None
+
+
+@pytest.mark.parametrize("problem", ["negative", "moving_hole", "too_fast", "constrained"])
+def test_physical_time_refuses_bad_input_with_a_message(problem):
+    scene, cam, sphere = _demo()
+    g = scene.grlens
+    g.speed_of_light = 2.0
+    if problem == "negative":
+        g.speed_of_light = -1.0
+        expect = "speed of light must be positive"
+    elif problem == "moving_hole":
+        _key_linear(g.black_hole, "location", [(1, (0.0, 0.0, 0.0)), (11, (0.0, 1.0, 0.0))])
+        expect = "black hole 'BlackHole' moves"
+    elif problem == "too_fast":
+        _key_linear(cam, "location", [(1, (40.0, 0.0, 0.0)), (3, (40.0, 4.0, 0.0))])
+        expect = "raise speed_of_light or slow the camera"
+    else:
+        cam.constraints.new("FOLLOW_PATH")
+        expect = "follow path constraint"
+    scene.frame_set(2)
+    rebuild.rebuild_scene(scene)
+    assert g.status.startswith("grlens:") and expect in g.status, g.status
+    g.speed_of_light = 0.0
+    rebuild.rebuild_scene(scene)
+    assert not g.status.startswith("grlens:"), g.status
+
+
+def test_a_marker_cut_starts_from_the_new_cameras_own_motion():
+    """At a timeline marker that switches to a camera moving on its own, beta is that camera's (not a
+    difference across the cut)."""
+    scene, cam, sphere = _demo()
+    cam_b = bpy.data.objects.new("CameraB", cam.data)
+    scene.collection.objects.link(cam_b)
+    cam_b.rotation_euler = cam.rotation_euler
+    _key_linear(cam_b, "location", [(1, (0.0, 40.0, 0.0)), (21, (0.0, 40.0, 4.0))])
+    scene.timeline_markers.new("A", frame=1).camera = cam
+    scene.timeline_markers.new("B", frame=10).camera = cam_b
+    scene.grlens.speed_of_light = 1.0
+    for frame, v in ((9, np.zeros(3)), (10, np.array([0.0, 0.0, 0.2]))):
+        scene.frame_set(frame)
+        assert bpy.ops.grlens.rebuild() == {"FINISHED"}
+        pos = np.array(rebuild.observer_camera(scene).matrix_world.translation)
+        beta = observer_view.static_frame_beta(pos, v, np.zeros(3), R_S, 1.0)[0]
+        assert f"camera at {np.linalg.norm(beta):.3g} c" in scene.grlens.status, scene.grlens.status
