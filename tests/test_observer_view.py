@@ -316,3 +316,36 @@ def test_frequency_ratio_limits_and_bad_input():
         observer_view.frequency_ratio(np.array([5.0]), 1.0, k)
     with pytest.raises(ValueError, match="speed of light"):
         observer_view.frequency_ratio(np.array([5.0]), 4.0, k, [0, 1.0, 0])
+
+
+@pytest.mark.parametrize("beta", BETAS[:3])
+def test_ring_measure_of_a_moving_observer_is_the_sag_it_sees(beta):
+    """hole_angle with beta: the static radius of the circle about the axis through a direction times
+    the aberration's local scale. A piece of such a circle (radius R about the hole's direction in the
+    static frame, spanning the azimuth D), seen by the moving observer, sags from its chord by
+    ring_sagitta(hole_angle(., beta), D) (checked by aberrating the arc's ends and middle and
+    measuring the angle between the chord's middle and the arc's), and unit_directions with beta is
+    the aberrated undistorted view."""
+    camera, hole = SCENE.camera, SCENE.hole
+    towards = -SCENE.e1
+    u = observer_view.any_perpendicular(towards)
+    v = np.cross(towards, u)
+    for radius in (0.003, 0.01):
+        for psi in np.linspace(0, 2 * np.pi, 7)[:-1]:
+            step = 0.3
+
+            def at(a):
+                return np.cos(radius) * towards + np.sin(radius) * (np.cos(a) * u + np.sin(a) * v)
+
+            ends = observer_view.aberrate(np.array([at(psi), at(psi + step)]), beta)
+            mid = observer_view.aberrate(at(psi + step / 2)[None], beta)[0]
+            chord_mid = ends.sum(axis=0) / np.linalg.norm(ends.sum(axis=0))
+            seen_sag = np.arccos(np.clip(chord_mid @ mid, -1, 1))
+            r_moving = observer_view.hole_angle(mid[None], camera, hole, beta)[0]
+            np.testing.assert_allclose(seen_sag, observer_view.ring_sagitta(r_moving, step), rtol=0.05)
+            if np.linalg.norm(beta) > 0.5:  # the static radius would not do
+                assert abs(seen_sag / observer_view.ring_sagitta(radius, step) - 1) > 0.2
+    np.testing.assert_allclose(observer_view.hole_angle(SCENE.e1[None], camera, hole), [np.pi], atol=1e-7)
+    pts = _points(20)
+    np.testing.assert_allclose(observer_view.unit_directions(pts, camera, beta),
+                               observer_view.aberrate(observer_view.unit_directions(pts, camera), beta), atol=0)

@@ -73,7 +73,7 @@ def outside_bits(points, planes) -> np.ndarray:
 
 def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_planes=None, image_points=None,
          hole=None, order=None, pixel_angle=None, max_error_px=None, *, source_circumference=None,
-         image_circumference=None, image_outside_bits=None, axis_candidates=None):
+         image_circumference=None, image_outside_bits=None, axis_candidates=None, beta=None):
     """Mask of image triangles to keep, and a :class:`CullReport`.
 
     tris (F, 3) index the per-vertex arrays: image_dirs (V, 3) unit apparent directions of the images,
@@ -95,7 +95,10 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     same): ``source_circumference`` and ``image_circumference`` (F,), :func:`circumference` of the
     undistorted and image directions; ``image_outside_bits`` (V,), :func:`outside_bits` of
     ``image_points``; ``axis_candidates`` (F,) bool, a superset of the triangles the axis may pass
-    through (e.g. from :func:`near_axis` of their source triangles; others are not tested).
+    through (e.g. from :func:`near_axis` of their source triangles; others are not tested). ``beta``
+    (3,; units of c): the camera's velocity (mapping.Scene.beta), whose view ``image_dirs`` are; the
+    undistorted view and the ring measure are then the moving camera's (observer_view.unit_directions,
+    observer_view.hole_angle).
     """
     tris = np.asarray(tris, dtype=np.int64)
     rep = CullReport()
@@ -105,7 +108,7 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     keep &= ~bad_v
     src_c = source_circumference
     if src_c is None:
-        src_c = circumference(unit_directions(source_points, camera), tris)
+        src_c = circumference(unit_directions(source_points, camera, beta), tris)
     degenerate = keep & ~(src_c > 0)
     rep.degenerate_source = int(degenerate.sum())
     keep &= ~degenerate
@@ -127,7 +130,7 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
             if pixel_angle and max_error_px:
                 at = used_vertices(t_sel, len(image_dirs))  # once per corner point
                 angle = np.full(len(image_dirs), np.nan)
-                angle[at] = hole_angle(image_dirs.take(at, axis=0), camera, hole)
+                angle[at] = hole_angle(image_dirs.take(at, axis=0), camera, hole, beta)
                 r_px = angle.take(t_sel)
                 r_px = np.maximum(np.maximum(r_px[:, 0], r_px[:, 1]), r_px[:, 2]) / pixel_angle
                 wide[sel] = ring_sagitta(r_px, span[sel]) > max_error_px
@@ -176,10 +179,10 @@ def cull_pieces(frame, source, coarse, plan, pieces, patches, order):
         sub.tris, img.direction, img.valid, sub.positions, scene.camera, settings.cull_ratio, planes,
         img.position, scene.hole, order, budget.pixel_angle, budget.tolerance_px,
         source_circumference=_face_values(sub, face_src, source.circumference, lambda t: circumference(
-            unit_directions(sub.positions, scene.camera), t)),
+            unit_directions(sub.positions, scene.camera, scene.beta), t)),
         image_circumference=_face_values(sub, face_src, coarse.circumference[order],
                                          lambda t: circumference(img.direction, t)),
-        image_outside_bits=bits, axis_candidates=source.near_axis[face_src])
+        image_outside_bits=bits, axis_candidates=source.near_axis[face_src], beta=scene.beta)
     rep.extra, rep.presplit = report.extra, report.presplit
     rep.outside_frustum += plan.set_aside.get("outside_frustum", 0)
     rep.back_face = plan.set_aside.get("back_face", 0)

@@ -118,18 +118,31 @@ def circumference(d, tris):
     return chord_length(a, b) + chord_length(b, c) + chord_length(c, a)
 
 
-def unit_directions(points, camera):
-    """Unit vectors from ``camera`` (3,) to ``points`` (N, 3) (BU); NaN for the camera itself."""
+def unit_directions(points, camera, beta=None):
+    """Unit vectors from ``camera`` (3,) to ``points`` (N, 3) (BU): the undistorted view (flat space);
+    NaN for the camera itself. With ``beta`` (3,; units of c), the view of an observer moving with it
+    (:func:`aberrate`), whose images are to be measured against it."""
     v = np.asarray(points, dtype=np.float64) - camera
     with np.errstate(invalid="ignore", divide="ignore"):
-        return v / row_norm(v)[:, None]
+        d = v / row_norm(v)[:, None]
+    return d if beta is None else aberrate(d, beta)
 
 
-def hole_angle(directions, camera, hole) -> np.ndarray:
-    """Angle (radians) of unit ``directions`` (N, 3) from the camera's direction to the hole (BU)."""
+def hole_angle(directions, camera, hole, beta=None) -> np.ndarray:
+    """Angle (radians) of unit ``directions`` (N, 3) from the camera's direction to the hole (BU): the
+    radius of the circle about the observer-hole axis through each direction, on which the lensing
+    keeps a point's azimuth (Einstein rings are such circles). With ``beta`` (3,; units of c) the
+    directions are those of an observer moving with it: aberration keeps circles circles, but not
+    centred on the hole's direction, so the radius is measured in the static frame (:func:`unaberrate`)
+    and scaled by the aberration's local magnification 1 / (gamma (1 + beta . d_static)) (it is
+    conformal): the same circle's radius in the moving observer's angles there, which the error
+    budget compares with its pixels."""
     towards_hole = np.asarray(hole, np.float64) - np.asarray(camera, np.float64)
     towards_hole /= np.linalg.norm(towards_hole)
-    return np.arccos(np.clip(directions @ towards_hole, -1.0, 1.0))
+    if beta is None:
+        return np.arccos(np.clip(directions @ towards_hole, -1.0, 1.0))
+    static = unaberrate(directions, beta)
+    return np.arccos(np.clip(static @ towards_hole, -1.0, 1.0)) / doppler_factor(static, beta)
 
 
 def ring_sagitta(radius, span):
