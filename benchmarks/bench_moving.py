@@ -11,7 +11,8 @@ inwards ("in", radial part reversed).
   mismatch and screen error of the surface points (pixels, p99 and max).
 * 1 + z of the image vertices against the exact value (lutgen.connect's direction at the camera,
   the gravitational shift and the Doppler factor): relative error p99 and max.
-* Per-frame cost: pipeline.build_images, median of 7 runs, moving over at rest.
+* Per-frame cost: pipeline.build_images, best of 9 runs (the three cameras in turn), moving over at
+  rest.
 
 Usage: ./dev python benchmarks/bench_moving.py [output.md]   (default docs/moving_camera.md)
 """
@@ -70,9 +71,9 @@ def main(out_path):
     rows, cost = [], []
     for angle in (45, 170, 180):
         src = BA.sphere_scene(angle)[0]
-        times = {}
+        scenes = {name: mapping.Scene(CAM.position, np.zeros(3), BA.R_S, beta=beta) for name, beta in CAMERAS.items()}
         for name, beta in CAMERAS.items():
-            scene = mapping.Scene(CAM.position, np.zeros(3), BA.R_S, beta=beta)
+            scene = scenes[name]
             chk = frame_check.check_frame([src], scene, table, settings, CAM)
             images = pipeline.build_images(src, scene, table, settings, None, CAM.frustum_planes())
             z99, zmax = _redshift_error(images, scene) if beta is not None else (float("nan"), float("nan"))
@@ -83,12 +84,13 @@ def main(out_path):
                 cells += [f"{m['covered_ref']}", f"{m['mismatch']}", f"{sp.get('p99', float('nan')):.3f}",
                           f"{sp.get('max', float('nan')):.3f}"]
             rows.append(f"| {angle} | {name} | " + " | ".join(cells) + f" | {z99:.1e} | {zmax:.1e} |")
-            runs = []
-            for _ in range(7):
+        runs = {name: [] for name in CAMERAS}
+        for _ in range(9):  # the three cameras in turn, so that a busy moment of the machine hits all
+            for name, scene in scenes.items():
                 t0 = time.perf_counter()
                 pipeline.build_images(src, scene, table, settings, None, CAM.frustum_planes())
-                runs.append(time.perf_counter() - t0)
-            times[name] = float(np.median(runs))
+                runs[name].append(time.perf_counter() - t0)
+        times = {name: float(np.min(r)) for name, r in runs.items()}
         cost.append(f"| {angle} | {1e3 * times['at rest']:.1f} | {1e3 * times['out']:.1f} | {1e3 * times['in']:.1f} | "
                     f"{max(times['out'], times['in']) / times['at rest']:.2f} |")
         print(rows[-3:], cost[-1], flush=True)
@@ -102,9 +104,20 @@ def main(out_path):
         "| orbit angle (deg) | camera | o1 covered | o1 mismatch | o1 screen p99 | o1 screen max | o2 covered | "
         "o2 mismatch | o2 screen p99 | o2 screen max | 1+z p99 | 1+z max |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|", *rows, "",
-        "Per-frame cost of the core (`pipeline.build_images`, median of 7, ms) and the larger moving one over "
-        "the camera at rest:", "",
-        "| orbit angle (deg) | at rest | out | in | ratio |", "|---|---|---|---|---|", *cost, ""])
+        "Per-frame cost of the core (`pipeline.build_images`, best of 9 taken in turn, ms) and the larger moving "
+        "one over the camera at rest (the moving images are larger or smaller on screen: `out` sees the hole's "
+        "side magnified, `in` shrunk):", "",
+        "| orbit angle (deg) | at rest | out | in | ratio |", "|---|---|---|---|---|", *cost, "",
+        "Reading. The moving camera's images are as accurate as the resting camera's: the same coverage "
+        "mismatch (a few pixels) and screen errors of the same size, against a reference that traces the moving "
+        "camera's own pixel rays. 1 + z is within about 1e-7 of the exact value: the table's direction error "
+        "(about 1.6e-7 rad here) times beta; given a direction, the formula is exact to rounding "
+        "(tests/test_moving_observer.py). The cost follows the images' size on screen: the camera moving away "
+        "from the hole's side (`out`) sees that side magnified (about 1.75 times the pixels at 180 degrees, "
+        "the Einstein ring wider), so its images have more pieces and its axis patch more azimuths; moving "
+        "towards it (`in`) the images shrink. The error budget measures the moving camera's own view (the "
+        "ring radius about the axis in the static frame times the aberration's local magnification): measured "
+        "about the unaberrated hole direction instead, the same frames cost 1.3 to 2.5 times as much.", ""])
     with open(out_path, "w") as f:
         f.write(text)
     print(text)
