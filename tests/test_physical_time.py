@@ -206,3 +206,85 @@ def test_a_marker_cut_starts_from_the_new_cameras_own_motion():
         pos = np.array(rebuild.observer_camera(scene).matrix_world.translation)
         beta = observer_view.static_frame_beta(pos, v, np.zeros(3), R_S, 1.0)[0]
         assert f"camera at {np.linalg.norm(beta):.3g} c" in scene.grlens.status, scene.grlens.status
+
+
+def _cam_at(scene, cam, frame):
+    scene.frame_set(frame)
+    return np.array(cam.matrix_world.translation), -np.array(cam.matrix_world.to_3x3().col[2])
+
+
+def test_the_orbit_operator_keys_the_circular_geodesic_in_coordinate_time():
+    """bpy.ops.grlens.camera_geodesic(path="ORBIT"): the camera's keys are the circular orbit at its
+    distance in coordinate time (one frame = c / r_s), it looks at the hole, and the rebuild reads
+    back the orbital speed 1/sqrt(2 (r - 1)) c (seed 002, eq. 10) from the keys."""
+    from grlens_addon.core import camera_geodesics
+
+    scene, cam, sphere = _demo()
+    g = scene.grlens
+    g.speed_of_light = 2.0  # BU per frame: one frame is 1 r_s / c
+    start = np.array(cam.matrix_world.translation)
+    assert bpy.ops.grlens.camera_geodesic(path="ORBIT", axis=(0.0, 0.0, 1.0), look="HOLE", frame_start=1,
+                                          frame_end=40) == {"FINISHED"}
+    expect = camera_geodesics.orbit_path(np.arange(40.0), start, np.zeros(3), R_S, np.array([0.0, 0.0, 1.0]))
+    for f in (1, 17, 40):
+        pos, view = _cam_at(scene, cam, f)
+        np.testing.assert_allclose(pos, expect.position[f - 1], atol=2e-5)
+        np.testing.assert_allclose(view, -pos / np.linalg.norm(pos), atol=1e-5)
+    scene.frame_set(20)
+    rebuild.rebuild_scene(scene)
+    speed = 1 / math.sqrt(2 * (20 - 1))
+    assert f"camera at {speed:.3g} c" in g.status, g.status
+    beta = rebuild.observer_beta(scene, cam, cam, g.black_hole, g.black_hole, mapping.Scene(
+        np.array(cam.matrix_world.translation), np.zeros(3), R_S))
+    np.testing.assert_allclose(np.linalg.norm(beta), speed, rtol=1e-4)
+
+
+def test_the_fall_operator_keys_the_radial_fall_and_stops_at_the_photon_sphere():
+    """path="FALL" from rest at infinity: the keys follow core.camera_geodesics.fall_path until the
+    photon sphere; looking along the motion, the camera faces the hole; the rebuild reads the escape
+    speed sqrt(r_s / r) c."""
+    from grlens_addon.core import camera_geodesics
+
+    scene, cam, sphere = _demo()
+    g = scene.grlens
+    g.speed_of_light = 4.0  # one frame is 2 r_s / c
+    start = np.array(cam.matrix_world.translation)
+    assert bpy.ops.grlens.camera_geodesic(path="FALL", release_radius=0.0, look="MOTION", frame_start=1,
+                                          frame_end=300) == {"FINISHED"}
+    t = np.arange(300.0) * 2.0
+    expect = camera_geodesics.fall_path(t, start, np.zeros(3), R_S)
+    last = int(np.flatnonzero(expect.r > 1.5)[-1]) + 1
+    fc = [f for f in motion._fcurves(cam) if f.data_path == "location"][0]
+    assert len(fc.keyframe_points) == last < 300
+    for f in (1, last // 2, last):
+        pos, view = _cam_at(scene, cam, f)
+        np.testing.assert_allclose(pos, expect.position[f - 1], atol=2e-5)
+        np.testing.assert_allclose(view, -pos / np.linalg.norm(pos), atol=1e-5)
+    f = last // 2
+    scene.frame_set(f)
+    rebuild.rebuild_scene(scene)
+    beta = rebuild.observer_beta(scene, cam, cam, g.black_hole, g.black_hole, mapping.Scene(
+        np.array(cam.matrix_world.translation), np.zeros(3), R_S))
+    np.testing.assert_allclose(np.linalg.norm(beta), np.sqrt(1 / expect.r[f - 1]), rtol=2e-3)
+
+
+def test_the_geodesic_operator_warns_inside_the_isco_and_refuses_what_it_cannot_key():
+    from grlens_addon.blender import geodesic_camera
+
+    scene, cam, sphere = _demo()
+    g = scene.grlens
+    with pytest.raises(ValueError, match="speed_of_light first"):
+        geodesic_camera.key_geodesic(scene, "ORBIT")
+    g.speed_of_light = 1.0
+    cam.location = (5.0, 0.0, 0.0)  # 2.5 r_s
+    n, note = geodesic_camera.key_geodesic(scene, "ORBIT", frame_start=1, frame_end=10)
+    assert n == 10 and note.startswith("warning") and "innermost stable" in note
+    cam.animation_data_clear()
+    cam.location = (2.8, 0.0, 0.0)  # 1.4 r_s
+    scene.frame_set(1)
+    with pytest.raises(ValueError, match="photon sphere"):
+        geodesic_camera.key_geodesic(scene, "ORBIT")
+    cam.location = (40.0, 0.0, 0.0)
+    with pytest.raises(ValueError, match="release radius"):
+        geodesic_camera.key_geodesic(scene, "FALL", release_radius=10.0)
+    assert "Camera" == cam.name and bpy.ops.grlens.camera_geodesic.idname() == "GRLENS_OT_camera_geodesic"

@@ -30,6 +30,8 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         col.prop(g, "black_hole")
         col.prop(g, "r_s")
         col.prop(g, "speed_of_light")
+        if g.speed_of_light > 0:
+            col.operator("grlens.camera_geodesic")
         col.prop(g, "observer")
         note = panorama_note(context.scene)
         if note:
