@@ -656,11 +656,106 @@ def test_cycles_procedural_checker_world(tmp_path):
 
 
 # ---------------------------------------------------------------------------------------------
+# a moving camera (physical time): its sky aberrated by its own velocity
+# ---------------------------------------------------------------------------------------------
+def _moving(scene, cam, velocity=(-3.0, 4.0, 1.0), c=10.0):
+    """Key the camera moving linearly (BU per frame) through its position at frame 2, set the speed
+    of light (BU per frame); returns beta in the local static frame at frame 2 (units of c)."""
+    from grlens_addon.core import observer_view
+
+    pos = np.array(cam.location)
+    v = np.array(velocity)
+    cam.animation_data_clear()
+    for f in (1, 3):
+        cam.location = tuple(pos + (f - 2) * v)
+        cam.keyframe_insert("location", frame=f)
+    from grlens_addon.blender import motion
+
+    for fc in motion._fcurves(cam):
+        for kp in fc.keyframe_points:
+            kp.interpolation = "LINEAR"
+    scene.grlens.speed_of_light = c
+    scene.frame_set(2)
+    return observer_view.static_frame_beta(pos, v, np.zeros(3), R_S, c)[0]
+
+
+def _boosted_back(d, beta):
+    """The static frame's directions of the light a camera moving with ``beta`` sees from ``d``
+    (H, W, 3): the photons' 4-momenta (1, -d) boosted back with the Lorentz matrix."""
+    b2 = beta @ beta
+    g = 1 / np.sqrt(1 - b2)
+    L = np.eye(4)
+    L[0, 0] = g
+    L[0, 1:] = L[1:, 0] = g * beta  # the boost by -beta
+    L[1:, 1:] += (g - 1) * np.outer(beta, beta) / b2
+    p = np.concatenate([np.ones(d.shape[:-1] + (1,)), -d], -1) @ L.T
+    return -p[..., 1:] / np.linalg.norm(p[..., 1:], axis=-1, keepdims=True)
+
+
+@pytest.mark.parametrize("panorama", [False, True])
+def test_cycles_render_of_a_moving_cameras_sky_matches_the_exact_aberrated_escape_directions(tmp_path, panorama):
+    """With speed_of_light > 0 the camera's keyed motion aberrates its sky: each pixel shows the escape
+    direction of its ray taken back to the static frame (a Lorentz matrix here), per pixel, in a
+    perspective view and a full equirectangular panorama; the world status names the speed."""
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene(size=(48, 24) if panorama else (48, 32))
+    if panorama:
+        cam.data.type = "PANO"
+        cam.data.panorama_type = "EQUIRECTANGULAR"
+    beta = _moving(scene, cam)
+    assert 0.3 < np.linalg.norm(beta) < 0.9
+    assert f"camera at {np.linalg.norm(beta):.3g} c" in scene.grlens.world_status, scene.grlens.world_status
+    img = _render(scene, tmp_path / "moving.exr")
+    pos = np.array(cam.matrix_world.translation)
+    dirs = _equirect_dirs if panorama else _pixel_dirs
+
+    def want(du, dv):
+        d = _boosted_back(dirs(scene, cam, du, dv), beta)
+        return _direction_colours(escape_directions(d, pos, hole.location, R_S))
+
+    assert _check_per_pixel(img, want) > 0.9
+    static = _direction_colours(escape_directions(dirs(scene, cam), pos, hole.location, R_S))
+    assert np.abs(img - static).max() > 0.1  # (the aberration shows)
+
+
+def test_check_frame_of_a_moving_camera_checks_its_aberrated_sky(tmp_path):
+    """bpy.ops.grlens.check_frame with a moving camera: the reference traces the camera's own pixel
+    rays and the sky model takes them back to the static frame as the node group does: they agree."""
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene(size=(64, 40))
+    sphere = bpy.data.objects.new("Ball", bpy.data.meshes.new("Ball"))
+    import bmesh
+
+    bm = bmesh.new()
+    bmesh.ops.create_uvsphere(bm, u_segments=16, v_segments=8, radius=2.0)
+    bm.to_mesh(sphere.data)
+    bm.free()
+    sphere.location = (-12.0, 6.0, 1.0)
+    scene.collection.objects.link(sphere)
+    sphere.grlens.enabled = True
+    _moving(scene, cam, velocity=(-2.0, 3.0, 0.5))
+    assert bpy.ops.grlens.check_frame(percentage=100, filepath="") == {"FINISHED"}
+    summary = scene.grlens.check_summary
+    assert "sky" in summary, summary
+    from grlens_addon.blender import check
+    from grlens_addon.blender.rebuild import scene_geometry
+
+    result, _ = check.check_scene(scene, bpy.context.evaluated_depsgraph_get(), 100, "")
+    sky = result.metrics["sky"]
+    assert sky["compared"] > 1000 and sky["sky_angle_px"]["p99"] < 0.05 and sky["shadow_mismatch"] <= 3, sky
+    assert np.linalg.norm(scene_geometry(scene, bpy.context.evaluated_depsgraph_get())[0].beta) > 0.1
+
+
+# ---------------------------------------------------------------------------------------------
 # Eevee: one smoke render in a subprocess (bpy 4.2 may crash at exit after a GPU-engine render)
 # ---------------------------------------------------------------------------------------------
-def test_eevee_smoke(tmp_path):
+@pytest.mark.parametrize("mode", ["eevee", "eevee_moving"])
+def test_eevee_smoke(tmp_path, mode):
+    """Eevee renders the lensed sky, of a camera at rest and of one moving (aberrated)."""
     out = tmp_path / "eevee.exr"
-    p = subprocess.run([sys.executable, __file__, "eevee", str(out)], capture_output=True, text=True, timeout=600,
+    p = subprocess.run([sys.executable, __file__, mode, str(out)], capture_output=True, text=True, timeout=600,
                        cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     assert "GRLENS_EEVEE_ERR" in p.stdout, p.stdout[-3000:] + p.stderr[-3000:]
     line = next(ln for ln in p.stdout.splitlines() if ln.startswith("GRLENS_EEVEE_ERR"))
@@ -670,7 +765,7 @@ def test_eevee_smoke(tmp_path):
     assert p99 < 3e-3 and frac > 0.95, line
 
 
-def _eevee_main(out):
+def _eevee_main(out, moving=False):
     grlens_addon.register()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
@@ -679,9 +774,12 @@ def _eevee_main(out):
     scene.render.engine = "BLENDER_EEVEE" if bpy.app.version >= (5, 0, 0) else "BLENDER_EEVEE_NEXT"
     scene.eevee.taa_render_samples = 1
     scene.view_settings.view_transform = "Standard"
+    beta = _moving(scene, cam) if moving else None
     img = _render(scene, out)
     d = _pixel_dirs(scene, cam)
-    exact = escape_directions(d, cam.location, hole.location, R_S)
+    if beta is not None:
+        d = _boosted_back(d, beta)
+    exact = escape_directions(d, np.array(cam.matrix_world.translation), hole.location, R_S)
     want = _direction_colours(exact)
     err = np.abs(img - want).max(-1)
     dark = np.isnan(exact).any(-1)
@@ -689,7 +787,7 @@ def _eevee_main(out):
           float(np.abs(img[dark]).max()) if dark.any() else 0.0, flush=True)
 
 
-if __name__ == "__main__" and len(sys.argv) == 3 and sys.argv[1] == "eevee":
-    _eevee_main(sys.argv[2])
+if __name__ == "__main__" and len(sys.argv) == 3 and sys.argv[1] in ("eevee", "eevee_moving"):
+    _eevee_main(sys.argv[2], moving=sys.argv[1] == "eevee_moving")
     sys.stdout.flush()
     os._exit(0)

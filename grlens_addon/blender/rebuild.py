@@ -537,9 +537,6 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
         report["status"] += f", r_obs = {geo.r_obs:.4g} r_s"
         if geo.beta is not None:
             report["status"] += f", camera at {np.linalg.norm(geo.beta):.3g} c"
-            if world_line and world_line.startswith("sky lensed"):
-                warn.append("the lensed sky is that of a camera at rest: it is not aberrated nor shifted "
-                            "by the camera's motion yet")
         if settings.max_error_px != max_error_px(g):
             report["status"] += f" (viewport preview: {settings.max_error_px:.3g} px)"
         if world_line and world_line.startswith("sky lensed"):

@@ -24,8 +24,13 @@ records what it had in its custom property ``grlens_hooked`` ({input identifier:
 "<from node name>\\t<from output identifier>"}), so :func:`restore` puts the tree back exactly.
 :func:`apply` is idempotent: nodes the user adds while lensing is on are hooked at the next update.
 
-Per frame only values change (never the tree): e1 and xi_lim inside the group, and the table's
-pixels when the camera's radius changes (r_obs rounded to 7 digits, as the LUTs). Saving stores
+Before all this, D is taken back to the camera's local static frame (exact inverse aberration,
+:func:`_static_direction`) when frames measure physical time and the camera moves (its velocity
+from its own keyframes, as the images'); at rest the nodes give D itself.
+
+Per frame only values change (never the tree): e1, xi_lim and the camera's velocity inside the
+group, and the table's pixels when the camera's radius changes (r_obs rounded to 7 digits, as the
+LUTs). Saving stores
 the user's own world: the file is restored before it is written and lensed again after
 (save_pre / save_post), so a .blend never holds grlens' nodes or its table.
 
@@ -117,6 +122,7 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
     d = _vmath(N, "SCALE", 200)  # D = -Incoming (unit in Cycles' background and Eevee's world)
     d.inputs["Scale"].default_value = -1.0
     L.new(geo.outputs["Incoming"], d.inputs[0])
+    d = _static_direction(N, L, d.outputs["Vector"])
     cos = _vmath(N, "DOT_PRODUCT", 400)
     L.new(d.outputs["Vector"], cos.inputs[0])
     L.new(e1.outputs[0], cos.inputs[1])
@@ -201,6 +207,59 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
     L.new(rot.outputs["Vector"], out.inputs["Vector"])
     L.new(esc.outputs[0], out.inputs["Escapes"])
     return ng
+
+
+def _static_direction(N, L, d):
+    """Nodes taking the camera's ray direction ``d`` (a socket) back to its local static frame, the
+    exact inverse aberration of observer_view.unaberrate: with n = -beta / |beta| (node "beta_dir"),
+    b = |beta| ("beta") and 1 / gamma ("inv_gamma"), c = D . n,
+    D_static = ((c + b) / (1 + b c)) n + (D - c n) / (gamma (1 + b c)). Per frame values only; a camera
+    at rest (n = 0, b = 0, 1 / gamma = 1) gives D itself, to the bit. Returns the node whose output
+    "Vector" is D_static."""
+    n = N.new("ShaderNodeCombineXYZ")
+    n.name = n.label = "beta_dir"
+    n.location = (0, -800)
+    b = N.new("ShaderNodeValue")
+    b.name = b.label = "beta"
+    b.location = (0, -1000)
+    b.outputs[0].default_value = 0.0
+    ig = N.new("ShaderNodeValue")
+    ig.name = ig.label = "inv_gamma"
+    ig.location = (0, -1200)
+    ig.outputs[0].default_value = 1.0
+    c = _vmath(N, "DOT_PRODUCT", 250)
+    L.new(d, c.inputs[0])
+    L.new(n.outputs[0], c.inputs[1])
+    cn = _vmath(N, "SCALE", 300)
+    L.new(n.outputs[0], cn.inputs[0])
+    L.new(c.outputs["Value"], cn.inputs["Scale"])
+    across = _vmath(N, "SUBTRACT", 300)
+    L.new(d, across.inputs[0])
+    L.new(cn.outputs["Vector"], across.inputs[1])
+    den = _math(N, "MULTIPLY_ADD", x=300)  # 1 + b c
+    L.new(c.outputs["Value"], den.inputs[0])
+    L.new(b.outputs[0], den.inputs[1])
+    den.inputs[2].default_value = 1.0
+    num = _math(N, "ADD", x=300)
+    L.new(c.outputs["Value"], num.inputs[0])
+    L.new(b.outputs[0], num.inputs[1])
+    k1 = _math(N, "DIVIDE", x=350)
+    L.new(num.outputs[0], k1.inputs[0])
+    L.new(den.outputs[0], k1.inputs[1])
+    k2 = _math(N, "DIVIDE", x=350)
+    L.new(ig.outputs[0], k2.inputs[0])
+    L.new(den.outputs[0], k2.inputs[1])
+    v1 = _vmath(N, "SCALE", 380)
+    L.new(n.outputs[0], v1.inputs[0])
+    L.new(k1.outputs[0], v1.inputs["Scale"])
+    v2 = _vmath(N, "SCALE", 380)
+    L.new(across.outputs["Vector"], v2.inputs[0])
+    L.new(k2.outputs[0], v2.inputs["Scale"])
+    out = _vmath(N, "ADD", 400)
+    out.name = "static direction"
+    L.new(v1.outputs["Vector"], out.inputs[0])
+    L.new(v2.outputs["Vector"], out.inputs[1])
+    return out
 
 
 def _table_lookup(nodes, name, image, interpolation, location):
@@ -308,7 +367,7 @@ def _socket(sockets, ident):
 
 def _group_ok(group) -> bool:
     return group is not None and all(k in group.nodes for k in (*TABLE_LOOKUPS, "spare", "e1", "xi_lim", "rotate",
-                                                                 *LOOKUPS.values()))
+                                                                 "beta_dir", "beta", "inv_gamma", *LOOKUPS.values()))
 
 
 def _incoming(tree) -> dict:
@@ -591,10 +650,35 @@ def update(scene, depsgraph=None) -> str | None:
         _set(e1_node.inputs[k], float(e1[k]))
     _set(lim_sock, float(escape_limit(round_radius(r_obs))))
     line = f"sky lensed, r_obs = {r_obs:.4g} r_s"
+    beta = np.zeros(3)
+    if g.speed_of_light > 0:  # physical time: the camera's own motion aberrates its sky
+        from ..core import mapping
+        from .rebuild import RebuildError, observer_beta
+
+        try:
+            beta = observer_beta(scene, lensing_camera(scene), cam, g.black_hole, hole,
+                                 mapping.Scene(p_cam, p_hole, g.r_s))
+        except RebuildError as exc:
+            raise WorldError(str(exc)) from None
+        line += f", camera at {np.linalg.norm(beta):.3g} c"
+    set_velocity(grp, beta)
     skipped = unhooked(world)
     if skipped:
         line += f"; not lensed (no Vector input, e.g. a Sky Texture with Sun Disc on): {', '.join(skipped)}"
     return line
+
+
+def set_velocity(group, beta) -> None:
+    """The group's inverse aberration for a camera moving with ``beta`` (3,; units of c, world axes;
+    zero: at rest) in its local static frame (see _static_direction)."""
+    beta = np.asarray(beta, dtype=np.float64).reshape(3)
+    b = float(np.linalg.norm(beta))
+    n = -beta / b if b > 0 else np.zeros(3)
+    node = group.nodes["beta_dir"]
+    for k in range(3):
+        _set(node.inputs[k], float(n[k]))
+    _set(group.nodes["beta"].outputs[0], b)
+    _set(group.nodes["inv_gamma"].outputs[0], math.sqrt(max(1.0 - b * b, 0.0)))
 
 
 def refresh(scene, depsgraph=None):

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import image_metrics, mapping, pipeline, rasterize, raytrace
+from . import image_metrics, mapping, observer_view, pipeline, rasterize, raytrace
 
 @dataclass
 class FrameCheck:
@@ -88,11 +88,13 @@ class FrameCheck:
         return "; ".join(parts)
 
 
-def lensed_world_sky(hole, r_s):
+def lensed_world_sky(hole, r_s, beta=None):
     """The add-on's lensed world as a sky model for :func:`check_frame`: (directions (N, 3) unit
     world, camera position (3,) BU) -> escape directions (N, 3), the node group's mapping (the
     escape table of the camera's radius, rounded to 7 digits as the world update rounds it, read
-    linearly in s; ``lutgen.EscapeTable.directions``) in float64. ``hole`` (3,) and ``r_s`` in BU."""
+    linearly in s; ``lutgen.EscapeTable.directions``) in float64. ``hole`` (3,) and ``r_s`` in BU;
+    ``beta`` (3,; units of c): the camera's velocity in its local static frame, whose directions are
+    taken back to that frame first (observer_view.unaberrate), as the node group does."""
     from lutgen.escape import escape_table
 
     hole = np.asarray(hole, dtype=float)
@@ -103,6 +105,8 @@ def lensed_world_sky(hole, r_s):
         key = mapping.round_radius(np.linalg.norm(e1) / r_s)
         if key not in tables:
             tables[key] = escape_table(key)
+        if beta is not None:
+            d = observer_view.unaberrate(np.asarray(d, dtype=float), beta)
         return tables[key].directions(d, e1 / np.linalg.norm(e1))
 
     return sky
