@@ -719,6 +719,30 @@ def test_cycles_render_of_a_moving_cameras_sky_matches_the_exact_aberrated_escap
     assert np.abs(img - static).max() > 0.1  # (the aberration shows)
 
 
+def test_a_camera_at_rest_keeps_the_aberration_out_of_the_sky_shader():
+    """The inverse aberration is linked into the group only while the camera moves (a camera at rest
+    pays nothing for it); switching back relinks D itself."""
+    from grlens_addon.blender import world
+
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene()
+    world.update(scene)
+    grp = world._group_node(scene.world.node_tree).node_tree
+
+    def source():
+        return {s.links[0].from_node.name for s in world._direction_inputs(grp)}
+
+    assert source() == {"D"}
+    _moving(scene, cam)
+    world.update(scene)
+    assert source() == {"static direction"}
+    assert grp.nodes["beta"].outputs[0].default_value > 0.3
+    scene.grlens.speed_of_light = 0.0
+    world.update(scene)
+    assert source() == {"D"} and grp.nodes["beta"].outputs[0].default_value == 0.0
+
+
 def test_check_frame_of_a_moving_camera_checks_its_aberrated_sky(tmp_path):
     """bpy.ops.grlens.check_frame with a moving camera: the reference traces the camera's own pixel
     rays and the sky model takes them back to the static frame as the node group does: they agree."""

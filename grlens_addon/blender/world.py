@@ -120,13 +120,16 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
     lim.name = lim.label = "xi_lim"
     lim.location = (0, -500)
     d = _vmath(N, "SCALE", 200)  # D = -Incoming (unit in Cycles' background and Eevee's world)
+    d.name = "D"
     d.inputs["Scale"].default_value = -1.0
     L.new(geo.outputs["Incoming"], d.inputs[0])
-    d = _static_direction(N, L, d.outputs["Vector"])
+    _static_direction(N, L, d.outputs["Vector"])  # linked in for a moving camera only (_use_aberration)
     cos = _vmath(N, "DOT_PRODUCT", 400)
+    cos.name = "cos xi"
     L.new(d.outputs["Vector"], cos.inputs[0])
     L.new(e1.outputs[0], cos.inputs[1])
     axis = _vmath(N, "CROSS_PRODUCT", 400)  # e1 x D: |.| = sin(xi), the axis of the deflection
+    axis.name = "deflection axis"
     L.new(e1.outputs[0], axis.inputs[0])
     L.new(d.outputs["Vector"], axis.inputs[1])
     sin = _vmath(N, "LENGTH", 600)
@@ -214,8 +217,9 @@ def _static_direction(N, L, d):
     exact inverse aberration of observer_view.unaberrate: with n = -beta / |beta| (node "beta_dir"),
     b = |beta| ("beta") and 1 / gamma ("inv_gamma"), c = D . n,
     D_static = ((c + b) / (1 + b c)) n + (D - c n) / (gamma (1 + b c)). Per frame values only; a camera
-    at rest (n = 0, b = 0, 1 / gamma = 1) gives D itself, to the bit. Returns the node whose output
-    "Vector" is D_static."""
+    at rest (n = 0, b = 0, 1 / gamma = 1) gives D itself, to the bit; it is then left out of the path
+    (:func:`_use_aberration`), so a camera at rest costs no more than before. Returns the node whose
+    output "Vector" is D_static."""
     n = N.new("ShaderNodeCombineXYZ")
     n.name = n.label = "beta_dir"
     n.location = (0, -800)
@@ -260,6 +264,28 @@ def _static_direction(N, L, d):
     L.new(v1.outputs["Vector"], out.inputs[0])
     L.new(v2.outputs["Vector"], out.inputs[1])
     return out
+
+
+def _direction_inputs(group):
+    """The three inputs that take the ray's direction: xi's cosine, the deflection's axis, the rotated
+    vector."""
+    return (group.nodes["cos xi"].inputs[0], group.nodes["deflection axis"].inputs[1],
+            group.nodes["rotate"].inputs["Vector"])
+
+
+def _use_aberration(group, moving: bool) -> bool:
+    """Feed the direction inputs from the inverse aberration (``moving``) or from D itself; relinks
+    (and so recompiles the world's shader) only when that changes. Returns whether it relinked."""
+    src = group.nodes["static direction" if moving else "D"].outputs["Vector"]
+    changed = False
+    for sock in _direction_inputs(group):
+        if sock.is_linked and sock.links[0].from_socket == src:
+            continue
+        for lk in list(sock.links):
+            group.links.remove(lk)
+        group.links.new(src, sock)
+        changed = True
+    return changed
 
 
 def _table_lookup(nodes, name, image, interpolation, location):
@@ -367,7 +393,8 @@ def _socket(sockets, ident):
 
 def _group_ok(group) -> bool:
     return group is not None and all(k in group.nodes for k in (*TABLE_LOOKUPS, "spare", "e1", "xi_lim", "rotate",
-                                                                 "beta_dir", "beta", "inv_gamma", *LOOKUPS.values()))
+                                                                 "beta_dir", "beta", "inv_gamma", "D", "static direction",
+                                                                 "cos xi", "deflection axis", *LOOKUPS.values()))
 
 
 def _incoming(tree) -> dict:
@@ -662,6 +689,7 @@ def update(scene, depsgraph=None) -> str | None:
             raise WorldError(str(exc)) from None
         line += f", camera at {np.linalg.norm(beta):.3g} c"
     set_velocity(grp, beta)
+    _use_aberration(grp, bool(np.any(beta != 0)))
     skipped = unhooked(world)
     if skipped:
         line += f"; not lensed (no Vector input, e.g. a Sky Texture with Sun Disc on): {', '.join(skipped)}"
