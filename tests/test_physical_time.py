@@ -288,3 +288,22 @@ def test_the_geodesic_operator_warns_inside_the_isco_and_refuses_what_it_cannot_
     with pytest.raises(ValueError, match="release radius"):
         geodesic_camera.key_geodesic(scene, "FALL", release_radius=10.0)
     assert "Camera" == cam.name and bpy.ops.grlens.camera_geodesic.idname() == "GRLENS_OT_camera_geodesic"
+
+
+def test_the_speed_of_light_from_a_crossing_time_or_a_real_hole():
+    """set_speed_of_light: r_s/c = 10 frames gives c = r_s / 10; Sagittarius A* (4.3 million suns,
+    r_s = 1.27e7 km, r_s/c = 42.4 s) at 24 frames per second, 1017 frames; bad input is refused."""
+    from grlens_addon.blender import geodesic_camera
+
+    scene = bpy.context.scene
+    scene.grlens.r_s = 2.0
+    assert bpy.ops.grlens.set_speed_of_light(mode="FRAMES", frames=10.0) == {"FINISHED"}
+    assert scene.grlens.speed_of_light == pytest.approx(0.2)
+    scene.render.fps, scene.render.fps_base = 24, 1.0
+    assert bpy.ops.grlens.set_speed_of_light(mode="PHYSICAL", mass=4.3e6) == {"FINISHED"}
+    n = 4.3e6 * 2 * 6.6743e-11 * 1.98841e30 / 299792458.0 ** 3 * 24  # G M / c^3 in seconds, times 2 and fps
+    assert 1010 < n < 1025
+    assert scene.grlens.speed_of_light == pytest.approx(2.0 / n, rel=1e-6)
+    assert geodesic_camera.frames_per_crossing("PHYSICAL", r_s_km=299792.458, fps=30) == pytest.approx(30)
+    with pytest.raises(ValueError, match="positive"):
+        geodesic_camera.frames_per_crossing("PHYSICAL", mass=0.0)

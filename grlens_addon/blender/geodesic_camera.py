@@ -1,6 +1,8 @@
-"""Operator ``bpy.ops.grlens.camera_geodesic()``: put the observer camera on a timelike geodesic of the
-black hole, a radial free fall or a circular orbit through its position, keyed every frame in
-Schwarzschild coordinate time (core.camera_geodesics), looking at the hole or along its motion.
+"""Operators of physical time: ``bpy.ops.grlens.camera_geodesic()`` puts the observer camera on a
+timelike geodesic of the black hole, a radial free fall or a circular orbit through its position,
+keyed every frame in Schwarzschild coordinate time (core.camera_geodesics), looking at the hole or
+along its motion; ``bpy.ops.grlens.set_speed_of_light()`` chooses the speed of light from the light
+crossing time r_s/c in frames, or from the hole's size (or mass) and the frame rate.
 
 Units: scene units (BU); r_s = ``scene.grlens.r_s``; frames measure coordinate time with
 ``scene.grlens.speed_of_light`` (BU per frame, > 0): one frame is c / r_s in units of r_s/c.
@@ -151,4 +153,65 @@ def _key(cam, frames, p, hole, look):
                 kp.interpolation = "LINEAR"
 
 
-CLASSES = (GRLENS_OT_camera_geodesic,)
+R_S_SUN_KM = 2.0 * 6.6743e-11 * 1.98841e30 / 299792458.0 ** 2 / 1e3
+"""Schwarzschild radius of one solar mass, km (2 G M_sun / c^2 = 2.953 km)."""
+
+C_KM_S = 299792.458
+"""The speed of light, km/s."""
+
+
+def frames_per_crossing(mode, frames=10.0, r_s_km=0.0, mass=0.0, fps=24.0, slow_motion=1.0) -> float:
+    """The light crossing time r_s/c in frames: ``frames`` itself (mode "FRAMES"), or (mode
+    "PHYSICAL") r_s / c in seconds for a hole of Schwarzschild radius ``r_s_km`` (km; 0: from ``mass``
+    in solar masses, r_s = 2.953 km per solar mass) times the frame rate ``fps``, times ``slow_motion``
+    (seconds of the film per second of the hole's time). Raises ValueError for what is not positive."""
+    if mode == "FRAMES":
+        n = float(frames)
+    elif mode == "PHYSICAL":
+        km = float(r_s_km) if r_s_km > 0 else float(mass) * R_S_SUN_KM
+        n = km / C_KM_S * float(fps) * float(slow_motion)
+    else:
+        raise ValueError(f"unknown mode {mode!r} (FRAMES or PHYSICAL)")
+    if not (math.isfinite(n) and n > 0):
+        raise ValueError("the light crossing time must be positive: give frames, or a size or mass, a frame rate "
+                         "and a slow-motion factor above 0")
+    return n
+
+
+class GRLENS_OT_set_speed_of_light(bpy.types.Operator):
+    """Set the speed of light (scene units per frame) from the light crossing time r_s/c in frames, or
+    from the hole's size or mass and the scene's frame rate"""
+
+    bl_idname = "grlens.set_speed_of_light"
+    bl_label = "Set Speed of Light"
+    bl_options = {"REGISTER", "UNDO"}
+
+    mode: bpy.props.EnumProperty(
+        name="From", default="FRAMES",
+        items=[("FRAMES", "Crossing Time", "Light crosses r_s in this many frames"),
+               ("PHYSICAL", "Size and Frame Rate", "A real hole of this size or mass, filmed at the scene's "
+                                                  "frame rate (slowed down by the slow-motion factor)")])
+    frames: bpy.props.FloatProperty(name="r_s/c (frames)", default=10.0, min=1e-6,
+                                    description="Frames light takes to cross one Schwarzschild radius")
+    r_s_km: bpy.props.FloatProperty(name="r_s (km)", default=0.0, min=0.0,
+                                    description="The hole's Schwarzschild radius in km (0: from its mass)")
+    mass: bpy.props.FloatProperty(name="Mass (suns)", default=10.0, min=0.0,
+                                  description="The hole's mass in solar masses (r_s = 2.953 km each)")
+    slow_motion: bpy.props.FloatProperty(name="Slow Motion", default=1.0, min=1e-12,
+                                         description="Seconds of film per second of the hole's coordinate time")
+
+    def execute(self, context):
+        scene = context.scene
+        fps = scene.render.fps / scene.render.fps_base
+        try:
+            n = frames_per_crossing(self.mode, self.frames, self.r_s_km, self.mass, fps, self.slow_motion)
+        except ValueError as exc:
+            self.report({"ERROR"}, f"grlens: {exc}")
+            return {"CANCELLED"}
+        scene.grlens.speed_of_light = scene.grlens.r_s / n
+        self.report({"INFO"}, f"grlens: speed of light {scene.grlens.speed_of_light:.6g} scene units per frame "
+                              f"(r_s/c = {n:.6g} frames)")
+        return {"FINISHED"}
+
+
+CLASSES = (GRLENS_OT_camera_geodesic, GRLENS_OT_set_speed_of_light)

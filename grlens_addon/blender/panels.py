@@ -29,8 +29,11 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         col = layout.column()
         col.prop(g, "black_hole")
         col.prop(g, "r_s")
-        col.prop(g, "speed_of_light")
+        row = col.row(align=True)
+        row.prop(g, "speed_of_light")
+        row.operator("grlens.set_speed_of_light", text="", icon="TIME")
         if g.speed_of_light > 0:
+            col.label(text=f"r_s/c = {g.r_s / g.speed_of_light:.4g} frames (coordinate time)")
             col.operator("grlens.camera_geodesic")
         col.prop(g, "observer")
         note = panorama_note(context.scene)
