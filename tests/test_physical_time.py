@@ -307,3 +307,35 @@ def test_the_speed_of_light_from_a_crossing_time_or_a_real_hole():
     assert geodesic_camera.frames_per_crossing("PHYSICAL", r_s_km=299792.458, fps=30) == pytest.approx(30)
     with pytest.raises(ValueError, match="positive"):
         geodesic_camera.frames_per_crossing("PHYSICAL", mass=0.0)
+
+
+class _Layout:
+    """Stands in for a UILayout: records every prop/operator/label drawn."""
+
+    def __init__(self, drawn):
+        self.drawn = drawn
+
+    def __getattr__(self, name):
+        if name in ("column", "row", "box", "split"):
+            return lambda *a, **k: self
+        if name in ("prop", "operator", "label", "separator", "prop_search", "template_list"):
+            return lambda *a, **k: self.drawn.append((name, a, k))
+        raise AttributeError(name)
+
+
+def test_the_panel_draws_physical_time():
+    """The panel shows the speed of light with its helper, and while it is set, r_s/c in frames and the
+    geodesic operator."""
+    from grlens_addon.blender import panels
+
+    scene, cam, sphere = _demo()
+    for c in (0.0, 0.5):
+        scene.grlens.speed_of_light = c
+        drawn = []
+        fake = type("P", (), {"layout": _Layout(drawn)})()
+        panels.VIEW3D_PT_grlens.draw(fake, bpy.context)
+        ops = [a[0] for kind, a, k in drawn if kind == "operator"]
+        labels = [k.get("text", a[0] if a else "") for kind, a, k in drawn if kind == "label"]
+        assert "grlens.set_speed_of_light" in ops
+        assert ("grlens.camera_geodesic" in ops) == (c > 0)
+        assert any("r_s/c = 4 frames" in t for t in labels) == (c > 0), labels
