@@ -339,3 +339,79 @@ def test_the_panel_draws_physical_time():
         assert "grlens.set_speed_of_light" in ops
         assert ("grlens.camera_geodesic" in ops) == (c > 0)
         assert any("r_s/c = 4 frames" in t for t in labels) == (c > 0), labels
+
+
+def test_the_shifted_colour_group_renders_the_shifted_spectrum(tmp_path):
+    """The "grlens Shifted Colour" node group in an emission material, rendered by Cycles on quads
+    whose grlens_redshift is 1 + z = 0.8, 1, 1.25, 1.6 and 0 (none): each shows max(M(g) rgb, 0) of
+    core.spectrum with g = 1 / (1 + z) (to the curves' accuracy), and at Strength 0 the colour itself."""
+    import OpenEXR
+
+    from grlens_addon.blender import shading
+    from grlens_addon.core import spectrum
+
+    scene = bpy.context.scene
+    z = [0.8, 1.0, 1.25, 1.6, 0.0]
+    verts, faces = [], []
+    for i in range(len(z)):
+        x0 = 2.0 * i
+        verts += [(x0, 0, 0), (x0 + 1.6, 0, 0), (x0 + 1.6, 1.6, 0), (x0, 1.6, 0)]
+        faces.append((4 * i, 4 * i + 1, 4 * i + 2, 4 * i + 3))
+    me = bpy.data.meshes.new("Quads")
+    me.from_pydata(verts, [], faces)
+    attr = me.attributes.new("grlens_redshift", "FLOAT", "POINT")
+    attr.data.foreach_set("value", np.repeat(np.array(z, np.float32), 4))
+    obj = bpy.data.objects.new("Quads", me)
+    scene.collection.objects.link(obj)
+    mat = bpy.data.materials.new("Shifted")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    grp = nt.nodes.new("ShaderNodeGroup")
+    grp.node_tree = shading.ensure_shift_node_group()
+    assert shading.ensure_shift_node_group() is grp.node_tree  # never duplicated
+    rgb = np.array([0.8, 0.5, 0.2])
+    grp.inputs["Color"].default_value = (*rgb, 1.0)
+    emit = nt.nodes.new("ShaderNodeEmission")
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(grp.outputs["Color"], emit.inputs["Color"])
+    nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
+    me.materials.append(mat)
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 10.0
+    cam.location = (4.8, 0.8, 5.0)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    r = scene.render
+    r.engine = "CYCLES"
+    r.resolution_x, r.resolution_y, r.resolution_percentage = 100, 20, 100
+    r.filter_size = 0.01
+    scene.cycles.samples = 1
+    scene.cycles.use_denoising = False
+    scene.view_settings.view_transform = "Standard"
+    r.image_settings.file_format = "OPEN_EXR"
+    r.image_settings.color_depth = "32"
+
+    def render(strength):
+        grp.inputs["Strength"].default_value = strength
+        r.filepath = str(tmp_path / f"q{strength}.exr")
+        bpy.ops.render.render(write_still=True)
+        ch = OpenEXR.File(r.filepath, separate_channels=True).parts[0].channels
+        img = np.stack([np.asarray(ch[c].pixels, dtype=np.float64) for c in ("R", "G", "B")], -1)
+        return img[10, [10 * (2 * i) + 8 for i in range(len(z))]]  # each quad's middle (0.1 BU per pixel)
+
+    got = render(1.0)
+    for i, zi in enumerate(z):
+        g = 1.0 / zi if zi > 0 else 1.0
+        want = np.maximum(spectrum.shift_matrix(g) @ rgb, 0.0)
+        np.testing.assert_allclose(got[i], want, rtol=5e-3, atol=5e-3 * max(1.0, g ** 5), err_msg=str(zi))
+    np.testing.assert_allclose(render(0.0), np.tile(rgb, (len(z), 1)), atol=1e-5)
+
+
+def test_setting_a_speed_of_light_creates_the_shifted_colour_group():
+    from grlens_addon.blender import shading
+
+    assert bpy.data.node_groups.get(shading.SHIFT_GROUP_NAME) is None
+    bpy.context.scene.grlens.speed_of_light = 0.5
+    assert bpy.data.node_groups.get(shading.SHIFT_GROUP_NAME) is not None

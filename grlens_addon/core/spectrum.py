@@ -91,8 +91,9 @@ def shift_matrix(g) -> np.ndarray:
     return np.swapaxes(cols, -1, -2)
 
 
-LN_G_RANGE = (-np.log(16.0), np.log(16.0))
-"""The range of ln g the node group's table covers (g from 1/16 to 16); beyond it, the ends."""
+LN_G_RANGE = (-np.log(4.0), np.log(4.0))
+"""The range of ln g the node group's table covers (g from 1/4 to 4; beyond, its ends, which the
+model's flat continuation makes a plain brightening or dimming anyway)."""
 
 
 def shift_table(n: int = 256) -> tuple[np.ndarray, np.ndarray]:
