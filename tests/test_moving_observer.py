@@ -129,3 +129,22 @@ def test_a_camera_at_or_above_the_speed_of_light_is_refused():
     for bad in ([1.0, 0, 0], [0.9, 0.5, 0.0], [np.nan, 0, 0]):
         with pytest.raises(ValueError, match="speed of light"):
             mapping.Scene(CAM.position, np.zeros(3), 1.0, beta=bad)
+
+
+def test_with_aberration_off_a_moving_camera_sees_the_static_directions_and_shifted_light(table):
+    """Scene.aberration False (for teaching): the images are the still's, to the bit; 1 + z is the
+    moving camera's for those (static) directions; the gravitational part is written beside it."""
+    src = BA.sphere_scene(170)[0]
+    settings = BA.make_settings(CAM)
+    still = pipeline.build_images(src, mapping.Scene(CAM.position, np.zeros(3), 1.0), table, settings)
+    off = pipeline.build_images(src, mapping.Scene(CAM.position, np.zeros(3), 1.0, beta=BETA, aberration=False),
+                                table, settings)
+    for order in (1, 2):
+        np.testing.assert_array_equal(off[order].positions, still[order].positions)
+        d = _directions(off[order], mapping.Scene(CAM.position, np.zeros(3), 1.0))
+        r = np.linalg.norm(off[order].source_position, axis=1)
+        grav = np.sqrt((1 - 1 / R_OBS) / (1 - 1 / r))
+        e_moving = (np.column_stack([np.ones(len(d)), -d]) @ _boost(BETA).T)[:, 0]
+        np.testing.assert_allclose(off[order].redshift, grav / e_moving, rtol=1e-12)
+        np.testing.assert_allclose(off[order].redshift_gravity, grav, rtol=1e-14)
+        assert still[order].redshift_gravity is None

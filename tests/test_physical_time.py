@@ -341,17 +341,15 @@ def test_the_panel_draws_physical_time():
         assert any("r_s/c = 4 frames" in t for t in labels) == (c > 0), labels
 
 
-def test_the_shifted_colour_group_renders_the_shifted_spectrum(tmp_path):
-    """The "grlens Shifted Colour" node group in an emission material, rendered by Cycles on quads
-    whose grlens_redshift is 1 + z = 0.8, 1, 1.25, 1.6 and 0 (none): each shows max(M(g) rgb, 0) of
-    core.spectrum with g = 1 / (1 + z) (to the curves' accuracy), and at Strength 0 the colour itself."""
+def _shift_quads(tmp_path, z, z_grav, rgb):
+    """Quads (one per entry of ``z``) with grlens_redshift = z and grlens_redshift_gravity = z_grav, in
+    an emission material through "grlens Shifted Colour" of colour ``rgb``, under an orthographic
+    camera; returns (render(strength) -> (len(z), 3) colours at the quads' middles, group node)."""
     import OpenEXR
 
     from grlens_addon.blender import shading
-    from grlens_addon.core import spectrum
 
     scene = bpy.context.scene
-    z = [0.8, 1.0, 1.25, 1.6, 0.0]
     verts, faces = [], []
     for i in range(len(z)):
         x0 = 2.0 * i
@@ -359,8 +357,10 @@ def test_the_shifted_colour_group_renders_the_shifted_spectrum(tmp_path):
         faces.append((4 * i, 4 * i + 1, 4 * i + 2, 4 * i + 3))
     me = bpy.data.meshes.new("Quads")
     me.from_pydata(verts, [], faces)
-    attr = me.attributes.new("grlens_redshift", "FLOAT", "POINT")
-    attr.data.foreach_set("value", np.repeat(np.array(z, np.float32), 4))
+    for name, values in (("grlens_redshift", z), ("grlens_redshift_gravity", z_grav)):
+        if values is not None:
+            a = me.attributes.new(name, "FLOAT", "POINT")
+            a.data.foreach_set("value", np.repeat(np.array(values, np.float32), 4))
     obj = bpy.data.objects.new("Quads", me)
     scene.collection.objects.link(obj)
     mat = bpy.data.materials.new("Shifted")
@@ -370,7 +370,6 @@ def test_the_shifted_colour_group_renders_the_shifted_spectrum(tmp_path):
     grp = nt.nodes.new("ShaderNodeGroup")
     grp.node_tree = shading.ensure_shift_node_group()
     assert shading.ensure_shift_node_group() is grp.node_tree  # never duplicated
-    rgb = np.array([0.8, 0.5, 0.2])
     grp.inputs["Color"].default_value = (*rgb, 1.0)
     emit = nt.nodes.new("ShaderNodeEmission")
     out = nt.nodes.new("ShaderNodeOutputMaterial")
@@ -379,13 +378,13 @@ def test_the_shifted_colour_group_renders_the_shifted_spectrum(tmp_path):
     me.materials.append(mat)
     cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
     cam.data.type = "ORTHO"
-    cam.data.ortho_scale = 10.0
-    cam.location = (4.8, 0.8, 5.0)
+    cam.data.ortho_scale = 2.0 * len(z)
+    cam.location = (len(z) - 0.2, 0.8, 5.0)
     scene.collection.objects.link(cam)
     scene.camera = cam
     r = scene.render
     r.engine = "CYCLES"
-    r.resolution_x, r.resolution_y, r.resolution_percentage = 100, 20, 100
+    r.resolution_x, r.resolution_y, r.resolution_percentage = 20 * len(z), 20, 100
     r.filter_size = 0.01
     scene.cycles.samples = 1
     scene.cycles.use_denoising = False
@@ -401,12 +400,57 @@ def test_the_shifted_colour_group_renders_the_shifted_spectrum(tmp_path):
         img = np.stack([np.asarray(ch[c].pixels, dtype=np.float64) for c in ("R", "G", "B")], -1)
         return img[10, [10 * (2 * i) + 8 for i in range(len(z))]]  # each quad's middle (0.1 BU per pixel)
 
+    return render, grp
+
+
+def _expected_shift(rgb, z, z_grav, strength=1.0, gravity=True, colour=True, beaming=True):
+    """The group's colour by its formula, from core.spectrum."""
+    from grlens_addon.core import spectrum
+
+    ln_total = -np.log(z) if z > 0 else 0.0
+    ln_grav = -np.log(z_grav) if z_grav and z_grav > 0 else 0.0
+    motion, grav = ln_total - ln_grav, ln_grav * gravity
+    ln_hue, ln_bright = strength * (motion * colour + grav), strength * (motion * beaming + grav)
+    g = np.exp(ln_hue)
+    return np.maximum(spectrum.shift_matrix(g) @ rgb / g ** 5 * np.exp(5 * ln_bright), 0.0)
+
+
+def test_the_shifted_colour_group_renders_the_shifted_spectrum(tmp_path):
+    """The "grlens Shifted Colour" node group in an emission material, rendered by Cycles on quads
+    whose grlens_redshift is 1 + z = 0.8, 1, 1.25, 1.6 and 0 (none): each shows max(M(g) rgb, 0) of
+    core.spectrum with g = 1 / (1 + z) (to the curves' accuracy), and at Strength 0 the colour itself."""
+    z = [0.8, 1.0, 1.25, 1.6, 0.0]
+    rgb = np.array([0.8, 0.5, 0.2])
+    render, _ = _shift_quads(tmp_path, z, None, rgb)
     got = render(1.0)
     for i, zi in enumerate(z):
-        g = 1.0 / zi if zi > 0 else 1.0
-        want = np.maximum(spectrum.shift_matrix(g) @ rgb, 0.0)
-        np.testing.assert_allclose(got[i], want, rtol=5e-3, atol=5e-3 * max(1.0, g ** 5), err_msg=str(zi))
+        want = _expected_shift(rgb, zi, None)
+        np.testing.assert_allclose(got[i], want, rtol=5e-3, atol=5e-3 * max(1.0, want.max()), err_msg=str(zi))
     np.testing.assert_allclose(render(0.0), np.tile(rgb, (len(z), 1)), atol=1e-5)
+
+
+@pytest.mark.parametrize("switches", [(True, True, False), (True, False, True), (False, True, True),
+                                      (False, False, False)])
+def test_the_teaching_switches_take_parts_of_the_shift_out(tmp_path, switches):
+    """scene.grlens.use_gravitational_shift / use_doppler_colour / use_beaming: the group leaves the
+    gravitational part (grlens_redshift_gravity) out of the shift, or the motions' part out of the
+    hue or the brightness, as its formula says; Strength 0.5 halves every ln g."""
+    grav_on, colour_on, beaming_on = switches
+    z, zg = [0.8, 1.3, 1.1], [1.2, 1.2, 0.9]
+    rgb = np.array([0.3, 0.6, 0.9])
+    scene = bpy.context.scene
+    render, grp = _shift_quads(tmp_path, z, zg, rgb)
+    g = scene.grlens
+    g.use_gravitational_shift, g.use_doppler_colour, g.use_beaming = grav_on, colour_on, beaming_on
+    from grlens_addon.blender import shading
+
+    assert grp.node_tree.nodes[shading.SWITCHES["use_beaming"]].outputs[0].default_value == float(beaming_on)
+    for strength in (1.0, 0.5):
+        got = render(strength)
+        for i in range(len(z)):
+            want = _expected_shift(rgb, z[i], zg[i], strength, grav_on, colour_on, beaming_on)
+            np.testing.assert_allclose(got[i], want, rtol=5e-3, atol=5e-3 * max(1.0, want.max()),
+                                       err_msg=f"{switches} {strength} {z[i]}")
 
 
 def test_setting_a_speed_of_light_creates_the_shifted_colour_group():
@@ -415,3 +459,20 @@ def test_setting_a_speed_of_light_creates_the_shifted_colour_group():
     assert bpy.data.node_groups.get(shading.SHIFT_GROUP_NAME) is None
     bpy.context.scene.grlens.speed_of_light = 0.5
     assert bpy.data.node_groups.get(shading.SHIFT_GROUP_NAME) is not None
+
+
+def test_aberration_off_keeps_the_stills_images_and_shifts_their_light():
+    """use_aberration off (teaching): a moving camera's images are the still's, with grlens_redshift
+    (its motion's shift) and grlens_redshift_gravity on every vertex."""
+    scene, cam, sphere = _demo()
+    x0 = np.array(cam.location)
+    _key_linear(cam, "location", [(1, tuple(x0)), (21, tuple(x0 + np.array([-4.0, 6.0, 1.0])))])
+    scene.frame_set(11)
+    still = np.array([v.co[:] for v in bpy.data.objects["OrbitingSphere.GR1"].data.vertices])
+    scene.grlens.speed_of_light = 1.5
+    scene.grlens.use_aberration = False
+    rebuild.rebuild_scene(scene)
+    obj = bpy.data.objects["OrbitingSphere.GR1"]
+    np.testing.assert_array_equal(np.array([v.co[:] for v in obj.data.vertices]), still)
+    z, zg = _attr(obj, "grlens_redshift"), _attr(obj, "grlens_redshift_gravity")
+    assert z is not None and zg is not None and np.all(zg > 1) and not np.allclose(z, zg, rtol=1e-3)

@@ -35,6 +35,9 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         if g.speed_of_light > 0:
             col.label(text=f"r_s/c = {g.r_s / g.speed_of_light:.4g} frames (coordinate time)")
             col.operator("grlens.camera_geodesic")
+            row = col.row(align=True)
+            for prop in ("use_aberration", "use_doppler_colour", "use_beaming", "use_gravitational_shift"):
+                row.prop(g, prop, toggle=True)
         col.prop(g, "observer")
         note = panorama_note(context.scene)
         if note:

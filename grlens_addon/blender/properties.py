@@ -33,6 +33,14 @@ def _speed_changed(self, context):
     _changed(self, context)
 
 
+def _switch_changed(self, context):
+    """A colour switch of physical time: into the shifted-colour node group at once (no rebuild needed)."""
+    from . import shading
+
+    if context is not None and context.scene is not None:
+        shading.set_shift_switches(context.scene)
+
+
 def _world_changed(self, context):
     """Lens World switched: lens or restore the world at once (whatever auto update says)."""
     from . import handlers
@@ -66,6 +74,20 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
                     "camera's motion, read from its animation, aberrates the images and shifts their light "
                     "(point attribute grlens_redshift = 1 + z; node group 'grlens Shifted Colour'), and the black "
                     "hole must stay at rest. A negative value is refused with a message")
+    use_aberration: BoolProperty(
+        name="Aberration", default=True, update=_changed,
+        description="Physical time: the camera's motion aberrates its view (images and sky). Off, for teaching: "
+                    "the directions of a camera at rest, the light still shifted")
+    use_doppler_colour: BoolProperty(
+        name="Doppler Colour", default=True, update=_switch_changed,
+        description="Physical time: the motions' shift changes the hue (node group 'grlens Shifted Colour')")
+    use_beaming: BoolProperty(
+        name="Beaming", default=True, update=_switch_changed,
+        description="Physical time: the motions' shift changes the brightness (node group 'grlens Shifted Colour')")
+    use_gravitational_shift: BoolProperty(
+        name="Gravitational Shift", default=True, update=_switch_changed,
+        description="Physical time: the gravitational shift between the surface and the camera changes hue and "
+                    "brightness (node group 'grlens Shifted Colour')")
     lut_mode: EnumProperty(
         name="Lookup Table", default="EVERY_DISTANCE", update=_changed,
         items=[("EVERY_DISTANCE", "Every Distance",

@@ -191,6 +191,7 @@ def scene_geometry(scene, depsgraph, preview: bool = False):
                            "r > 1.5 r_s")
     if g.speed_of_light > 0:
         geo.beta = observer_beta(scene, cam, cam_eval, g.black_hole, hole_eval, geo)
+        geo.aberration = bool(g.use_aberration)
     orders = tuple(o for o, on in ((1, g.show_order_1), (2, g.show_order_2)) if on)
     settings = pipeline.Settings(max_tess_level=g.max_tess_level, tess_a=g.tess_a, tess_b=g.tess_b,
                                  cull_ratio=g.cull_ratio, orders=orders,
@@ -364,7 +365,7 @@ def _inputs(mesh, geo, settings, lut, light, mats, planes, disc=None):
     settings, LUT parameters, light and material slots. Equal inputs give identical images."""
     arrays = (mesh.positions, mesh.tris, mesh.corner_uv, mesh.material, mesh.corner_normals,
               geo.camera, geo.hole, planes, geo.beta)
-    rest = repr((geo.r_s, settings, None if disc is None else (tuple(disc.axis), disc.prograde, disc.mode, disc.r_in,
+    rest = repr((geo.r_s, geo.aberration, settings, None if disc is None else (tuple(disc.axis), disc.prograde, disc.mode, disc.r_in,
                                                                disc.t_peak, disc.exposure),
                  tuple(sorted(lut.parameters.items())), [m.name if m else None for m in mats],
                  None if light is None else (tuple(light.position), light.intensity,
@@ -492,6 +493,8 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
             raise _WorldOnly(f"no object marked; {world_line}")
         geo, settings, cam = scene_geometry(scene, depsgraph, preview)
         warn.extend(hole_notes(scene))
+        if geo.beta is not None:
+            shading.set_shift_switches(scene)  # (a file saved with other switches: its group follows)
         planes = frustum_planes(scene, cam)
         g = scene.grlens
         lut = lutcache.get_table(g, geo.r_obs)

@@ -62,6 +62,27 @@ from 1/4 to 4; Blender's smooth curves through them are within 2e-3 of the table
 reach about 3)."""
 
 
+REDSHIFT_GRAVITY = "grlens_redshift_gravity"
+"""Point float attribute of image meshes with physical time: the gravitational part of 1 + z."""
+
+SWITCHES = {"use_gravitational_shift": "gravitational shift", "use_doppler_colour": "Doppler colour",
+            "use_beaming": "beaming"}
+"""scene.grlens switch -> the shifted-colour group's Value node that carries it (1 on, 0 off)."""
+
+
+def set_shift_switches(scene) -> None:
+    """Write the scene's colour switches into the shifted-colour group, if there is one (only values
+    that change: every write updates the node tree)."""
+    tree = bpy.data.node_groups.get(SHIFT_GROUP_NAME)
+    if tree is None:
+        return
+    for prop, name in SWITCHES.items():
+        node = tree.nodes.get(name)
+        value = 1.0 if getattr(scene.grlens, prop) else 0.0
+        if node is not None and node.outputs[0].default_value != value:
+            node.outputs[0].default_value = value
+
+
 def ensure_shift_node_group():
     """Get or create the node group "grlens Shifted Colour" (never duplicated): the colour a surface of
     colour ``Color`` (linear RGB, as emitted) shows when its light reaches the camera with
@@ -69,12 +90,16 @@ def ensure_shift_node_group():
     with physical time; 0 or missing: no shift). ``Strength`` runs from 0 (no shift) to 1 (physical:
     the colour of the shifted spectrum, brightness and hue together, core.spectrum); in between the
     shift g^Strength. Outputs ``Color`` (negative channels of out-of-gamut colours clipped to 0) and
-    ``Redshift`` (1 + z). Use it in front of a shader's colour (Add > Group); the image meshes'
+    ``Redshift`` (1 + z). For teaching, the scene's switches (:data:`SWITCHES`, set into the group by
+    :func:`set_shift_switches`) leave out the gravitational part of the shift
+    (``grlens_redshift_gravity``), or the motions' part (the rest) from the hue (Doppler colour) or
+    from the brightness (beaming): the hue is that of g_hue, the brightness scaled by
+    g_bright^5 / g_hue^5. Use it in front of a shader's colour (Add > Group); the image meshes'
     materials are copies of the sources', so putting it in the source's material is enough.
 
-    Nodes: ln g = -Strength ln(1 + z) -> u = (ln g - ln(1/4)) / ln(16), clamped -> three RGB Curves
-    nodes (one per basis colour, each channel's curve M(g)_kc / g^5 over u) -> the input's channels
-    times those columns, summed -> times g^5 (= exp(5 ln g))."""
+    Nodes: ln g_hue, ln g_bright (Strength times the parts switched on) -> u = (ln g_hue - ln(1/4)) /
+    ln(16), clamped -> three RGB Curves nodes (one per basis colour, each channel's curve M(g)_kc / g^5
+    over u) -> the input's channels times those columns, summed -> times g_bright^5."""
     from ..core import spectrum
 
     tree = bpy.data.node_groups.get(SHIFT_GROUP_NAME)
@@ -114,19 +139,34 @@ def ensure_shift_node_group():
             links.new(b, node.inputs[1])
         return node.outputs["Vector"]
 
-    attr = n.new("ShaderNodeAttribute")
-    attr.attribute_type = "GEOMETRY"
-    attr.attribute_name = REDSHIFT
-    z1 = attr.outputs["Fac"]
-    valid = fn("GREATER_THAN", z1, 0.0)
-    z1 = fn("MULTIPLY_ADD", fn("SUBTRACT", z1, 1.0), valid, 1.0)  # 1 where there is no attribute
-    ln_g = fn("MULTIPLY", fn("LOGARITHM", z1, math.e), fn("MULTIPLY", gin.outputs["Strength"], -1.0))
+    def ln_g_of(name):  # ln g = -ln(1 + z) of a point attribute; 0 where it is 0 or missing
+        attr = n.new("ShaderNodeAttribute")
+        attr.attribute_type = "GEOMETRY"
+        attr.attribute_name = name
+        z1 = attr.outputs["Fac"]
+        valid = fn("GREATER_THAN", z1, 0.0)
+        z1 = fn("MULTIPLY_ADD", fn("SUBTRACT", z1, 1.0), valid, 1.0)
+        return fn("MULTIPLY", fn("LOGARITHM", z1, math.e), -1.0), attr
+
+    def switch(name):
+        node = n.new("ShaderNodeValue")
+        node.name = node.label = name
+        node.outputs[0].default_value = 1.0
+        return node.outputs[0]
+
+    ln_total, attr = ln_g_of(REDSHIFT)
+    ln_grav, _ = ln_g_of(REDSHIFT_GRAVITY)
+    ln_motion = fn("SUBTRACT", ln_total, ln_grav)  # the motions' part (camera, disc gas)
+    grav = fn("MULTIPLY", ln_grav, switch(SWITCHES["use_gravitational_shift"]))
+    strength = gin.outputs["Strength"]
+    ln_g = fn("MULTIPLY", fn("MULTIPLY_ADD", ln_motion, switch(SWITCHES["use_doppler_colour"]), grav), strength)
+    ln_bright = fn("MULTIPLY", fn("MULTIPLY_ADD", ln_motion, switch(SWITCHES["use_beaming"]), grav), strength)
     lo, hi = spectrum.LN_G_RANGE
     u = fn("MULTIPLY_ADD", ln_g, 1.0 / (hi - lo), -lo / (hi - lo), clamp=True)
     uu = n.new("ShaderNodeCombineColor")
     for k in range(3):
         links.new(u, uu.inputs[k])
-    ln_tab, table = spectrum.shift_table(SHIFT_CURVE_POINTS)
+    ln_tab, table = spectrum.shift_table(SHIFT_CURVE_POINTS)  # (the hue's shift)
     x = (ln_tab - lo) / (hi - lo)
     sep = n.new("ShaderNodeSeparateColor")
     links.new(gin.outputs["Color"], sep.inputs[0])
@@ -146,7 +186,7 @@ def ensure_shift_node_group():
         links.new(uu.outputs[0], cur.inputs["Color"])
         part = vmath("SCALE", cur.outputs["Color"], None, scale=sep.outputs[c])
         total = part if total is None else vmath("ADD", total, part)
-    shifted = vmath("SCALE", total, None, scale=fn("EXPONENT", fn("MULTIPLY", ln_g, 5.0)))
+    shifted = vmath("SCALE", total, None, scale=fn("EXPONENT", fn("MULTIPLY", ln_bright, 5.0)))
     links.new(vmath("MAXIMUM", shifted, (0.0, 0.0, 0.0)), gout.inputs["Color"])
     links.new(attr.outputs["Fac"], gout.inputs["Redshift"])
     for i, node in enumerate(tree.nodes):

@@ -688,6 +688,9 @@ def update(scene, depsgraph=None) -> str | None:
         except RebuildError as exc:
             raise WorldError(str(exc)) from None
         line += f", camera at {np.linalg.norm(beta):.3g} c"
+        if not g.use_aberration:
+            line += " (aberration off)"
+            beta = np.zeros(3)
     set_velocity(grp, beta)
     _use_aberration(grp, bool(np.any(beta != 0)))
     skipped = unhooked(world)

@@ -32,8 +32,9 @@ class ImageMesh:
     world point each image vertex shows; redshift (V,) 1 + z of the light each vertex shows
     (:func:`image_redshift`), with a :class:`DiscEmitter` or a scene with a velocity (physical time;
     0 where there is none: disc gas without a circular orbit, r <= 1.5 r_s or on the disc axis), else
-    None; with a disc, disc_colour (V, 3) linear RGB (black there), else None. source_tri indexes the
-    caller's SourceMesh.tris.
+    None; with a disc, disc_colour (V, 3) linear RGB (black there), else None; with physical time,
+    redshift_gravity (V,) its gravitational part sqrt((1 - r_s/r_cam) / (1 - r_s/r)) (static emitter
+    and camera), else None. source_tri indexes the caller's SourceMesh.tris.
     """
 
     order: int
@@ -49,6 +50,7 @@ class ImageMesh:
     redshift: np.ndarray | None = field(repr=False, default=None)
     disc_colour: np.ndarray | None = field(repr=False, default=None)
     corner_normal: np.ndarray | None = field(repr=False, default=None)
+    redshift_gravity: np.ndarray | None = field(repr=False, default=None)
 
 
 def empty_image(order, report: culling.CullReport) -> ImageMesh:
@@ -115,9 +117,13 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
         irr = e.reshape(-1, 3)
     if patch_corners is not None:
         src_tri = np.concatenate([src_tri, p_src])
-    redshift = colour = None
+    redshift = colour = gravity = None
     if disc is not None or scene.beta is not None:
         redshift = image_redshift(scene, v_src, v_dir, disc)
+    if scene.beta is not None:  # physical time: the gravitational part too, for the colour's switches
+        gravity = 1.0 / observer_view.frequency_ratio(np.linalg.norm(v_src - scene.hole, axis=1) / scene.r_s,
+                                                       scene.r_obs, None)
+        gravity = np.nan_to_num(gravity, nan=0.0)
     if disc is not None:
         r = np.linalg.norm(v_src - scene.hole, axis=1) / scene.r_s
         colour = np.nan_to_num(thin_disc.disc_colour(r, redshift, disc.mode, r_in=disc.r_in,
@@ -127,7 +133,7 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
     return ImageMesh(order=order, positions=v_pos, tris=image_tris, corner_uv=corner_uv,
                      material=mesh.material[src_tri], light_travel_time=v_dist, irradiance=irr, report=report,
                      source_tri=source.origin[src_tri], source_position=v_src, redshift=redshift,
-                     disc_colour=colour, corner_normal=n)
+                     disc_colour=colour, corner_normal=n, redshift_gravity=gravity)
 
 
 def image_redshift(scene, points, directions, disc: DiscEmitter | None = None) -> np.ndarray:
@@ -137,7 +143,8 @@ def image_redshift(scene, points, directions, disc: DiscEmitter | None = None) -
     the camera's motion: observer_view.frequency_ratio), or a thin disc's gas on circular orbits
     (thin_disc, its shift for the static observer, divided by the camera's Doppler factor). NaN where
     there is none (r <= 1 r_s; disc gas at r <= 1.5 r_s or on the disc axis)."""
-    static = directions if scene.beta is None else observer_view.unaberrate(directions, scene.beta)
+    view = scene.view_beta
+    static = directions if view is None else observer_view.unaberrate(directions, view)
     if disc is not None:
         z1 = thin_disc.vertex_redshift_from_direction(points, scene.hole, scene.camera, scene.r_s, disc.axis, static,
                                                       disc.prograde)

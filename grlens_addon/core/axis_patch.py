@@ -468,7 +468,7 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
     ring = {o: limit_images(cr, np.zeros(1), mp, o, look[o]) for o in orders}
     if not all(bool(im.valid[0]) for im in ring.values()):
         return None
-    theta_e = {o: float(hole_angle(im.direction, scene.camera, scene.hole, scene.beta)[0]) for o, im in ring.items()}
+    theta_e = {o: float(hole_angle(im.direction, scene.camera, scene.hole, scene.view_beta)[0]) for o, im in ring.items()}
     n_az, q = grid_shape(max(theta_e.values()) / pixel_angle, max_error_px)
     # the innermost circle: probe the image at B.PROBE_AZIMUTHS azimuths in the crossed triangle's plane
     k = np.arange(B.MAX_CIRCLES + 1)
@@ -481,7 +481,7 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
     band = B.PATCH_BAND_FACTOR * (B.COVERAGE_FACTOR * max_error_px) * pixel_angle
     gap = np.zeros(len(qx))
     for o, img in mp.images(probe, orders).items():
-        gap = np.maximum(gap, np.abs(hole_angle(img.direction, scene.camera, scene.hole, scene.beta)
+        gap = np.maximum(gap, np.abs(hole_angle(img.direction, scene.camera, scene.hole, scene.view_beta)
                                      - theta_e[o]))  # NaN stays
     gap = gap.reshape(len(k), B.PROBE_AZIMUTHS).max(axis=1)
     # no image (outside the LUT, horizon) next to the axis: no patch; farther out: a smaller patch

@@ -179,10 +179,10 @@ def cull_pieces(frame, source, coarse, plan, pieces, patches, order):
         sub.tris, img.direction, img.valid, sub.positions, scene.camera, settings.cull_ratio, planes,
         img.position, scene.hole, order, budget.pixel_angle, budget.tolerance_px,
         source_circumference=_face_values(sub, face_src, source.circumference, lambda t: circumference(
-            unit_directions(sub.positions, scene.camera, scene.beta), t)),
+            unit_directions(sub.positions, scene.camera, scene.view_beta), t)),
         image_circumference=_face_values(sub, face_src, coarse.circumference[order],
                                          lambda t: circumference(img.direction, t)),
-        image_outside_bits=bits, axis_candidates=source.near_axis[face_src], beta=scene.beta)
+        image_outside_bits=bits, axis_candidates=source.near_axis[face_src], beta=scene.view_beta)
     rep.extra, rep.presplit = report.extra, report.presplit
     rep.outside_frustum += plan.set_aside.get("outside_frustum", 0)
     rep.back_face = plan.set_aside.get("back_face", 0)

@@ -185,7 +185,7 @@ def prepare_source(frame: Frame, src: SourceMesh, origin=None, n_bad: int = 0) -
     out.plane = mapping.plane_coordinates(mesh.positions, scene)
     out.axis_xyz = observer_view.axis_coordinates(mesh.positions, scene.camera, scene.hole)
     out.circumference = circumference_from_edges(
-        chord_lengths(observer_view.unit_directions(mesh.positions, scene.camera, scene.beta), out.edges.verts),
+        chord_lengths(observer_view.unit_directions(mesh.positions, scene.camera, scene.view_beta), out.edges.verts),
         out.edges.of_tri)
     out.near_axis = observer_view.near_axis(mesh.positions, mesh.tris, scene.camera, scene.hole, axis_xyz=out.axis_xyz)
     return out
@@ -284,7 +284,7 @@ class SourceImages:
         if order not in self._hole:
             with np.errstate(invalid="ignore"):
                 self._hole[order] = observer_view.hole_angle(self.images[order].direction, self.scene.camera,
-                                                             self.scene.hole, self.scene.beta)
+                                                             self.scene.hole, self.scene.view_beta)
         return self._hole[order]
 
 

@@ -122,8 +122,8 @@ def check_frame(sources, scene: mapping.Scene, lut, settings: pipeline.Settings,
     camera's frustum planes (None for a panorama). ``sky``: optional model of the lensed world, a
     function (directions (N, 3) unit world, camera position (3,) BU) -> (N, 3) unit world directions at
     infinity, NaN rows for rays that fall in; it is asked for every pixel that has a ray and compared
-    with the reference's sky (``metrics["sky"]``). A moving observer (``scene.beta``) is checked as such:
-    the reference traces its aberrated pixel rays (raytrace.trace)."""
+    with the reference's sky (``metrics["sky"]``). A moving observer (``scene.view_beta``) is checked as
+    such: the reference traces its aberrated pixel rays (raytrace.trace)."""
     sources = list(sources)
     if not sources:
         raise ValueError("nothing to check: no source mesh")
@@ -134,7 +134,7 @@ def check_frame(sources, scene: mapping.Scene, lut, settings: pipeline.Settings,
     settings = dataclasses.replace(settings, pixel_angle=camera.pixel_angle)
     tri_scene = raytrace.TriangleScene.concatenate([(s.positions, s.tris, s.corner_uv) for s in sources])
     t0 = time.perf_counter()
-    ref = raytrace.trace(tri_scene, camera, scene.hole, scene.r_s, beta=scene.beta)
+    ref = raytrace.trace(tri_scene, camera, scene.hole, scene.r_s, beta=scene.view_beta)
     t_ref = time.perf_counter() - t0
     planes = camera.frustum_planes()
     meshes, t_poly = [], 0.0
@@ -146,7 +146,7 @@ def check_frame(sources, scene: mapping.Scene, lut, settings: pipeline.Settings,
     poly = rasterize.rasterize(meshes, camera) if meshes else raytrace.PixelBuffers.empty((camera.height, camera.width))
     metrics = image_metrics.compare(
         ref, poly, image_pixels=lambda points, order: raytrace.image_pixels(points, camera, scene.hole, scene.r_s, order,
-                                                                            beta=scene.beta),
+                                                                            beta=scene.view_beta),
         column_period=camera.column_period)
     model, t_sky = None, 0.0
     dirs = camera.pixel_directions()

@@ -331,7 +331,7 @@ def _nearest_point_radius(frame, source, tris_idx, order) -> np.ndarray:
     img = frame.map.images(point, (order,))[order]
     scene = frame.scene
     with np.errstate(invalid="ignore"):
-        r = observer_view.hole_angle(img.direction, scene.camera, scene.hole, scene.beta) / frame.budget.pixel_angle
+        r = observer_view.hole_angle(img.direction, scene.camera, scene.hole, scene.view_beta) / frame.budget.pixel_angle
     return np.where(inside | ~img.valid, np.nan, r)
 
 

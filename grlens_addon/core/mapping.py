@@ -44,12 +44,14 @@ class Scene:
     frames measure physical time: the camera's velocity in its local static frame (units of c, world
     axes; observer_view.static_frame_beta), which aberrates every image direction and shifts every
     image's light (assemble's 1 + z); None: a still, seen by the static observer (beta = 0 aberrates
-    nothing but still gives every image its 1 + z)."""
+    nothing but still gives every image its 1 + z). ``aberration`` False (for teaching): the directions
+    are the static observer's though the camera moves (its light is still shifted)."""
 
     camera: np.ndarray  # (3,)
     hole: np.ndarray  # (3,)
     r_s: float
     beta: np.ndarray | None = None
+    aberration: bool = True
 
     def __post_init__(self):
         self.camera = np.asarray(self.camera, dtype=np.float64).reshape(3)
@@ -64,6 +66,12 @@ class Scene:
         if self.beta is not None:
             self.beta = np.asarray(self.beta, dtype=np.float64).reshape(3)
             lorentz_gamma(self.beta)  # refuses |beta| >= 1
+
+    @property
+    def view_beta(self) -> np.ndarray | None:
+        """The velocity that aberrates the camera's view (units of c): ``beta``, or None without one or
+        with ``aberration`` off."""
+        return self.beta if self.aberration else None
 
     @property
     def r_obs(self) -> float:

@@ -71,13 +71,13 @@ def view_directions(xi, e2, e1, order) -> np.ndarray:
 def place_images(xi, dt, e2, scene, order):
     """The images of ``order`` (1 or 2) of points whose table values are ``xi`` (N,; radians) and ``dt``
     (N,; r_s/c), in the planes of their unit vectors ``e2`` (N, 3), for the observer of ``scene``
-    (anything with ``camera`` (3,; BU), ``e1`` (3,) and ``r_s`` (BU), and optionally ``beta`` (3,;
-    units of c), e.g. mapping.Scene): (direction (N, 3) unit, the static observer's
-    :func:`view_directions` aberrated by beta if the scene has one (:func:`aberrate`), distance (N,)
+    (anything with ``camera`` (3,; BU), ``e1`` (3,) and ``r_s`` (BU), and optionally ``view_beta``
+    (3,; units of c), e.g. mapping.Scene): (direction (N, 3) unit, the static observer's
+    :func:`view_directions` aberrated by view_beta if the scene has one (:func:`aberrate`), distance (N,)
     c dt in BU, position (N, 3) BU = camera + distance * direction, finite (N,) bool: xi and dt are
     finite). Positions are not masked here (the caller adds its own reasons, e.g. points on the axis)."""
     direction = view_directions(xi, e2, scene.e1, order)
-    beta = getattr(scene, "beta", None)
+    beta = getattr(scene, "view_beta", None)
     if beta is not None:
         direction = aberrate(direction, beta)
     distance = dt * scene.r_s
