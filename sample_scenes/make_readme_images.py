@@ -32,6 +32,7 @@ PICTURES = {  # scene: extra render.py arguments
     "luminet": [], "luminet_blackbody": [],
     "flyin": ["--frames", "1,120,240"],
     "starfield": [], "starfield_dome": [], "starfield_panorama": [],
+    "orbit": [], "orbit_panorama": [], "orbit_still": [], "orbit_panorama_still": [],
 }
 SEPARATE = {"flyin"}  # one picture per frame: <scene>_NNNN.png
 TARGETS = {"starfield": "starfield_normal"}  # picture name when it is not the scene's

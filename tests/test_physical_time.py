@@ -476,3 +476,16 @@ def test_aberration_off_keeps_the_stills_images_and_shifts_their_light():
     np.testing.assert_array_equal(np.array([v.co[:] for v in obj.data.vertices]), still)
     z, zg = _attr(obj, "grlens_redshift"), _attr(obj, "grlens_redshift_gravity")
     assert z is not None and zg is not None and np.all(zg > 1) and not np.allclose(z, zg, rtol=1e-3)
+
+
+def test_velocity_at_the_first_and_last_keys_is_not_halved():
+    """At the first and last keys (held beyond them) the velocity is one-sided, not half the slope."""
+    scene = bpy.context.scene
+    obj = bpy.data.objects.new("Mover", None)
+    scene.collection.objects.link(obj)
+    _key_linear(obj, "location", [(1, (0.0, 0.0, 0.0)), (11, (2.0, -1.0, 0.5))])
+    for f in (1, 6, 11):
+        scene.frame_set(f)
+        np.testing.assert_allclose(motion.velocity(scene, obj), [0.2, -0.1, 0.05], atol=1e-6)
+    scene.frame_set(15)
+    np.testing.assert_allclose(motion.velocity(scene, obj), 0.0, atol=1e-9)  # held after the last key

@@ -62,7 +62,7 @@ class GRLENS_OT_camera_geodesic(bpy.types.Operator):
         except ValueError as exc:
             self.report({"ERROR"}, f"grlens: {exc}")
             return {"CANCELLED"}
-        self.report({"WARNING"} if note.startswith("warning") else {"INFO"}, f"grlens: keyed {n} frames; {note}")
+        self.report({"WARNING"} if note.startswith("warning") else {"INFO"}, f"keyed {n} frames; {note}")
         return {"FINISHED"}
 
 
@@ -209,7 +209,7 @@ class GRLENS_OT_set_speed_of_light(bpy.types.Operator):
             self.report({"ERROR"}, f"grlens: {exc}")
             return {"CANCELLED"}
         scene.grlens.speed_of_light = scene.grlens.r_s / n
-        self.report({"INFO"}, f"grlens: speed of light {scene.grlens.speed_of_light:.6g} scene units per frame "
+        self.report({"INFO"}, f"speed of light {scene.grlens.speed_of_light:.6g} scene units per frame "
                               f"(r_s/c = {n:.6g} frames)")
         return {"FINISHED"}
 

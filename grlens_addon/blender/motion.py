@@ -12,7 +12,8 @@ constraints that move it or its parents, drivers, NLA strips or other parent typ
 and the velocity is then refused with a message saying why, not guessed.
 
 Units: Blender units (BU) per frame; the central difference over +-``STEP`` frames about the
-current frame and subframe.
+current frame and subframe, one-sided (second order) at the first and last keys, where the
+F-curves hold their end values.
 """
 from __future__ import annotations
 
@@ -122,8 +123,28 @@ def velocity(scene, obj, obj_eval=None) -> np.ndarray:
             or any(abs(now[i][j] - actual[i][j]) > tol for i in rows for j in range(3))):
         raise MotionError(f"the motion of '{obj.name}' does not follow from its keyframes alone "
                           "(drivers, NLA strips or other animation)")
-    ahead, behind = world_matrix_at(obj, frame + STEP), world_matrix_at(obj, frame - STEP)
-    return np.array(ahead.translation - behind.translation, dtype=np.float64) / (2.0 * STEP)
+    lo, hi = _keyed_range(obj)
+    at = [np.array(world_matrix_at(obj, frame + k * STEP).translation, dtype=np.float64) for k in (-2, -1, 1, 2)]
+    if frame - STEP < lo <= frame + STEP < hi:  # the first key: held before it, so one-sided (second order)
+        now_t = np.array(now.translation, dtype=np.float64)
+        return (-3.0 * now_t + 4.0 * at[2] - at[3]) / (2.0 * STEP)
+    if lo < frame - STEP <= hi < frame + STEP:  # the last key
+        now_t = np.array(now.translation, dtype=np.float64)
+        return (3.0 * now_t - 4.0 * at[1] + at[0]) / (2.0 * STEP)
+    return (at[2] - at[1]) / (2.0 * STEP)
+
+
+def _keyed_range(obj):
+    """(first, last) frame over the keys of the transform F-curves of ``obj`` and its parents that hold
+    their end values beyond their keys (constant extrapolation); (-inf, inf) without any."""
+    lo, hi = -np.inf, np.inf
+    for o in _chain(obj):
+        for fc in _fcurves(o):
+            if fc.data_path in _CHANNELS and fc.extrapolation == "CONSTANT" and len(fc.keyframe_points) > 1 \
+                    and not fc.modifiers:
+                a, b = fc.range()
+                lo, hi = (a, b) if not np.isfinite(lo) else (min(lo, a), max(hi, b))
+    return lo, hi
 
 
 def _chain(obj):
