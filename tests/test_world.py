@@ -737,14 +737,14 @@ def test_a_camera_at_rest_keeps_the_aberration_out_of_the_sky_shader():
     _moving(scene, cam)
     world.update(scene)
     assert source() == {"static direction"}
-    assert grp.nodes["beta"].outputs[0].default_value > 0.3
+    assert grp.nodes["gamma_beta"].outputs[0].default_value > 0.3
     scene.grlens.use_aberration = False  # for teaching: the sky of a camera at rest
     world.update(scene)
     assert source() == {"D"} and "aberration off" in scene.grlens.world_status
     scene.grlens.use_aberration = True
     scene.grlens.speed_of_light = 0.0
     world.update(scene)
-    assert source() == {"D"} and grp.nodes["beta"].outputs[0].default_value == 0.0
+    assert source() == {"D"} and grp.nodes["gamma_beta"].outputs[0].default_value == 0.0
 
 
 def test_check_frame_of_a_moving_camera_checks_its_aberrated_sky(tmp_path):

@@ -24,8 +24,8 @@ records what it had in its custom property ``grlens_hooked`` ({input identifier:
 "<from node name>\\t<from output identifier>"}), so :func:`restore` puts the tree back exactly.
 :func:`apply` is idempotent: nodes the user adds while lensing is on are hooked at the next update.
 
-Before all this, D is taken back to the camera's local static frame (exact inverse aberration,
-:func:`_static_direction`) when frames measure physical time and the camera moves (its velocity
+Before all this, D is taken back to the camera's local static frame (exact inverse aberration in
+four nodes, :func:`_static_direction`) when frames measure physical time and the camera moves (its velocity
 from its own keyframes, as the images'); at rest the nodes give D itself.
 
 Per frame only values change (never the tree): e1, xi_lim and the camera's velocity inside the
@@ -213,56 +213,38 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
 
 
 def _static_direction(N, L, d):
-    """Nodes taking the camera's ray direction ``d`` (a socket) back to its local static frame, the
-    exact inverse aberration of observer_view.unaberrate: with n = -beta / |beta| (node "beta_dir"),
-    b = |beta| ("beta") and 1 / gamma ("inv_gamma"), c = D . n,
-    D_static = ((c + b) / (1 + b c)) n + (D - c n) / (gamma (1 + b c)). Per frame values only; a camera
-    at rest (n = 0, b = 0, 1 / gamma = 1) gives D itself, to the bit; it is then left out of the path
-    (:func:`_use_aberration`), so a camera at rest costs no more than before. Returns the node whose
-    output "Vector" is D_static."""
+    """Nodes taking the camera's ray direction ``d`` (a socket, unit) back to its local static frame,
+    the exact inverse aberration of observer_view.unaberrate in four nodes: with n = -beta / |beta|
+    (node "beta_dir"), gamma - 1 ("gamma_minus_1") and gamma |beta| ("gamma_beta") and c = D . n,
+    D_static = ((c + b) / (1 + b c)) n + (D - c n) / (gamma (1 + b c)), which is the unit vector of
+    D + ((gamma - 1) c + gamma b) n (times gamma (1 + b c) > 0). Per frame values only; left out of the
+    path for a camera at rest (:func:`_use_aberration`). Returns the node whose output "Vector" is
+    D_static."""
     n = N.new("ShaderNodeCombineXYZ")
     n.name = n.label = "beta_dir"
     n.location = (0, -800)
-    b = N.new("ShaderNodeValue")
-    b.name = b.label = "beta"
-    b.location = (0, -1000)
-    b.outputs[0].default_value = 0.0
-    ig = N.new("ShaderNodeValue")
-    ig.name = ig.label = "inv_gamma"
-    ig.location = (0, -1200)
-    ig.outputs[0].default_value = 1.0
+    gm1 = N.new("ShaderNodeValue")
+    gm1.name = gm1.label = "gamma_minus_1"
+    gm1.location = (0, -1000)
+    gm1.outputs[0].default_value = 0.0
+    gb = N.new("ShaderNodeValue")
+    gb.name = gb.label = "gamma_beta"
+    gb.location = (0, -1200)
+    gb.outputs[0].default_value = 0.0
     c = _vmath(N, "DOT_PRODUCT", 250)
     L.new(d, c.inputs[0])
     L.new(n.outputs[0], c.inputs[1])
-    cn = _vmath(N, "SCALE", 300)
-    L.new(n.outputs[0], cn.inputs[0])
-    L.new(c.outputs["Value"], cn.inputs["Scale"])
-    across = _vmath(N, "SUBTRACT", 300)
-    L.new(d, across.inputs[0])
-    L.new(cn.outputs["Vector"], across.inputs[1])
-    den = _math(N, "MULTIPLY_ADD", x=300)  # 1 + b c
-    L.new(c.outputs["Value"], den.inputs[0])
-    L.new(b.outputs[0], den.inputs[1])
-    den.inputs[2].default_value = 1.0
-    num = _math(N, "ADD", x=300)
-    L.new(c.outputs["Value"], num.inputs[0])
-    L.new(b.outputs[0], num.inputs[1])
-    k1 = _math(N, "DIVIDE", x=350)
-    L.new(num.outputs[0], k1.inputs[0])
-    L.new(den.outputs[0], k1.inputs[1])
-    k2 = _math(N, "DIVIDE", x=350)
-    L.new(ig.outputs[0], k2.inputs[0])
-    L.new(den.outputs[0], k2.inputs[1])
-    v1 = _vmath(N, "SCALE", 380)
-    L.new(n.outputs[0], v1.inputs[0])
-    L.new(k1.outputs[0], v1.inputs["Scale"])
-    v2 = _vmath(N, "SCALE", 380)
-    L.new(across.outputs["Vector"], v2.inputs[0])
-    L.new(k2.outputs[0], v2.inputs["Scale"])
-    out = _vmath(N, "ADD", 400)
+    k = _math(N, "MULTIPLY_ADD", x=300)  # (gamma - 1) c + gamma b
+    L.new(c.outputs["Value"], k.inputs[0])
+    L.new(gm1.outputs[0], k.inputs[1])
+    L.new(gb.outputs[0], k.inputs[2])
+    v = _vmath(N, "MULTIPLY_ADD", 350)  # D + k n
+    L.new(n.outputs[0], v.inputs[0])
+    L.new(k.outputs[0], v.inputs[1])
+    L.new(d, v.inputs[2])
+    out = _vmath(N, "NORMALIZE", 400)
     out.name = "static direction"
-    L.new(v1.outputs["Vector"], out.inputs[0])
-    L.new(v2.outputs["Vector"], out.inputs[1])
+    L.new(v.outputs["Vector"], out.inputs[0])
     return out
 
 
@@ -393,7 +375,7 @@ def _socket(sockets, ident):
 
 def _group_ok(group) -> bool:
     return group is not None and all(k in group.nodes for k in (*TABLE_LOOKUPS, "spare", "e1", "xi_lim", "rotate",
-                                                                 "beta_dir", "beta", "inv_gamma", "D", "static direction",
+                                                                 "beta_dir", "gamma_minus_1", "gamma_beta", "D", "static direction",
                                                                  "cos xi", "deflection axis", *LOOKUPS.values()))
 
 
@@ -705,11 +687,12 @@ def set_velocity(group, beta) -> None:
     beta = np.asarray(beta, dtype=np.float64).reshape(3)
     b = float(np.linalg.norm(beta))
     n = -beta / b if b > 0 else np.zeros(3)
+    gamma = 1.0 / math.sqrt(max(1.0 - b * b, 1e-300))
     node = group.nodes["beta_dir"]
     for k in range(3):
         _set(node.inputs[k], float(n[k]))
-    _set(group.nodes["beta"].outputs[0], b)
-    _set(group.nodes["inv_gamma"].outputs[0], math.sqrt(max(1.0 - b * b, 0.0)))
+    _set(group.nodes["gamma_minus_1"].outputs[0], gamma - 1.0)
+    _set(group.nodes["gamma_beta"].outputs[0], gamma * b)
 
 
 def refresh(scene, depsgraph=None):
