@@ -405,8 +405,9 @@ def frequency_ratio(r_emit, r_obs, k_obs, beta_obs=None, k_emit=None, beta_emit=
         g = sqrt((1 - r_s/r_e) / (1 - r_s/r_o)) gamma_o (1 - beta_o . k_o) / (gamma_e (1 - beta_e . k_e)),
 
     ``k_obs`` (N, 3): the photon's unit direction of travel where it arrives, in the observer's local
-    static frame (minus the static observer's apparent direction); ``beta_obs`` (3,): the observer's
-    velocity in that frame (units of c; None: at rest); ``k_emit`` (N, 3): the photon's unit direction
+    static frame (minus the static observer's apparent direction; not needed for an observer at
+    rest); ``beta_obs`` (3,): the observer's velocity in that frame (units of c; None: at rest);
+    ``k_emit`` (N, 3): the photon's unit direction
     of travel where it leaves the emitter, in the emitter's static frame, and ``beta_emit`` (N, 3 or 3)
     the emitter's velocity there (None: emitters at rest, and ``k_emit`` is not needed). An observer
     moving towards the source sees g > 1. NaN for emitters at or inside the horizon or moving at or
