@@ -658,9 +658,10 @@ def test_cycles_procedural_checker_world(tmp_path):
 # ---------------------------------------------------------------------------------------------
 # a moving camera (physical time): its sky aberrated by its own velocity
 # ---------------------------------------------------------------------------------------------
-def _moving(scene, cam, velocity=(-3.0, 4.0, 1.0), c=10.0):
+def _moving(scene, cam, velocity=(-3.0, 4.0, 1.0), c=10.0, shift_colours=False):
     """Key the camera moving linearly (BU per frame) through its position at frame 2, set the speed
-    of light (BU per frame); returns beta in the local static frame at frame 2 (units of c)."""
+    of light (BU per frame) and the colour switches (off: the sky's directions alone); returns beta in
+    the local static frame at frame 2 (units of c)."""
     from grlens_addon.core import observer_view
 
     pos = np.array(cam.location)
@@ -675,6 +676,8 @@ def _moving(scene, cam, velocity=(-3.0, 4.0, 1.0), c=10.0):
         for kp in fc.keyframe_points:
             kp.interpolation = "LINEAR"
     scene.grlens.speed_of_light = c
+    g = scene.grlens
+    g.use_doppler_colour = g.use_beaming = g.use_gravitational_shift = shift_colours
     scene.frame_set(2)
     return observer_view.static_frame_beta(pos, v, np.zeros(3), R_S, c)[0]
 
@@ -745,6 +748,69 @@ def test_a_camera_at_rest_keeps_the_aberration_out_of_the_sky_shader():
     scene.grlens.speed_of_light = 0.0
     world.update(scene)
     assert source() == {"D"} and grp.nodes["gamma_beta"].outputs[0].default_value == 0.0
+
+
+@pytest.mark.parametrize("velocity", [(-3.0, 4.0, 1.0), (0.0, 0.0, 0.0)])
+def test_cycles_render_of_the_skys_colours_shifted_for_the_moving_camera(tmp_path, velocity):
+    """With physical time and the colour switches on, the sky's light (emitted at rest at infinity)
+    reaches the camera with g = gamma (1 + beta . D_static) / sqrt(1 - r_s/r): each pixel shows the
+    colour of its escape direction shifted by that g (core.spectrum), per pixel; a camera at rest
+    sees the whole sky blue-shifted by 1 / sqrt(1 - r_s/r)."""
+    from grlens_addon.core import spectrum
+
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene(size=(40, 24))
+    beta = _moving(scene, cam, velocity=velocity, shift_colours=True)
+    img = _render(scene, tmp_path / "shifted.exr")
+    pos = np.array(cam.matrix_world.translation)
+    r = np.linalg.norm(pos - np.array(hole.location)) / R_S
+
+    def want(du, dv):
+        d = _pixel_dirs(scene, cam, du, dv)
+        ds = _boosted_back(d, beta) if np.any(beta) else d
+        colour = _direction_colours(escape_directions(ds, pos, hole.location, R_S))
+        gamma = 1 / np.sqrt(1 - beta @ beta)
+        g = gamma * (1 + ds @ beta) / np.sqrt(1 - 1 / r)
+        m = spectrum.shift_matrix(g.ravel()).reshape(g.shape + (3, 3))
+        return np.maximum(np.einsum("hwij,hwj->hwi", m, colour), 0.0)
+
+    assert _check_per_pixel(img, want, tol=2e-2) > 0.9
+    if not np.any(beta):
+        assert 1.02 < 1 / np.sqrt(1 - 1 / r) < 1.03  # (20 r_s)
+
+
+def test_the_skys_colour_shift_is_hooked_restorably():
+    """The sky's colour shift hooks every Background colour through a grlens node: switching the speed
+    of light off takes it out again, lens_world off gives back the user's tree exactly, and a
+    Background with an unlinked colour keeps its own colour in the shift node."""
+    from grlens_addon.blender import world
+
+    scene = bpy.context.scene
+    w = _direction_world(scene)
+    plain_bg = w.node_tree.nodes.new("ShaderNodeBackground")  # a second, unlinked one
+    plain_bg.inputs["Color"].default_value = (0.2, 0.3, 0.4, 1.0)
+    _, cam, hole = _scene()
+    scene.grlens.lens_world = False
+    before = _snapshot(w.node_tree)
+    scene.grlens.lens_world = True
+    lensed = _snapshot(w.node_tree)
+    _moving(scene, cam, shift_colours=True)
+    world.update(scene)
+    shifts = [n for n in w.node_tree.nodes if n.get("grlens_own") == "sky shift"]
+    assert len(shifts) == 2
+    for bg in (w.node_tree.nodes["Background"], plain_bg):
+        assert bg.inputs["Color"].links[0].from_node.get("grlens_own") == "sky shift"
+    plain_shift = plain_bg.inputs["Color"].links[0].from_node
+    assert tuple(plain_shift.inputs["Color"].default_value) == pytest.approx((0.2, 0.3, 0.4, 1.0))
+    scene.grlens.speed_of_light = 0.0
+    world.update(scene)
+    assert not [n for n in w.node_tree.nodes if n.get("grlens_own") == "sky shift"]
+    assert _snapshot(w.node_tree) == lensed
+    scene.grlens.speed_of_light = 10.0
+    world.update(scene)
+    scene.grlens.lens_world = False
+    assert _snapshot(w.node_tree) == before
 
 
 def test_check_frame_of_a_moving_camera_checks_its_aberrated_sky(tmp_path):

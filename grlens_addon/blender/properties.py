@@ -34,11 +34,13 @@ def _speed_changed(self, context):
 
 
 def _switch_changed(self, context):
-    """A colour switch of physical time: into the shifted-colour node group at once (no rebuild needed)."""
-    from . import shading
+    """A colour switch of physical time: into the shifted-colour node group and the sky at once (no
+    rebuild needed)."""
+    from . import handlers, shading
 
     if context is not None and context.scene is not None:
         shading.set_shift_switches(context.scene)
+        handlers.update_world(context.scene)  # the sky's switches
 
 
 def _world_changed(self, context):
