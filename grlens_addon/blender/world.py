@@ -425,7 +425,8 @@ def _socket(sockets, ident):
 
 def _group_ok(group) -> bool:
     return group is not None and all(k in group.nodes for k in (*TABLE_LOOKUPS, "spare", "e1", "xi_lim", "rotate",
-                                                                 "beta_dir", "gamma_minus_1", "gamma_beta", "D", "static direction", "sky doppler dot",
+                                                                 "beta_dir", "gamma_minus_1", "gamma_beta", "D",
+                                                                 "static direction", "sky doppler dot",
                                                                  "gamma", "minus_gamma_beta", "ln_g_gravity",
                                                                  "cos xi", "deflection axis", *LOOKUPS.values()))
 
@@ -758,8 +759,8 @@ SKY_SWITCHES = {"use_gravitational_shift": "sky gravitational shift", "use_doppl
 
 
 def _hook_sky_shift(world, group_node, on: bool) -> None:
-    """With ``on`` (physical time, a colour switch on), every Background node of the user's tree takes its colour through
-    a "grlens Shift by g" node (marked ``grlens_own == "sky shift"``) fed by the sky group's ln g
+    """With ``on`` (physical time, a colour switch on), every Background node of the user's tree takes
+    its colour through a "grlens Shift by g" node (marked ``grlens_own == "sky shift"``) fed by the sky group's ln g
     outputs, its Color input recorded as the lensed world records inputs (so :func:`restore` puts it
     back); without, those nodes are taken out again and the colours relinked. An unlinked colour is
     copied into the shift node (again whenever it changes)."""
