@@ -1,5 +1,5 @@
 """The lensed world of a moving camera (physical time), in the pip bpy of the dev environment:
-``./dev bench moving_sky``.
+``./dev bench physical_time_sky``.
 
 Prints
 * the world update per frame (grlens_addon.blender.world.update, grlens' depsgraph handler

@@ -14,7 +14,7 @@ inwards ("in", radial part reversed).
 * Per-frame cost: pipeline.build_images, best of 9 runs (the three cameras in turn), moving over at
   rest.
 
-Usage: ./dev python benchmarks/bench_moving.py [output.md]   (default docs/moving_camera.md)
+Usage: ./dev python benchmarks/bench_physical_time.py [output.md]   (default docs/physical_time.md)
 """
 import math
 import os
@@ -96,7 +96,7 @@ def main(out_path):
         print(rows[-3:], cost[-1], flush=True)
     text = "\n".join([
         "# A moving camera: accuracy and cost", "",
-        "From `benchmarks/bench_moving.py` (see its docstring): the paper's sphere seen from 20 r_s through a "
+        "From `benchmarks/bench_physical_time.py` (see its docstring): the paper's sphere seen from 20 r_s through a "
         "100 degree view (480x270), the camera at rest or moving at 0.4 c in its local static frame (radial "
         "and tangential parts; `out`: away from the hole, `in`: towards it). Images against the reference ray "
         "tracer for the same camera: pixels covered (reference), coverage mismatch, screen error of the surface "
@@ -124,4 +124,4 @@ def main(out_path):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1] if len(sys.argv) > 1 else os.path.join(HERE, "..", "docs", "moving_camera.md"))
+    main(sys.argv[1] if len(sys.argv) > 1 else os.path.join(HERE, "..", "docs", "physical_time.md"))
