@@ -365,8 +365,9 @@ def _inputs(mesh, geo, settings, lut, light, mats, planes, disc=None):
     settings, LUT parameters, light and material slots. Equal inputs give identical images."""
     arrays = (mesh.positions, mesh.tris, mesh.corner_uv, mesh.material, mesh.corner_normals,
               geo.camera, geo.hole, planes, geo.beta)
-    rest = repr((geo.r_s, geo.aberration, settings, None if disc is None else (tuple(disc.axis), disc.prograde, disc.mode, disc.r_in,
-                                                               disc.t_peak, disc.exposure),
+    disc_key = None if disc is None else (tuple(disc.axis), disc.prograde, disc.mode, disc.r_in, disc.t_peak,
+                                          disc.exposure)
+    rest = repr((geo.r_s, geo.aberration, settings, disc_key,
                  tuple(sorted(lut.parameters.items())), [m.name if m else None for m in mats],
                  None if light is None else (tuple(light.position), light.intensity,
                                              tuple(sorted(light.lut.parameters.items())))))
