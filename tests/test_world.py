@@ -845,9 +845,10 @@ def test_check_frame_of_a_moving_camera_checks_its_aberrated_sky(tmp_path):
 # ---------------------------------------------------------------------------------------------
 # Eevee: one smoke render in a subprocess (bpy 4.2 may crash at exit after a GPU-engine render)
 # ---------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("mode", ["eevee", "eevee_moving"])
+@pytest.mark.parametrize("mode", ["eevee", "eevee_moving", "eevee_shifted"])
 def test_eevee_smoke(tmp_path, mode):
-    """Eevee renders the lensed sky, of a camera at rest and of one moving (aberrated)."""
+    """Eevee renders the lensed sky, of a camera at rest, of one moving (aberrated), and of one moving
+    with the sky's colour shift."""
     out = tmp_path / "eevee.exr"
     p = subprocess.run([sys.executable, __file__, mode, str(out)], capture_output=True, text=True, timeout=600,
                        cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -859,7 +860,7 @@ def test_eevee_smoke(tmp_path, mode):
     assert p99 < 3e-3 and frac > 0.95, line
 
 
-def _eevee_main(out, moving=False):
+def _eevee_main(out, moving=False, shifted=False):
     grlens_addon.register()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
@@ -868,20 +869,28 @@ def _eevee_main(out, moving=False):
     scene.render.engine = "BLENDER_EEVEE" if bpy.app.version >= (5, 0, 0) else "BLENDER_EEVEE_NEXT"
     scene.eevee.taa_render_samples = 1
     scene.view_settings.view_transform = "Standard"
-    beta = _moving(scene, cam) if moving else None
+    beta = _moving(scene, cam, shift_colours=shifted) if moving else None
     img = _render(scene, out)
     d = _pixel_dirs(scene, cam)
     if beta is not None:
         d = _boosted_back(d, beta)
-    exact = escape_directions(d, np.array(cam.matrix_world.translation), hole.location, R_S)
+    pos = np.array(cam.matrix_world.translation)
+    exact = escape_directions(d, pos, hole.location, R_S)
     want = _direction_colours(exact)
+    if shifted:
+        from grlens_addon.core import spectrum
+
+        r = np.linalg.norm(pos - np.array(hole.location)) / R_S
+        g = (d @ beta + 1) / np.sqrt(1 - beta @ beta) / np.sqrt(1 - 1 / r)
+        m = spectrum.shift_matrix(g.ravel()).reshape(g.shape + (3, 3))
+        want = np.maximum(np.einsum("hwij,hwj->hwi", m, want), 0.0)
     err = np.abs(img - want).max(-1)
     dark = np.isnan(exact).any(-1)
     print("GRLENS_EEVEE_ERR", np.percentile(err, 99), np.mean(err < 2e-3), int(dark.sum()),
           float(np.abs(img[dark]).max()) if dark.any() else 0.0, flush=True)
 
 
-if __name__ == "__main__" and len(sys.argv) == 3 and sys.argv[1] in ("eevee", "eevee_moving"):
-    _eevee_main(sys.argv[2], moving=sys.argv[1] == "eevee_moving")
+if __name__ == "__main__" and len(sys.argv) == 3 and sys.argv[1] in ("eevee", "eevee_moving", "eevee_shifted"):
+    _eevee_main(sys.argv[2], moving=sys.argv[1] != "eevee", shifted=sys.argv[1] == "eevee_shifted")
     sys.stdout.flush()
     os._exit(0)
