@@ -33,6 +33,7 @@ PICTURES = {  # scene: extra render.py arguments
     "flyin": ["--frames", "1,120,240"],
     "plunge": ["--frames", "1,160,240"],
     "starfield": [], "starfield_dome": [], "starfield_panorama": [],
+    "orbit": [], "orbit_panorama": [], "orbit_still": [], "orbit_panorama_still": [],
 }
 SEPARATE = {"flyin", "plunge"}  # one picture per frame: <scene>_NNNN.png
 TARGETS = {"starfield": "starfield_normal"}  # picture name when it is not the scene's

@@ -18,6 +18,7 @@ import bpy
 
 from sample_scenes import luminet as _luminet
 from sample_scenes import starfield as _starfield
+from sample_scenes import orbit as _orbit
 
 # --------------------------------------------------------------------------------------------------
 # helpers (plain bpy: materials, cameras, meshes)
@@ -948,6 +949,10 @@ SCENES["luminet_blackbody"] = _luminet.luminet_disc_blackbody
 SCENES["starfield"] = _starfield.starfield
 SCENES["starfield_dome"] = functools.partial(_starfield.starfield, view="dome")
 SCENES["starfield_panorama"] = functools.partial(_starfield.starfield, view="panorama")
+SCENES["orbit"] = _orbit.orbit
+SCENES["orbit_panorama"] = functools.partial(_orbit.orbit, view="panorama")
+SCENES["orbit_still"] = functools.partial(_orbit.orbit, physical=False)
+SCENES["orbit_panorama_still"] = functools.partial(_orbit.orbit, view="panorama", physical=False)
 for _incl in (90, 30, 10):
     SCENES[f"disc_{_incl}"] = functools.partial(accretion_disc, inclination=_incl)
     SCENES[f"disc_{_incl}_external"] = functools.partial(accretion_disc, inclination=_incl, external=True)
@@ -986,6 +991,14 @@ DEFAULTS = {
                            what="the star field through a 180-degree fisheye dome master (fisheye equidistant)"),
     "starfield_panorama": dict(frames=[1], resolution=(1024, 512), samples=16,
                                what="the star field as a 360-degree equirectangular panorama"),
+    "orbit": dict(frames=[1], resolution=(640, 360), samples=16,
+                  what="physical time: the star field's scene from a camera on the circular orbit at 6 r_s (0.316 c)"),
+    "orbit_panorama": dict(frames=[1], resolution=(1024, 512), samples=16,
+                           what="the orbiting camera's 360-degree equirectangular panorama"),
+    "orbit_still": dict(frames=[1], resolution=(640, 360), samples=16,
+                        what="the same frame with speed_of_light 0: a camera at rest at the same place"),
+    "orbit_panorama_still": dict(frames=[1], resolution=(1024, 512), samples=16,
+                                 what="the still's 360-degree equirectangular panorama"),
 }
 for _incl, _letters in ((90, "a, b"), (30, "c, d"), (10, "e, f")):
     _obs, _ext = _letters.split(", ")

@@ -25,7 +25,7 @@ SCENE_NAMES = sorted([
     "sphere", "triangle", "triangle_tess1", "triangle_tess4", "triangle_tess64", "triangle_flat",
     "disc", "disc_external", "disc_90", "disc_30", "disc_10", "disc_90_external", "disc_30_external",
     "disc_10_external", "shell", "room", "luminet", "luminet_blackbody", "flyin", "plunge", "starfield",
-    "starfield_dome", "starfield_panorama"])
+    "starfield_dome", "starfield_panorama", "orbit", "orbit_panorama", "orbit_still", "orbit_panorama_still"])
 
 # how each scene is rendered here: (resolution, frames, samples); Cycles
 TEST_RENDERS = {
@@ -52,6 +52,10 @@ TEST_RENDERS = {
     "starfield": ("96x54", "1", 1),
     "starfield_dome": ("96x96", "1", 1),
     "starfield_panorama": ("192x96", "1", 1),
+    "orbit": ("96x54", "1", 1),
+    "orbit_panorama": ("192x96", "1", 1),
+    "orbit_still": ("96x54", "1", 1),
+    "orbit_panorama_still": ("192x96", "1", 1),
 }
 
 
@@ -592,3 +596,26 @@ def test_plunge_inside_the_photon_sphere(renders):
     ys, xs = np.nonzero(lit[240])
     w = lit[240].shape[1]
     assert xs.min() > 0.1 * w and xs.max() < 0.9 * w  # one disc, away from the frame's sides
+
+
+def test_orbit_camera_moves_and_its_view_is_aberrated(renders):
+    """The orbit scene: the camera on the circular orbit at 6 r_s moves at 1/sqrt(10) = 0.316 c in the
+    static frame (the rebuild's status), to the right of the picture; its view crowds towards the
+    motion: the shadow (the darkest pixels off the top and bottom rows) lies farther right and is no
+    larger (1/gamma across the motion) than from the camera at rest at the same place, in the normal
+    view and in the panorama."""
+    for moving, still in (("orbit", "orbit_still"), ("orbit_panorama", "orbit_panorama_still")):
+        out_m, stdout_m, imgs_m = renders.get(moving)
+        _, stdout_s, imgs_s = renders.get(still)
+        assert "camera at 0.316 c" in stdout_m and "camera at" not in stdout_s
+
+        def shadow(img):
+            peak = img.astype(float).max(axis=2)
+            h, w = peak.shape
+            dark = peak < 6
+            dark[: h // 5] = dark[-h // 5:] = False  # (the sky's dark gaps at the top and bottom)
+            ys, xs = np.nonzero(dark)
+            return xs.mean() / w, dark.sum()
+
+        (xm, nm), (xs_, ns) = shadow(imgs_m[1]), shadow(imgs_s[1])
+        assert xm > xs_ + 0.03 and nm <= ns, (moving, xm, xs_, nm, ns)  # (18 degrees in the panorama)

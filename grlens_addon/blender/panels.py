@@ -66,6 +66,15 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
             row.operator("grlens.demo_scene", icon="SPHERE")
         _notes(col, hole_notes(scene))
         col.prop(g, "r_s")
+        row = col.row(align=True)
+        row.prop(g, "speed_of_light")
+        row.operator("grlens.set_speed_of_light", text="", icon="TIME")
+        if g.speed_of_light > 0:
+            col.label(text=f"r_s/c = {g.r_s / g.speed_of_light:.4g} frames (coordinate time)")
+            col.operator("grlens.camera_geodesic")
+            row = col.row(align=True)
+            for prop in ("use_aberration", "use_doppler_colour", "use_beaming", "use_gravitational_shift"):
+                row.prop(g, prop, toggle=True)
         col.prop(g, "observer")
         note = panorama_note(scene)
         if note:

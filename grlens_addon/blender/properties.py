@@ -40,6 +40,26 @@ def _gr_illumination_changed(self, context):
     _changed(self, context)
 
 
+def _speed_changed(self, context):
+    """Physical time switched on: the "grlens Shifted Colour" node group is created at once (for
+    material set-up before any rebuild), then it rebuilds like any setting."""
+    if self.speed_of_light > 0:
+        from . import shading
+
+        shading.ensure_shift_node_group()
+    _changed(self, context)
+
+
+def _switch_changed(self, context):
+    """A colour switch of physical time: into the shifted-colour node group and the sky at once (no
+    rebuild needed)."""
+    from . import handlers, shading
+
+    if context is not None and context.scene is not None:
+        shading.set_shift_switches(context.scene)
+        handlers.update_world(context.scene)  # the sky's switches
+
+
 def _world_changed(self, context):
     """Lens World switched: lens or restore the world at once (whatever auto update says)."""
     from . import handlers
@@ -65,6 +85,28 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
         name="Schwarzschild Radius", default=1.0, soft_min=1e-6, soft_max=100.0, unit="LENGTH", update=_r_s_changed,
         description="Schwarzschild radius r_s of the black hole, in scene length units (a positive length; "
                     "zero or a negative value is refused with a message, never clamped)")
+    speed_of_light: FloatProperty(
+        name="Speed of Light", default=0.0, soft_min=0.0, soft_max=100.0, precision=4, update=_speed_changed,
+        description="Speed of light c in scene length units per frame. 0: infinite, every frame a still seen by "
+                    "a camera at rest (as without it). Above 0, frames measure Schwarzschild coordinate time (the "
+                    "clock of a distant observer at rest; a fall seen in this time slows near the horizon): the "
+                    "camera's motion, read from its animation, aberrates the images and shifts their light "
+                    "(point attribute grlens_redshift = 1 + z; node group 'grlens Shifted Colour'), and the black "
+                    "hole must stay at rest. A negative value is refused with a message")
+    use_aberration: BoolProperty(
+        name="Aberration", default=True, update=_changed,
+        description="Physical time: the camera's motion aberrates its view (images and sky). Off, for teaching: "
+                    "the directions of a camera at rest, the light still shifted")
+    use_doppler_colour: BoolProperty(
+        name="Doppler Colour", default=True, update=_switch_changed,
+        description="Physical time: the motions' shift changes the hue (node group 'grlens Shifted Colour')")
+    use_beaming: BoolProperty(
+        name="Beaming", default=True, update=_switch_changed,
+        description="Physical time: the motions' shift changes the brightness (node group 'grlens Shifted Colour')")
+    use_gravitational_shift: BoolProperty(
+        name="Gravitational Shift", default=True, update=_switch_changed,
+        description="Physical time: the gravitational shift between the surface and the camera changes hue and "
+                    "brightness (node group 'grlens Shifted Colour')")
     lut_mode: EnumProperty(
         name="Lookup Table", default="EVERY_DISTANCE", update=_changed,
         items=[("EVERY_DISTANCE", "Every Distance",

@@ -7,9 +7,9 @@ the marks and settings are kept in the file meanwhile.
 """
 import bpy
 
-from . import handlers, operators, panels, preferences, properties
+from . import geodesic_camera, handlers, operators, panels, preferences, properties
 
-_CLASSES = properties.CLASSES + preferences.CLASSES + operators.CLASSES + panels.CLASSES
+_CLASSES = properties.CLASSES + preferences.CLASSES + operators.CLASSES + geodesic_camera.CLASSES + panels.CLASSES
 _registered = False
 
 
