@@ -324,8 +324,8 @@ class _Layout:
 
 
 def test_the_panel_draws_physical_time():
-    """The panel shows the speed of light with its helper, and while it is set, r_s/c in frames and the
-    geodesic operator."""
+    """The Physical Time panel shows the speed of light with its helper, and while it is set, r_s/c in
+    frames and the geodesic operator."""
     from grlens_addon.blender import panels
 
     scene, cam, sphere = _demo()
@@ -333,7 +333,7 @@ def test_the_panel_draws_physical_time():
         scene.grlens.speed_of_light = c
         drawn = []
         fake = type("P", (), {"layout": _Layout(drawn)})()
-        panels.VIEW3D_PT_grlens.draw(fake, bpy.context)
+        panels.VIEW3D_PT_grlens_physical_time.draw(fake, bpy.context)
         ops = [a[0] for kind, a, k in drawn if kind == "operator"]
         labels = [k.get("text", a[0] if a else "") for kind, a, k in drawn if kind == "label"]
         assert "grlens.set_speed_of_light" in ops

@@ -5,9 +5,9 @@
 * grlens (open): the black hole and r_s, the observer, the lensed world, the pixel tolerance (render
   and viewport), the Lens switch of the active object, Lens / Unlens Selected, Rebuild, Unlens All,
   the status line (with grlens' time for the frame) and the report;
-* GR Illumination, Frame Check (closed): each its own panel;
+* GR Illumination, Physical Time, Frame Check (closed): each its own panel;
 * Advanced (closed): the method's knobs, the tables (mode, range, size, packing), MaxTessLevel, a, b
-  and the cull ratio.
+  the cull ratio and the triangle limit.
 
 Properties editor > Object > grlens: the object's own settings (Lens, the emitter, the thin disc),
 or which object an image shows. Add > Black Hole is in operators.py (menu_add).
@@ -66,15 +66,6 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
             row.operator("grlens.demo_scene", icon="SPHERE")
         _notes(col, hole_notes(scene))
         col.prop(g, "r_s")
-        row = col.row(align=True)
-        row.prop(g, "speed_of_light")
-        row.operator("grlens.set_speed_of_light", text="", icon="TIME")
-        if g.speed_of_light > 0:
-            col.label(text=f"r_s/c = {g.r_s / g.speed_of_light:.4g} frames (coordinate time)")
-            col.operator("grlens.camera_geodesic")
-            row = col.row(align=True)
-            for prop in ("use_aberration", "use_doppler_colour", "use_beaming", "use_gravitational_shift"):
-                row.prop(g, prop, toggle=True)
         col.prop(g, "observer")
         note = panorama_note(scene)
         if note:
@@ -136,6 +127,29 @@ class VIEW3D_PT_grlens_illumination(_Sub, bpy.types.Panel):
         col.active = g.use_gr_illumination
         col.prop(g, "light")
         col.prop(g, "light_intensity")
+
+
+class VIEW3D_PT_grlens_physical_time(_Sub, bpy.types.Panel):
+    """Physical time: the speed of light (0: every frame a still), the camera's motion and the colours
+    of shifted light, with the switches that take each effect out."""
+
+    bl_label = "Physical Time"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        g = context.scene.grlens
+        col = layout.column()
+        row = col.row(align=True)
+        row.prop(g, "speed_of_light")
+        row.operator("grlens.set_speed_of_light", text="", icon="TIME")
+        if g.speed_of_light > 0:
+            col.label(text=f"r_s/c = {g.r_s / g.speed_of_light:.4g} frames (coordinate time)")
+            col.operator("grlens.camera_geodesic")
+            col = layout.column(heading="Effects", align=True)
+            for prop in ("use_aberration", "use_doppler_colour", "use_beaming", "use_gravitational_shift"):
+                col.prop(g, prop)
 
 
 class VIEW3D_PT_grlens_check(_Sub, bpy.types.Panel):
@@ -228,5 +242,5 @@ def report_lines(g, limit=None) -> list:
     return lines
 
 
-CLASSES = (VIEW3D_PT_grlens, VIEW3D_PT_grlens_illumination, VIEW3D_PT_grlens_check, VIEW3D_PT_grlens_advanced,
-           OBJECT_PT_grlens)
+CLASSES = (VIEW3D_PT_grlens, VIEW3D_PT_grlens_illumination, VIEW3D_PT_grlens_physical_time, VIEW3D_PT_grlens_check,
+           VIEW3D_PT_grlens_advanced, OBJECT_PT_grlens)
