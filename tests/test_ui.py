@@ -91,6 +91,9 @@ def test_essentials_are_open_and_the_knobs_in_the_closed_advanced_panel():
     assert {"grlens.pack_lut", "grlens.unpack_luts"} <= set(adv.operators())
     for sub, props, ops in ((panels.VIEW3D_PT_grlens_advanced, KNOBS, ()),
                             (panels.VIEW3D_PT_grlens_illumination, {"light", "light_intensity"}, ()),
+                            (panels.VIEW3D_PT_grlens_physical_time,
+                             {"speed_of_light", "use_aberration", "use_doppler_colour", "use_beaming",
+                              "use_gravitational_shift"}, ("grlens.set_speed_of_light", "grlens.camera_geodesic")),
                             (panels.VIEW3D_PT_grlens_check, set(), ("grlens.check_frame",))):
         assert sub.bl_parent_id == "VIEW3D_PT_grlens" and "DEFAULT_CLOSED" in sub.bl_options, sub
         got = draw(sub)
@@ -102,7 +105,8 @@ def test_essentials_are_open_and_the_knobs_in_the_closed_advanced_panel():
     assert set(main.props(scene.grlens)) <= ESSENTIALS | {"show_order_1", "show_order_2", "auto_update"}
     # every setting of scene.grlens is drawn somewhere (read-only report strings aside)
     drawn = set()
-    for p in (panels.VIEW3D_PT_grlens, panels.VIEW3D_PT_grlens_advanced, panels.VIEW3D_PT_grlens_illumination):
+    for p in (panels.VIEW3D_PT_grlens, panels.VIEW3D_PT_grlens_advanced, panels.VIEW3D_PT_grlens_illumination,
+              panels.VIEW3D_PT_grlens_physical_time):
         drawn |= set(draw(p).props(scene.grlens))
     drawn |= set(draw(panels.VIEW3D_PT_grlens_illumination, header=True).props())
     settings = {p.identifier for p in scene.grlens.bl_rna.properties if p.identifier not in ("rna_type", "name")}

@@ -66,15 +66,6 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
             row.operator("grlens.demo_scene", icon="SPHERE")
         _notes(col, hole_notes(scene))
         col.prop(g, "r_s")
-        row = col.row(align=True)
-        row.prop(g, "speed_of_light")
-        row.operator("grlens.set_speed_of_light", text="", icon="TIME")
-        if g.speed_of_light > 0:
-            col.label(text=f"r_s/c = {g.r_s / g.speed_of_light:.4g} frames (coordinate time)")
-            col.operator("grlens.camera_geodesic")
-            row = col.row(align=True)
-            for prop in ("use_aberration", "use_doppler_colour", "use_beaming", "use_gravitational_shift"):
-                row.prop(g, prop, toggle=True)
         col.prop(g, "observer")
         note = panorama_note(scene)
         if note:
@@ -136,6 +127,30 @@ class VIEW3D_PT_grlens_illumination(_Sub, bpy.types.Panel):
         col.active = g.use_gr_illumination
         col.prop(g, "light")
         col.prop(g, "light_intensity")
+
+
+class VIEW3D_PT_grlens_physical_time(_Sub, bpy.types.Panel):
+    """Physical time: frames as Schwarzschild coordinate time, a moving camera's aberration and the
+    colours of light (speed_of_light in scene units per frame; 0: every frame a still)."""
+
+    bl_label = "Physical Time"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        g = context.scene.grlens
+        col = layout.column()
+        row = col.row(align=True)
+        row.prop(g, "speed_of_light")
+        row.operator("grlens.set_speed_of_light", text="", icon="TIME")
+        col.operator("grlens.camera_geodesic")
+        sub = col.column()
+        sub.active = g.speed_of_light > 0
+        if g.speed_of_light > 0:
+            sub.label(text=f"r_s/c = {g.r_s / g.speed_of_light:.4g} frames (coordinate time)")
+        for prop in ("use_aberration", "use_doppler_colour", "use_beaming", "use_gravitational_shift"):
+            sub.prop(g, prop)
 
 
 class VIEW3D_PT_grlens_check(_Sub, bpy.types.Panel):
@@ -228,5 +243,5 @@ def report_lines(g, limit=None) -> list:
     return lines
 
 
-CLASSES = (VIEW3D_PT_grlens, VIEW3D_PT_grlens_illumination, VIEW3D_PT_grlens_check, VIEW3D_PT_grlens_advanced,
+CLASSES = (VIEW3D_PT_grlens, VIEW3D_PT_grlens_illumination, VIEW3D_PT_grlens_physical_time, VIEW3D_PT_grlens_check, VIEW3D_PT_grlens_advanced,
            OBJECT_PT_grlens)
