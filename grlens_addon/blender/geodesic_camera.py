@@ -19,8 +19,6 @@ from mathutils import Vector
 from ..core import camera_geodesics
 from . import motion
 
-PHOTON_SPHERE = 1.5
-"""r_s: grlens' images need the camera outside it; a fall is keyed until it gets there."""
 
 
 class GRLENS_OT_camera_geodesic(bpy.types.Operator):
@@ -108,18 +106,21 @@ def key_geodesic(scene, path, release_radius=0.0, axis=(0.0, 0.0, 1.0), look="HO
         release = math.inf if release_radius == 0 else float(release_radius)
         if release < r0 * (1.0 - 1e-9):
             raise ValueError(f"the release radius ({release:.4g} r_s) is inside the camera's distance ({r0:.4g} r_s)")
+        from lutgen.rays import R_OBS_MIN  # the innermost camera grlens images for
+
         p = camera_geodesics.fall_path(t, start, hole, r_s, max(release, r0))
-        outside = np.flatnonzero(p.r > PHOTON_SPHERE)
+        outside = np.flatnonzero(p.r >= R_OBS_MIN)
         n_out = int(outside[-1]) + 1 if outside.size else 0
         note = ("radial fall from rest " + ("at infinity" if math.isinf(release) else f"at {release:.4g} r_s")
-                + f", from {r0:.4g} r_s to {p.r[max(n_out - 1, 0)]:.4g} r_s")
+                + f", from {r0:.4g} r_s to {p.r[max(n_out - 1, 0)]:.6g} r_s")
         if n_out < len(frames):
-            note += f"; it reaches the photon sphere after frame {frames[n_out - 1] if n_out else f0}: keyed up to there"
+            note += (f"; it comes within {R_OBS_MIN} r_s of the hole's centre after frame "
+                     f"{frames[n_out - 1] if n_out else f0}: keyed up to there")
         frames, p = frames[:n_out], camera_geodesics.Path(p.position[:n_out], p.velocity[:n_out], p.r[:n_out])
     else:
         raise ValueError(f"unknown path {path!r} (ORBIT or FALL)")
     if not len(frames):
-        raise ValueError("no frame to key: the camera is at or inside the photon sphere")
+        raise ValueError("no frame to key: the camera is too close to the horizon")
     _key(cam, frames, p, hole, look)
     return len(frames), note
 

@@ -5,9 +5,9 @@
 * grlens (open): the black hole and r_s, the observer, the lensed world, the pixel tolerance (render
   and viewport), the Lens switch of the active object, Lens / Unlens Selected, Rebuild, Unlens All,
   the status line (with grlens' time for the frame) and the report;
-* GR Illumination, Physical Time, Frame Check (closed): each its own panel;
+* GR Illumination, Frame Check (closed): each its own panel;
 * Advanced (closed): the method's knobs, the tables (mode, range, size, packing), MaxTessLevel, a, b
-  the cull ratio and the triangle limit.
+  and the cull ratio.
 
 Properties editor > Object > grlens: the object's own settings (Lens, the emitter, the thin disc),
 or which object an image shows. Add > Black Hole is in operators.py (menu_add).
@@ -130,8 +130,8 @@ class VIEW3D_PT_grlens_illumination(_Sub, bpy.types.Panel):
 
 
 class VIEW3D_PT_grlens_physical_time(_Sub, bpy.types.Panel):
-    """Physical time: the speed of light (0: every frame a still), the camera's motion and the colours
-    of shifted light, with the switches that take each effect out."""
+    """Physical time: frames as Schwarzschild coordinate time, a moving camera's aberration and the
+    colours of light (speed_of_light in scene units per frame; 0: every frame a still)."""
 
     bl_label = "Physical Time"
 
@@ -144,12 +144,13 @@ class VIEW3D_PT_grlens_physical_time(_Sub, bpy.types.Panel):
         row = col.row(align=True)
         row.prop(g, "speed_of_light")
         row.operator("grlens.set_speed_of_light", text="", icon="TIME")
+        col.operator("grlens.camera_geodesic")
+        sub = col.column()
+        sub.active = g.speed_of_light > 0
         if g.speed_of_light > 0:
-            col.label(text=f"r_s/c = {g.r_s / g.speed_of_light:.4g} frames (coordinate time)")
-            col.operator("grlens.camera_geodesic")
-            col = layout.column(heading="Effects", align=True)
-            for prop in ("use_aberration", "use_doppler_colour", "use_beaming", "use_gravitational_shift"):
-                col.prop(g, prop)
+            sub.label(text=f"r_s/c = {g.r_s / g.speed_of_light:.4g} frames (coordinate time)")
+        for prop in ("use_aberration", "use_doppler_colour", "use_beaming", "use_gravitational_shift"):
+            sub.prop(g, prop)
 
 
 class VIEW3D_PT_grlens_check(_Sub, bpy.types.Panel):
@@ -242,5 +243,5 @@ def report_lines(g, limit=None) -> list:
     return lines
 
 
-CLASSES = (VIEW3D_PT_grlens, VIEW3D_PT_grlens_illumination, VIEW3D_PT_grlens_physical_time, VIEW3D_PT_grlens_check,
-           VIEW3D_PT_grlens_advanced, OBJECT_PT_grlens)
+CLASSES = (VIEW3D_PT_grlens, VIEW3D_PT_grlens_illumination, VIEW3D_PT_grlens_physical_time, VIEW3D_PT_grlens_check, VIEW3D_PT_grlens_advanced,
+           OBJECT_PT_grlens)
