@@ -395,7 +395,7 @@ def orbit_summary(step, rows):
     t_ref = sum(r[3] * r[4] for r in rows) / 1000.0
     t_poly = sum(r[4] for r in rows) / 1000.0
     out += ["", f"The whole sequence ({n} frames): the reference took {t_ref:.0f} s, build_images {t_poly:.2f} s, "
-                f"{t_ref / t_poly:.0f} times less (seed 000's table 3 compares image sequences this way)."]
+                f"{t_ref / t_poly:.0f} times less (the paper's table 3 compares image sequences this way)."]
     return out
 
 
@@ -547,7 +547,7 @@ def main(argv=None):
         "reference's own UVs have a screen error below 1e-6 px (tests/test_raytrace.py), so the measure "
         "checks the ray tracer and lutgen.connect against each other as well.",
         "",
-        "Targets of issue 5 (default settings, 640x360): coverage mismatch under 0.5% of the covered pixels, "
+        "Accuracy targets (default settings, 640x360): coverage mismatch under 0.5% of the covered pixels, "
         "UV error p99 below 0.5 px (on screen, see above), polygon method at least 100x faster per frame than "
         "the reference.",
         "",
@@ -587,7 +587,7 @@ def main(argv=None):
     if args.sweep:
         tri_lines, tri_ref = triangle_pareto(w, h, max(1, args.repeat // 2))
         out += ["## Pareto sweep, triangle scene", "",
-                "Seed 000's triangle behind the hole (section 4.1; sample scene `triangle`, in units of r_s: "
+                "The paper's triangle behind the hole (section 4.1; sample scene `triangle`, in units of r_s: "
                 f"camera at {R_OBS:g} r_s, {TRIANGLE_FOV_DEG:g} deg vertical field of view, {w}x{h}) at "
                 f"{len(TRIANGLE_STEPS)} positions of its way from p2 to p1 (fractions "
                 f"{', '.join(f'{t:g}' for t in TRIANGLE_STEPS)}); the same settings as above; mismatch summed "

@@ -260,7 +260,7 @@ def report(rows, img, d):
               "figures at the end of the dolly section). Exact `connect` per point costs about 50-100x the lookups, every frame. A table in "
               "(1/b, 1/r) would serve every radius with one table, but its root find per point costs at "
               "least a dozen lookups per point and iteration counts that depend on the point: several times "
-              "today's mapping, with no error advantage. A table over the observer radius built at once "
+              "the present mapping, with no error advantage. A table over the observer radius built at once "
               "costs minutes and hundreds of MB (its row above). The family builds that 3-D table lazily: only the exact tables "
               "near the radii the camera visits, once each, kept in memory; per frame it costs a few "
               "microseconds plus interpolating the table rows a frame's points touch.",
@@ -286,8 +286,15 @@ def main(argv=None):
     text = report(options(rng), images(), dolly(args.frames, rng))
     print(text)
     if args.write:
+        kept = ""  # the section of benchmarks/bench_moving.py stays
+        if os.path.exists(OUT):
+            with open(OUT) as f:
+                old = f.read()
+            begin, end = "<!-- bench_moving: begin -->", "<!-- bench_moving: end -->"
+            if begin in old and end in old:
+                kept = "\n" + old[old.index(begin):old.index(end) + len(end)] + "\n"
         with open(OUT, "w") as f:
-            f.write(text)
+            f.write(text + kept)
         print(f"wrote {os.path.relpath(OUT)}")
 
 

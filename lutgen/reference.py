@@ -208,9 +208,12 @@ def shoot(r_obs, xi, *, side=+1, phi_end=None, r_end=None, max_lambda=None, r_es
     instead of xi (in [0, pi]): nearly inward-radial rays then keep the full relative precision
     of their small sin xi (xi itself resolves pi - xi only to 4.4e-16 absolute). Returns a
     :class:`Shot` with the final state, the null constraint there (it stays ~1e-13 relative)
-    and the constants of motion.
+    and the constants of motion. Any static observer (r_obs > 1) can shoot, inside the photon sphere
+    too (the equations do not care; :func:`connect_numeric`'s bracketing does).
     """
-    r_obs = _check_r_obs(r_obs)
+    r_obs = float(r_obs)
+    if not (r_obs > 1.0 and math.isfinite(r_obs)):
+        raise ValueError(f"r_obs must be finite and > 1 (outside the horizon), got {r_obs!r}")
     xi = float(xi)
     if not 0.0 <= xi <= math.pi:
         raise ValueError(f"xi must be in [0, pi], got {xi!r}")

@@ -179,12 +179,18 @@ def connect(r_obs, r, phi, order: int = 1) -> Connection:
     """Connecting null geodesic of the given order between a static observer at (r_obs, 0) and the
     points (r, phi), vectorised over ``r`` and ``phi`` (broadcast).
 
-    Parameters: r_obs (scalar, units of r_s, > 1.5), r (units of r_s), phi (radians, [0, pi]),
+    Parameters: r_obs (scalar, units of r_s, >= 1.001; inside the photon sphere, r_obs <= 1.5, the rays
+    come from lutgen.rays.connect_inside), r (units of r_s), phi (radians, [0, pi]),
     order 1 (sweeps phi) or 2 (sweeps 2*pi - phi). Points that no ray reaches (r <= 1, inside the
     horizon), or with NaN/inf/out-of-range input, come back as NaN in every field.
     See the module docstring for conventions; returns a :class:`Connection`.
     """
-    r_obs = check_observer_radius(r_obs)
+    inside = static_observer_radius(r_obs, ">= 1.001 r_s") <= 1.5
+    if inside:
+        from .rays import check_any_observer
+        r_obs = check_any_observer(r_obs)
+    else:
+        r_obs = check_observer_radius(r_obs)
     if order not in (1, 2):
         raise ValueError(f"order must be 1 or 2, got {order!r}")
     r, phi = np.broadcast_arrays(np.asarray(r, dtype=float), np.asarray(phi, dtype=float))
@@ -196,7 +202,11 @@ def connect(r_obs, r, phi, order: int = 1) -> Connection:
         ok = np.isfinite(r) & np.isfinite(phi) & (r > 1.0) & (phi >= 0.0) & (phi <= np.pi)
     idx = np.flatnonzero(ok)
     if idx.size:
-        res = _solve(r_obs, r[idx], phi[idx], order)
+        if inside:
+            from .rays import connect_inside
+            res = connect_inside(r_obs, r[idx], phi[idx], order)
+        else:
+            res = _solve(r_obs, r[idx], phi[idx], order)
         for k in Connection._fields:
             out[k][idx] = res[k]
     return Connection(**{k: v.reshape(shape) for k, v in out.items()})

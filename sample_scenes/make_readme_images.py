@@ -6,7 +6,7 @@ Each scene is rendered by render.py in its own process (default frames, resoluti
 sample_scenes.scenes.DEFAULTS unless listed below); scenes with several frames are put side by side
 (the triangle: p1 = frame 150 on the left, p2 = frame 1 on the right, like the paper's figure 8),
 except the scenes in SEPARATE, whose frames become one picture each, docs/images/<scene>_NNNN.png
-(the fly-in: far, middle, close), and the star field's three views go to docs/images/starfield_normal.png,
+(the fly-in: far, middle, close; the plunge: hovering at 6 r_s, at 1.28 r_s, at 1.05 r_s), and the star field's three views go to docs/images/starfield_normal.png,
 starfield_dome.png and starfield_panorama.png. Prints render.py's per-frame summary for each scene.
 """
 import os
@@ -31,9 +31,11 @@ PICTURES = {  # scene: extra render.py arguments
     "room": [],
     "luminet": [], "luminet_blackbody": [],
     "flyin": ["--frames", "1,120,240"],
+    "plunge": ["--frames", "1,160,240"],
     "starfield": [], "starfield_dome": [], "starfield_panorama": [],
+    "orbit": [], "orbit_panorama": [], "orbit_still": [], "orbit_panorama_still": [],
 }
-SEPARATE = {"flyin"}  # one picture per frame: <scene>_NNNN.png
+SEPARATE = {"flyin", "plunge"}  # one picture per frame: <scene>_NNNN.png
 TARGETS = {"starfield": "starfield_normal"}  # picture name when it is not the scene's
 
 

@@ -9,7 +9,8 @@ renders each frame to <output>/<scene>_NNNN.png and a multilayer OpenEXR <output
 frame (time for the grlens rebuild and for the render), then a summary of the time per frame.
 ``--list`` prints the scenes with their defaults: sphere (seed 000, 4.2), triangle and its variants
 (4.1, figure 8), disc and its views (4.3, figure 10), shell (seed 004), room (seed 003), luminet
-(seed 002), flyin (issue 19: the camera flies in from 80 to 4.5 r_s over a checkered floor), and the
+(seed 002), flyin (issue 19: the camera flies in from 80 to 4.5 r_s over a checkered floor), plunge
+(the camera descends from 6 to 1.05 r_s, inside the photon sphere, over the same floor), and the
 lensed star field (issue 21) in three cameras, one scene each: starfield (normal perspective view,
 640x360), starfield_dome (180-degree fisheye dome master, Cycles fisheye equidistant, 512x512) and
 starfield_panorama (360-degree equirectangular panorama, 1024x512); panoramas render in Cycles only.

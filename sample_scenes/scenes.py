@@ -18,6 +18,7 @@ import bpy
 
 from sample_scenes import luminet as _luminet
 from sample_scenes import starfield as _starfield
+from sample_scenes import orbit as _orbit
 
 # --------------------------------------------------------------------------------------------------
 # helpers (plain bpy: materials, cameras, meshes)
@@ -841,6 +842,90 @@ def flyin(scene):
     return scene
 
 
+PLUNGE_FRAMES = 240
+PLUNGE_HOVER = 48
+"""The plunge's camera hovers at PLUNGE_DISTANCE[0] over frames 1..PLUNGE_HOVER, then descends."""
+PLUNGE_DISTANCE = (6.0, 1.05)  # r_s
+PLUNGE_ELEVATION = 25.0  # degrees above the equatorial plane, fixed (the camera falls radially)
+PLUNGE_AZIMUTH = -100.0  # degrees
+PLUNGE_FOV = (70.0, 100.0)  # degrees, vertical
+PLUNGE_LOOK = (0.0, 0.95)
+"""How far the view has turned from the hole (0) towards straight up (1, radially outwards, through the
+tangent towards the floor at 0.5) at the start and the end of the descent."""
+
+
+def plunge_camera(frame):
+    """(distance in r_s, view turn, vertical field of view in degrees) of the plunge's camera at
+    ``frame``: still until PLUNGE_HOVER, then r - 1 falls geometrically (smoothstep in time) from
+    PLUNGE_DISTANCE[0] - 1 to PLUNGE_DISTANCE[1] - 1, so the approach to the horizon slows as it would
+    for a camera lowered on a rope; the view turns from the hole towards the sky overhead (which
+    shrinks into a disc of radius asin(b_crit sqrt(1 - 1/r) / r): 33 degrees at 1.05 r_s) and widens."""
+    s = min(max((frame - PLUNGE_HOVER) / (PLUNGE_FRAMES - PLUNGE_HOVER), 0.0), 1.0)
+    e = s * s * (3.0 - 2.0 * s)
+    a, b = PLUNGE_DISTANCE
+    d = 1.0 + (a - 1.0) * ((b - 1.0) / (a - 1.0)) ** e
+    turn = PLUNGE_LOOK[0] + (PLUNGE_LOOK[1] - PLUNGE_LOOK[0]) * e
+    return d, turn, PLUNGE_FOV[0] + (PLUNGE_FOV[1] - PLUNGE_FOV[0]) * e
+
+
+def plunge(scene):
+    """A camera that hovers at 6 r_s, then descends to 1.05 r_s, deep inside the photon sphere, over a
+    checkered floor and the paper's orbiting sphere, under the lensed star field. Units: r_s = 2 BU;
+    the hole at the origin, its equatorial plane z = 0.
+
+    * Each frame is a static observer at the camera's radius (the descent is a sequence of hovering
+      cameras; a falling camera's aberration is not applied here).
+    * The orbiting sphere (bpy.ops.grlens.demo_scene, radius 0.5 r_s on the 3 r_s orbit) and the floor
+      of the fly-in (a disc of 300 r_s, 2 r_s below the equatorial plane, checker squares of 2 r_s).
+    * The camera (``plunge_camera``) at elevation 25 degrees, azimuth -100 degrees, hovers at 6 r_s for
+      48 frames, then falls radially to 1.05 r_s by frame 240, its view turning from the hole to the
+      sky overhead. Below 1.5 r_s only rays leaving within the escape cone reach anything outside the
+      photon sphere: the floor, the sphere and the stars crowd into a disc overhead, the shadow fills
+      the rest of the sky, and rays that turn back show the floor again at its edge.
+    * lut_mode ONE_TABLE: the orbit table serves every radius of the descent, so no frame waits for a
+      table (lutgen.rays; lut_r_min 1.02 r_s).
+    * The star field of the ``starfield`` scene as the world, lensed (scene.grlens.lens_world)."""
+    r_s = FLYIN_R_S
+    bpy.ops.grlens.demo_scene(r_s=r_s)
+    g = scene.grlens
+    g.auto_update = False
+    hole, sphere, cam = (bpy.data.objects[n] for n in ("BlackHole", "OrbitingSphere", "Camera"))
+    sphere.data.materials.clear()
+    sphere.data.materials.append(_emission_checker("SphereChecker", (0.9, 0.35, 0.03), (0.03, 0.2, 0.9), 6.0))
+    floor_mat = _emission_checker("FloorChecker", (0.62, 0.6, 0.52), (0.035, 0.04, 0.06), 1.0)
+    floor = _polar_floor(scene, "Floor", r_s, FLOOR_DEPTH, FLOOR_RADIUS, FLOOR_CELL, floor_mat)
+    from mathutils import Vector
+
+    cam.data.sensor_fit = "VERTICAL"
+    cam.data.clip_start, cam.data.clip_end = 0.01, 1.0e4
+    el, az = math.radians(PLUNGE_ELEVATION), math.radians(PLUNGE_AZIMUTH)
+    radial = Vector((math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)))
+    down = Vector((0.0, 0.0, -1.0))
+    down = (down - down.dot(radial) * radial).normalized()  # the tangent towards the floor
+    previous = None
+    for f in range(1, PLUNGE_FRAMES + 1):
+        d, turn, fov = plunge_camera(f)
+        cam.location = radial * (d * r_s)
+        a = math.pi * turn  # the view turns from the hole through the floor's side to straight up
+        view = -radial * math.cos(a) + down * math.sin(a)
+        quat = view.to_track_quat("-Z", "Z")
+        cam.rotation_euler = quat.to_euler("XYZ", previous) if previous is not None else quat.to_euler("XYZ")
+        previous = cam.rotation_euler.copy()
+        cam.data.angle_y = math.radians(fov)
+        cam.keyframe_insert("location", frame=f)
+        cam.keyframe_insert("rotation_euler", frame=f)
+        cam.data.keyframe_insert("lens", frame=f)
+    _linear_keys(cam)
+    _linear_keys(cam.data)
+    scene.frame_start, scene.frame_end = 1, PLUNGE_FRAMES
+    scene.frame_set(1)
+    _lens(scene, hole, r_s, [sphere, floor], lut_mode="ONE_TABLE", lut_r_min=1.02, max_tess_level=64,
+          tess_a=5.0, tess_b=0.75)
+    _starfield._star_world(scene)
+    scene.view_settings.view_transform = "Standard"
+    return scene
+
+
 # --------------------------------------------------------------------------------------------------
 # registry: scene name -> builder, and render defaults
 # --------------------------------------------------------------------------------------------------
@@ -857,12 +942,17 @@ SCENES = {
     "shell": gridded_shell,
     "room": room,
     "flyin": flyin,
+    "plunge": plunge,
 }
 SCENES["luminet"] = _luminet.luminet_disc
 SCENES["luminet_blackbody"] = _luminet.luminet_disc_blackbody
 SCENES["starfield"] = _starfield.starfield
 SCENES["starfield_dome"] = functools.partial(_starfield.starfield, view="dome")
 SCENES["starfield_panorama"] = functools.partial(_starfield.starfield, view="panorama")
+SCENES["orbit"] = _orbit.orbit
+SCENES["orbit_panorama"] = functools.partial(_orbit.orbit, view="panorama")
+SCENES["orbit_still"] = functools.partial(_orbit.orbit, physical=False)
+SCENES["orbit_panorama_still"] = functools.partial(_orbit.orbit, view="panorama", physical=False)
 for _incl in (90, 30, 10):
     SCENES[f"disc_{_incl}"] = functools.partial(accretion_disc, inclination=_incl)
     SCENES[f"disc_{_incl}_external"] = functools.partial(accretion_disc, inclination=_incl, external=True)
@@ -892,12 +982,23 @@ DEFAULTS = {
                  what="seed 003: Cornell-like room, sphere, cube, cylinder, hole of r_s = 0.4 BU in the middle"),
     "flyin": dict(frames=[1, 120, 180, 240], resolution=(480, 270), samples=16,
                   what="issue 19: camera flies in from 80 to 4.5 r_s over a checkered floor, orbiting sphere, 240 frames"),
+    "plunge": dict(frames=[1, 150, 200, 240], resolution=(480, 270), samples=16,
+                   what="camera hovers at 6 r_s, then descends to 1.05 r_s inside the photon sphere: floor, "
+                        "orbiting sphere, lensed star field, 240 frames"),
     "starfield": dict(frames=[1], resolution=(640, 360), samples=16,
                       what="issue 21: lensed star field, Luminet's thin disc, orbiting sphere; normal view from 20 r_s"),
     "starfield_dome": dict(frames=[1], resolution=(512, 512), samples=16,
                            what="the star field through a 180-degree fisheye dome master (fisheye equidistant)"),
     "starfield_panorama": dict(frames=[1], resolution=(1024, 512), samples=16,
                                what="the star field as a 360-degree equirectangular panorama"),
+    "orbit": dict(frames=[1], resolution=(640, 360), samples=16,
+                  what="physical time: the star field's scene from a camera on the circular orbit at 6 r_s (0.316 c)"),
+    "orbit_panorama": dict(frames=[1], resolution=(1024, 512), samples=16,
+                           what="the orbiting camera's 360-degree equirectangular panorama"),
+    "orbit_still": dict(frames=[1], resolution=(640, 360), samples=16,
+                        what="the same frame with speed_of_light 0: a camera at rest at the same place"),
+    "orbit_panorama_still": dict(frames=[1], resolution=(1024, 512), samples=16,
+                                 what="the still's 360-degree equirectangular panorama"),
 }
 for _incl, _letters in ((90, "a, b"), (30, "c, d"), (10, "e, f")):
     _obs, _ext = _letters.split(", ")

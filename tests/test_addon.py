@@ -101,7 +101,8 @@ def test_first_order_image_matches_lutgen():
     assert abs(math.acos(centre_dir @ e1) - float(c.xi)) < math.radians(0.5)
 
 
-@pytest.mark.parametrize("problem", ["no_hole", "no_camera", "camera_inside", "camera_in_horizon", "nan_vertex",
+@pytest.mark.parametrize("problem", ["no_hole", "no_camera", "camera_inside", "camera_in_horizon",
+                                     "camera_in_photon_sphere", "nan_vertex",
                                      "inf_vertex", "empty_mesh", "r_s_tiny", "ngon_and_loose_edge",
                                      "object_inside_horizon", "zero_scale"])
 def test_bad_input_gives_a_message_not_a_crash(problem):
@@ -112,7 +113,9 @@ def test_bad_input_gives_a_message_not_a_crash(problem):
     elif problem == "no_camera":
         scene.camera = None
     elif problem == "camera_inside":
-        scene.camera.location = (2.5, 0, 0)  # 1.25 r_s: inside the photon sphere
+        scene.camera.location = (2.001, 0, 0)  # 1.0005 r_s: closer to the horizon than the tables reach
+    elif problem == "camera_in_photon_sphere":
+        scene.camera.location = (2.5, 0, 0)  # 1.25 r_s: inside the photon sphere, imaged
     elif problem == "camera_in_horizon":
         scene.camera.location = (1.0, 0, 0)  # 0.5 r_s
     elif problem == "nan_vertex":
@@ -142,7 +145,8 @@ def test_bad_input_gives_a_message_not_a_crash(problem):
     before = np.array([v.co[:] for v in sphere.data.vertices])
     if problem in ("no_hole", "no_camera", "camera_inside", "camera_in_horizon"):
         # scripts get the operator's error report as an exception with the message
-        with pytest.raises(RuntimeError, match="grlens: (no black hole|the scene has no camera|the camera is inside)"):
+        with pytest.raises(RuntimeError, match="grlens: (no black hole|the scene has no camera|the camera is inside|"
+                                               "the camera is too close to the horizon)"):
             bpy.ops.grlens.rebuild()
         assert scene.grlens.status.startswith("grlens:")
     else:
@@ -155,6 +159,8 @@ def test_bad_input_gives_a_message_not_a_crash(problem):
         assert len(bpy.data.objects["OrbitingSphere.GR1"].data.polygons) > 0
     if problem == "object_inside_horizon":
         assert all(len(o.data.polygons) == 0 for o in _image_objects().values())
+    if problem == "camera_in_photon_sphere":  # (looking at the hole it sees only the shadow: nothing in view)
+        assert scene.grlens.status.startswith("1 object(s) lensed")
     after = np.array([v.co[:] for v in sphere.data.vertices])
     np.testing.assert_array_equal(before, after)  # the source is never changed
 

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from grlens_addon.core import (axis_patch, budget, culling, frame, illumination, mapping, pipeline, rasterize,
+from grlens_addon.core import (axis_patch, budget, frame, illumination, mapping, observer_view, pipeline, rasterize,
                                raytrace, silhouette, subdivision, visibility)
 from lutgen import build_lut, connect
 from meshes import uv_sphere
@@ -94,7 +94,7 @@ def test_limit_images_are_the_einstein_ring(lut, x):
     order 1 and psi + pi for order 2; and points approaching the axis map onto them."""
     cr = axis_patch.Crossing(tri=0, point=np.array([x, 0.0, 0.0]), along=x)
     psi = np.linspace(0, 2 * np.pi, 12, endpoint=False)
-    u = mapping.any_perpendicular(SCENE.e1)
+    u = observer_view.any_perpendicular(SCENE.e1)
     v = np.cross(SCENE.e1, u)
     for order in axis_patch.ring_orders(cr, (1, 2)):
         im = axis_patch.limit_images(cr, psi, mapping.Mapper(SCENE, lut), order)
@@ -122,7 +122,7 @@ def test_patch_on_a_tilted_plane(lut):
     assert p.complete
     n = p.n_azimuths
     grid = p.source_position[n:]
-    x, y, z = culling.axis_coordinates(grid, CAMERA, HOLE)
+    x, y, z = observer_view.axis_coordinates(grid, CAMERA, HOLE)
     # on the plane through (-4, 0, 0) with normal (cos 0.5, -sin 0.5, 0)
     np.testing.assert_allclose((grid - [-4.0, 0, 0]) @ [math.cos(0.5), -math.sin(0.5), 0.0], 0.0, atol=1e-12)
     delta = np.hypot(x, y).reshape(-1, n)
@@ -139,7 +139,7 @@ def test_patch_on_a_tilted_plane(lut):
     rebuilt = np.einsum("fck,fkx->fcx", p.bary, pts[tris[p.face_src]])
     np.testing.assert_allclose(rebuilt, f, atol=1e-12)
     # replaced: all corners inside the outer circle
-    cd = np.hypot(*culling.axis_coordinates(pts, CAMERA, HOLE)[:2])
+    cd = np.hypot(*observer_view.axis_coordinates(pts, CAMERA, HOLE)[:2])
     assert len(p.replaced) > 0 and np.all(cd[tris[p.replaced]].max(axis=1) <= p.radius)
     rest = np.setdiff1d(np.arange(len(tris)), p.replaced)
     assert np.all(cd[tris[rest]].max(axis=1) > p.radius)
@@ -208,7 +208,7 @@ def test_patch_circles_on_a_steep_plane(lut, monkeypatch, tilt_deg):
 
     def circles(p):
         n = p.n_azimuths
-        d = np.hypot(*culling.axis_coordinates(p.source_position[n:], CAMERA, HOLE)[:2])
+        d = np.hypot(*observer_view.axis_coordinates(p.source_position[n:], CAMERA, HOLE)[:2])
         return d.reshape(-1, n)[:, 0]
 
     (p,) = _patches(pts, tris, lut)
@@ -274,9 +274,9 @@ def test_patch_stops_at_the_mesh(lut, monkeypatch):
     _, y, z = p.source_position.T
     assert np.abs(y).max() <= 0.04 + 1e-12 and np.abs(z).max() <= 0.04 + 1e-12
     n = p.n_azimuths
-    delta = np.hypot(*culling.axis_coordinates(p.source_position[n:], CAMERA, HOLE)[:2])
+    delta = np.hypot(*observer_view.axis_coordinates(p.source_position[n:], CAMERA, HOLE)[:2])
     assert np.unique(np.round(delta, 9)).size > 1 and len(p.source_position) < n * (1 + np.unique(np.round(delta, 9)).size)
-    cd = np.hypot(*culling.axis_coordinates(pts, CAMERA, HOLE)[:2])
+    cd = np.hypot(*observer_view.axis_coordinates(pts, CAMERA, HOLE)[:2])
     assert 0 < len(p.replaced) < len(tris) and np.all(cd[tris[p.replaced]].max(axis=1) <= p.radius)
     assert _patches(*_grid(-4.0, 1.0, 10, hole_radius=0.15), lut) == []
     # crossed, but the triangles next to the crossed one are missing
@@ -290,7 +290,7 @@ def test_patch_stops_at_the_mesh(lut, monkeypatch):
 def _clip_check(p, pts, tris):
     """Faces of a clipped patch: each inside its source triangle (projected along the axis), and the
     patch's own edges used twice, except on its outer circle and the sheet's edge (no cracks)."""
-    x, y, _ = culling.axis_coordinates(pts, CAMERA, HOLE)
+    x, y, _ = observer_view.axis_coordinates(pts, CAMERA, HOLE)
     n = p.n_azimuths
     assert np.all(p.bary.sum(axis=2) == pytest.approx(1.0)) and p.bary.min() > -1e-9
     # the corners' positions are their barycentrics in the face's source triangle
@@ -301,7 +301,7 @@ def _clip_check(p, pts, tris):
     e = e[e[:, 0] >= n]  # the limit vertices are one point with a turn of images: the ring's band
     key, count = np.unique(e, axis=0, return_counts=True)
     assert count.max() == 2
-    px, py, _ = culling.axis_coordinates(p.source_position, CAMERA, HOLE)
+    px, py, _ = observer_view.axis_coordinates(p.source_position, CAMERA, HOLE)
     once = key[count == 1]
     outer = (np.hypot(px, py)[once] >= p.radius * math.cos(math.pi / n) * (1 - 1e-12)).all(axis=1)
     return once[~outer], px, py, x, y
@@ -326,7 +326,7 @@ def test_clipped_patch_covers_the_mesh_up_to_its_edge(lut, monkeypatch):
     on_y = np.isclose(np.abs(py[rim]), 0.04, rtol=0, atol=1e-12).all(axis=1)
     assert (on_x | on_y).all()
     # the area of the square inside the outer circle (chords of it, N per turn), against Monte Carlo
-    area = np.abs(culling.projected_area(px, py, p.tris)).sum() / 2
+    area = np.abs(observer_view.projected_area(px, py, p.tris)).sum() / 2
     rng = np.random.default_rng(1)
     q = rng.uniform(-0.04, 0.04, (400000, 2))
     inside = np.hypot(q[:, 0], q[:, 1]) <= p.radius * math.cos(math.pi / p.n_azimuths)
@@ -350,13 +350,13 @@ def test_clipped_patch_leaves_out_a_hole_in_the_mesh(lut, monkeypatch):
     rim, px, py, x, y = _clip_check(p, pts, tris[~hole])
     on_border = (np.isclose(np.abs(px[rim]), 0.04, rtol=0, atol=1e-12).all(axis=1)
                  | np.isclose(np.abs(py[rim]), 0.04, rtol=0, atol=1e-12).all(axis=1))
-    hxy = np.stack(culling.axis_coordinates(pts[tris[hole]].reshape(-1, 3), CAMERA, HOLE)[:2], -1)
+    hxy = np.stack(observer_view.axis_coordinates(pts[tris[hole]].reshape(-1, 3), CAMERA, HOLE)[:2], -1)
     h_centre = 0.5 * (hxy.min(axis=0) + hxy.max(axis=0))  # the hole's square, half-side 0.005
     hx, hy = px[rim] - h_centre[0], py[rim] - h_centre[1]
     on_hole = ((np.abs(hx) <= 0.005 + 1e-12) & (np.abs(hy) <= 0.005 + 1e-12)
                & np.isclose(np.maximum(np.abs(hx), np.abs(hy)), 0.005, rtol=0, atol=1e-12)).all(axis=1)
     assert (on_border | on_hole).all() and on_hole.sum() >= 4
-    area = np.abs(culling.projected_area(px, py, p.tris)).sum() / 2
+    area = np.abs(observer_view.projected_area(px, py, p.tris)).sum() / 2
     rng = np.random.default_rng(2)
     q = rng.uniform(-0.04, 0.04, (400000, 2))
     inside = np.hypot(q[:, 0], q[:, 1]) <= p.radius * math.cos(math.pi / p.n_azimuths)
@@ -387,7 +387,7 @@ def test_clipped_patch_on_a_sphere_next_to_its_limb(lut, monkeypatch):
         assert len(rim) > 0
         # the fold: edges between triangles wound oppositely in projection
         e = subdivision.mesh_edges(tris)
-        sign = np.sign(culling.projected_area(x, y, tris))
+        sign = np.sign(observer_view.projected_area(x, y, tris))
         pos, neg = (np.bincount(e.of_tri.ravel(), weights=np.repeat(sign == k, 3), minlength=len(e.verts))
                     for k in (1, -1))
         fold = e.verts[(pos > 0) & (neg > 0)]
@@ -406,15 +406,15 @@ def test_open_distance_is_where_a_patch_stops_drawing(lut, monkeypatch):
     monkeypatch.setattr(budget, "CLIP_TO_TRIANGLES", False)
     pts, tris = _grid(-4.0, 1.0, 10)
     (p,) = _patches(pts, tris, lut)
-    x, y, _ = culling.axis_coordinates(pts, CAMERA, HOLE)
+    x, y, _ = observer_view.axis_coordinates(pts, CAMERA, HOLE)
     got = axis_patch.open_distance(p, tris, x, y)
-    reach_in = culling.axis_distance(x, y, tris) < p.radius
+    reach_in = observer_view.axis_distance(x, y, tris) < p.radius
     assert p.complete and reach_in.any() and (~reach_in).any()
     np.testing.assert_array_equal(got[reach_in], p.radius)
     assert np.isinf(got[~reach_in]).all()
     pts, tris = _grid(-4.0, 0.04, 2)
     (p,) = _patches(pts, tris, lut)
-    x, y, _ = culling.axis_coordinates(pts, CAMERA, HOLE)
+    x, y, _ = observer_view.axis_coordinates(pts, CAMERA, HOLE)
     got = axis_patch.open_distance(p, tris, x, y)
     first_gap = p.ring_radii[np.flatnonzero(~p.cell.all(axis=1))[0]]
     gap_near = np.hypot(x, y)[tris].max(axis=1) > first_gap  # reaching beyond the largest full circle
@@ -476,7 +476,7 @@ def test_back_faces_of_a_closed_sphere(lut):
     assert len(patches) == 2
     far, near = patches
     assert set(far.images) <= {1} and not far.facing[2].any() and len(far.replaced)
-    face_delta = np.hypot(*culling.axis_coordinates(far.source_position, CAMERA, HOLE)[:2])[far.tris].max(axis=1)
+    face_delta = np.hypot(*observer_view.axis_coordinates(far.source_position, CAMERA, HOLE)[:2])[far.tris].max(axis=1)
     assert far.facing[1].sum() <= 0.25 * len(far.tris) and np.all(face_delta[far.facing[1]] > 0.5 * far.radius)
     assert set(near.images) == {1, 2} and near.facing[1].all() and near.facing[2].mean() > 0.5
     both = _patches(pts, tris, lut, closed=False)
@@ -533,12 +533,12 @@ def test_patch_hidden_but_at_its_rim_gets_no_grid(lut, monkeypatch):
     pts, tris = _sphere([3.0 * math.cos(a), 3.0 * math.sin(a), 0.01])
     far, near = sorted(_patches(pts, tris, lut, closed=True), key=lambda p: p.crossing.along)
     assert len(far.tris) == 0 and far.images == {} and len(near.tris) > 0
-    x, y, _ = culling.axis_coordinates(pts, CAMERA, HOLE)
+    x, y, _ = observer_view.axis_coordinates(pts, CAMERA, HOLE)
     sheet = axis_patch._sheet(far.crossing, far.radius, tris, subdivision.mesh_edges(tris).of_tri,
                               len(subdivision.mesh_edges(tris).verts), x, y)
     kept = np.setdiff1d(sheet, far.replaced)
     assert 0 < len(far.replaced) < len(sheet) and len(kept) > 0
-    assert np.all(culling.axis_distance(x, y, tris[kept]) >= budget.HIDDEN_CORE * far.radius)
+    assert np.all(observer_view.axis_distance(x, y, tris[kept]) >= budget.HIDDEN_CORE * far.radius)
     monkeypatch.setattr(budget, "HIDDEN_CORE", np.inf)
     far_grid, _ = sorted(_patches(pts, tris, lut, closed=True), key=lambda p: p.crossing.along)
     assert len(far_grid.tris) > 0 and 0 < far_grid.facing[1].sum() < 0.2 * len(far_grid.tris)

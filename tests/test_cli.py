@@ -31,8 +31,14 @@ def test_connect_inside_horizon_is_null():
 
 
 def test_bad_observer_is_a_clear_error():
-    p = run("connect", "--r-obs", "1.2", "--r", "3", "--phi", "10", check=False)
-    assert p.returncode == 2 and "photon sphere" in p.stderr
+    p = run("connect", "--r-obs", "1.0005", "--r", "3", "--phi", "10", check=False)
+    assert p.returncode == 2 and "1.001" in p.stderr
+
+
+def test_connect_inside_the_photon_sphere():
+    out = json.loads(run("connect", "--r-obs", "1.2", "--r", "3", "--phi", "10").stdout)
+    c = connect(1.2, 3.0, math.radians(10.0), 1)
+    assert out["xi_deg"] == pytest.approx(math.degrees(float(c.xi)), rel=1e-12) and out["xi_deg"] < 90.0
 
 
 def test_build_plot_info(tmp_path):

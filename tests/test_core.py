@@ -5,7 +5,7 @@ Units: world positions in Blender units (BU); r_s in BU; the LUT in r_s and r_s/
 import numpy as np
 import pytest
 
-from grlens_addon.core import culling, illumination, mapping, subdivision
+from grlens_addon.core import culling, illumination, mapping, observer_view, subdivision
 from lutgen import build_lut, connect
 from meshes import uv_sphere
 
@@ -206,9 +206,10 @@ def test_within_axis_distance_agrees_with_axis_distance():
     tris = np.vstack([[0, 1, 2], [3, 4, 5], rng.integers(0, 3000, (4000, 3))])
     for limit in (0.1, 0.3, 1.0):
         with np.errstate(invalid="ignore"):
-            expect = culling.axis_distance(x, y, tris) <= limit
-        np.testing.assert_array_equal(culling.within_axis_distance(x, y, tris, limit), expect)
-    assert culling.within_axis_distance(x, y, tris[:1], 0.3)[0] and not culling.within_axis_distance(x, y, tris[:1], 0.1)[0]
+            expect = observer_view.axis_distance(x, y, tris) <= limit
+        np.testing.assert_array_equal(observer_view.within_axis_distance(x, y, tris, limit), expect)
+    assert observer_view.within_axis_distance(x, y, tris[:1], 0.3)[0]
+    assert not observer_view.within_axis_distance(x, y, tris[:1], 0.1)[0]
 
 
 def test_subdivision_levels_and_rho():
@@ -234,7 +235,7 @@ def test_subdivision_levels_and_rho():
 def test_culling_reasons():
     cam = np.zeros(3)
     src = np.array([[10.0, -1, 0], [10, 1, 0], [10, 0, 1], [10, 0, 1], [10, 0, 1], [-10, 0, 0]])
-    dirs = culling.unit_directions(src, cam)
+    dirs = observer_view.unit_directions(src, cam)
     dirs_img = dirs.copy()
     dirs_img[4] = [0.0, 0.0, 1.0]  # this vertex's image jumped far away (axis straddling)
     valid = np.ones(6, bool)
@@ -373,29 +374,29 @@ def test_axis_geometry_straddling_and_span():
                     [5.0, -1, -1], [5, 1, -1], [5, 0, 1],  # in front of the hole, around the axis
                     [-5.0, 1, 0], [-5, 2, 0], [-5, 0, 1]])  # beside the axis: covers 90 degrees
     tris = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8]])
-    s1, span = culling.axis_geometry(pts, tris, cam, hole, 1)
-    s2, _ = culling.axis_geometry(pts, tris, cam, hole, 2)
+    s1, span = observer_view.axis_geometry(pts, tris, cam, hole, 1)
+    s2, _ = observer_view.axis_geometry(pts, tris, cam, hole, 2)
     assert list(s1) == [True, False, False] and list(s2) == [True, True, False]
     np.testing.assert_allclose(span, [np.pi, np.pi, np.pi / 2])
 
 
 def test_side_azimuths_are_the_angles_between_the_corners_about_the_axis():
-    """culling.side_azimuths (from each corner point's azimuth, once): the unsigned angle about the
+    """observer_view.side_azimuths (from each corner point's azimuth, once): the unsigned angle about the
     axis between consecutive corners, as atan2(|a x b|, a . b) of the projected corners gives it, also
     across the -pi / pi cut; NaN for a corner without coordinates."""
     rng = np.random.default_rng(5)
     x, y = rng.normal(size=(2, 200))
     tris = rng.integers(0, 200, (500, 3))
-    got = culling.side_azimuths(x, y, tris)
+    got = observer_view.side_azimuths(x, y, tris)
     px, py = x[tris], y[tris]
     qx, qy = px[:, [1, 2, 0]], py[:, [1, 2, 0]]
     np.testing.assert_allclose(got, np.abs(np.arctan2(px * qy - py * qx, px * qx + py * qy)), atol=1e-12)
-    across = culling.side_azimuths(np.array([-1.0, -1.0, 1.0]), np.array([0.1, -0.1, 0.0]), np.array([[0, 1, 2]]))
+    across = observer_view.side_azimuths(np.array([-1.0, -1.0, 1.0]), np.array([0.1, -0.1, 0.0]), np.array([[0, 1, 2]]))
     np.testing.assert_allclose(across[0, 0], 2 * np.arctan(0.1), rtol=1e-12)
     x[3] = np.nan
-    assert np.isnan(culling.side_azimuths(x, y, np.array([[3, 4, 5]]))[0, [0, 2]]).all()
+    assert np.isnan(observer_view.side_azimuths(x, y, np.array([[3, 4, 5]]))[0, [0, 2]]).all()
     x[3] = y[3] = 0.0  # a corner on the axis
-    np.testing.assert_array_equal(culling.side_azimuths(x, y, np.array([[3, 4, 5]]))[0, [0, 2]], 0.0)
+    np.testing.assert_array_equal(observer_view.side_azimuths(x, y, np.array([[3, 4, 5]]))[0, [0, 2]], 0.0)
 
 
 def test_fine_mesh_behind_the_hole_keeps_its_ring(lut):
@@ -452,7 +453,7 @@ def test_pipeline_thin_disc_emitter(lut):
 
 
 def test_near_axis_is_a_superset_of_the_crossed_triangles():
-    """culling.near_axis never misses a triangle (or a sub-triangle of one) that the axis crosses, and
+    """observer_view.near_axis never misses a triangle (or a sub-triangle of one) that the axis crosses, and
     excludes triangles away from the axis; non-finite corners count as candidates."""
     rng = np.random.default_rng(5)
     cam, hole = CAMERA, np.array([0.3, -0.2, 0.1])
@@ -462,19 +463,19 @@ def test_near_axis_is_a_superset_of_the_crossed_triangles():
     pts = (centres[:, None, :] + rng.normal(scale=0.3, size=(4000, 3, 3))).reshape(-1, 3)
     pts[:30] = hole + axis * rng.uniform(-20, 20, 30)[:, None]  # corners exactly on the axis
     tris = np.arange(len(pts)).reshape(-1, 3)
-    cand = culling.near_axis(pts, tris, cam, hole)
+    cand = observer_view.near_axis(pts, tris, cam, hole)
     for order in (1, 2):
-        crossed, _ = culling.axis_geometry(pts, tris, cam, hole, order)
+        crossed, _ = observer_view.axis_geometry(pts, tris, cam, hole, order)
         assert crossed.sum() > 100 and not np.any(crossed & ~cand)
     assert 0.2 < cand.mean() < 0.9  # it does exclude the ones beside the axis
     # sub-triangles of an unsplit-then-split mesh
     E = subdivision.mesh_edges(tris)
     S = subdivision.subdivide(pts, tris, E, rng.integers(1, 9, len(E.verts)))
-    sub_crossed, _ = culling.axis_geometry(S.positions, S.tris, cam, hole, 2)
+    sub_crossed, _ = observer_view.axis_geometry(S.positions, S.tris, cam, hole, 2)
     assert sub_crossed.any() and not np.any(sub_crossed & ~cand[S.source_tri])
     bad = pts.copy()
     bad[0] = np.nan
-    assert culling.near_axis(bad, tris, cam, hole)[0]
+    assert observer_view.near_axis(bad, tris, cam, hole)[0]
 
 
 def test_cull_with_precomputed_values_is_the_same(lut):
@@ -490,10 +491,10 @@ def test_cull_with_precomputed_values_is_the_same(lut):
         args = (tris, img.direction, img.valid, pts, CAMERA, 4.0, planes, img.position, HOLE, order, pix, 0.25)
         keep, rep = culling.cull(*args)
         fast_keep, fast_rep = culling.cull(
-            *args, source_circumference=culling.circumference(culling.unit_directions(pts, CAMERA), tris),
-            image_circumference=culling.circumference(img.direction, tris),
+            *args, source_circumference=observer_view.circumference(observer_view.unit_directions(pts, CAMERA), tris),
+            image_circumference=observer_view.circumference(img.direction, tris),
             image_outside_bits=culling.outside_bits(img.position, planes),
-            axis_candidates=culling.near_axis(pts, tris, CAMERA, HOLE))
+            axis_candidates=observer_view.near_axis(pts, tris, CAMERA, HOLE))
         assert rep.einstein_ring > 0 and rep.outside_frustum > 0 and rep.kept > 0
         assert np.array_equal(keep, fast_keep) and rep == fast_rep
 

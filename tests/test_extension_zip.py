@@ -73,6 +73,9 @@ else:
     res["enable"] = sorted(bpy.ops.preferences.addon_enable(module=mod))
 res["after_enable"] = state()
 res["has_register"] = callable(getattr(sys.modules.get(mod), "register", None))
+prefs = bpy.context.preferences.addons[mod].preferences if mod in bpy.context.preferences.addons else None
+res["cache_pref"] = prefs is not None and "lut_cache_dir" in prefs.bl_rna.properties
+res["add_menu"] = any(getattr(f, "__name__", "") == "menu_add" for f in bpy.types.VIEW3D_MT_add._dyn_ui_initialize())
 
 import lutgen, numpy
 res["lutgen_file"] = where(lutgen)
@@ -115,6 +118,8 @@ def _check_common(res):
     site = res["site"] + os.sep
     assert res["after_enable"] == {"enabled": True, "scene_prop": True}, res
     assert res["has_register"], res
+    assert res["cache_pref"], res  # Edit > Preferences > Add-ons > grlens: the tables' cache folder
+    assert res["add_menu"], res    # Add > Black Hole
     assert res["lutgen_file"].startswith(site), res["lutgen_file"]
     assert all(math.isfinite(v) for v in res["connect"]), res["connect"]
     assert 0 < res["connect"][0] < math.pi and res["connect"][1] > 0, res["connect"]

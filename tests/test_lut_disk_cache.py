@@ -78,3 +78,23 @@ def test_no_cache_when_unset_and_an_unwritable_cache_is_skipped(tmp_path, monkey
     blocker.write_text("not a directory")
     monkeypatch.setenv(lutcache.CACHE_ENV, str(blocker / "luts"))
     assert lutcache._wide_builder(9.0, 1.5, ROWS, N_PHI).data.shape[2] == sum(ROWS)
+
+
+def test_the_orbit_table_is_cached_too(cache, monkeypatch):
+    """The one orbit table (lutgen.rays, the same for every scene) is written once and read back exactly
+    by a later process instead of being built."""
+    from lutgen import rays
+
+    monkeypatch.setattr(rays, "_TABLES", {})
+    built = lutcache.orbit_table()
+    assert len(list(cache.glob("grlens-*.npz"))) == 1
+    monkeypatch.setattr(rays, "_TABLES", {})  # a new process
+
+    def refuse(*_a, **_k):
+        raise AssertionError("built although cached")
+
+    monkeypatch.setattr(rays, "build_kind", refuse)
+    again = lutcache.orbit_table()
+    assert again is not built
+    for k in ("T", "P", "I"):
+        assert np.array_equal(again.kinds[k].u, built.kinds[k].u) and np.array_equal(again.kinds[k].j, built.kinds[k].j)

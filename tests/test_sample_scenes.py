@@ -24,8 +24,8 @@ STATS = os.path.join(HERE, "scripts", "scene_stats.py")
 SCENE_NAMES = sorted([
     "sphere", "triangle", "triangle_tess1", "triangle_tess4", "triangle_tess64", "triangle_flat",
     "disc", "disc_external", "disc_90", "disc_30", "disc_10", "disc_90_external", "disc_30_external",
-    "disc_10_external", "shell", "room", "luminet", "luminet_blackbody", "flyin", "starfield", "starfield_dome",
-    "starfield_panorama"])
+    "disc_10_external", "shell", "room", "luminet", "luminet_blackbody", "flyin", "plunge", "starfield",
+    "starfield_dome", "starfield_panorama", "orbit", "orbit_panorama", "orbit_still", "orbit_panorama_still"])
 
 # how each scene is rendered here: (resolution, frames, samples); Cycles
 TEST_RENDERS = {
@@ -48,9 +48,14 @@ TEST_RENDERS = {
     "luminet": ("96x54", "1", 2),
     "luminet_blackbody": ("96x54", "1", 2),
     "flyin": ("160x90", "120", 2),
+    "plunge": ("160x90", "160,240", 2),
     "starfield": ("96x54", "1", 1),
     "starfield_dome": ("96x96", "1", 1),
     "starfield_panorama": ("192x96", "1", 1),
+    "orbit": ("96x54", "1", 1),
+    "orbit_panorama": ("192x96", "1", 1),
+    "orbit_still": ("96x54", "1", 1),
+    "orbit_panorama_still": ("192x96", "1", 1),
 }
 
 
@@ -575,3 +580,42 @@ def test_starfield_renders_black_shadow_and_round_dome(renders):
     assert (dome[(r < 45) & (r > 18)] > 40).sum() > 10  # stars and the disc inside it
     pano = renders.get("starfield_panorama")[2][1].astype(float).max(axis=2)
     assert (pano[:, :24] > 15).sum() > 3 and (pano[:, -24:] > 15).sum() > 3
+
+
+def test_plunge_inside_the_photon_sphere(renders):
+    """The camera descends from 6 to 1.05 r_s: at 1.28 r_s (frame 160) the floor fills the lower part of
+    the view (seen along rays that turn back or cross the photon sphere); at 1.05 r_s (frame 240) the
+    outside world crowds into a bright disc overhead and the shadow fills the rest: most of the frame is
+    black, the lit part one blob within the escape cone (33 degrees in radius)."""
+    out_dir, stdout, imgs = renders.get("plunge")
+    assert "2 object(s) lensed, r_obs = 1.283 r_s" in stdout and "2 object(s) lensed, r_obs = 1.05 r_s" in stdout
+    lit = {f: img.max(axis=2) > 60 for f, img in imgs.items()}
+    h = lit[160].shape[0]
+    assert lit[160][h // 2:].mean() > 0.4 and lit[160][: h // 4].mean() < 0.05  # floor below, black above
+    assert 0.02 < lit[240].mean() < 0.45
+    ys, xs = np.nonzero(lit[240])
+    w = lit[240].shape[1]
+    assert xs.min() > 0.1 * w and xs.max() < 0.9 * w  # one disc, away from the frame's sides
+
+
+def test_orbit_camera_moves_and_its_view_is_aberrated(renders):
+    """The orbit scene: the camera on the circular orbit at 6 r_s moves at 1/sqrt(10) = 0.316 c in the
+    static frame (the rebuild's status), to the right of the picture; its view crowds towards the
+    motion: the shadow (the darkest pixels off the top and bottom rows) lies farther right and is no
+    larger (1/gamma across the motion) than from the camera at rest at the same place, in the normal
+    view and in the panorama."""
+    for moving, still in (("orbit", "orbit_still"), ("orbit_panorama", "orbit_panorama_still")):
+        out_m, stdout_m, imgs_m = renders.get(moving)
+        _, stdout_s, imgs_s = renders.get(still)
+        assert "camera at 0.316 c" in stdout_m and "camera at" not in stdout_s
+
+        def shadow(img):
+            peak = img.astype(float).max(axis=2)
+            h, w = peak.shape
+            dark = peak < 6
+            dark[: h // 5] = dark[-h // 5:] = False  # (the sky's dark gaps at the top and bottom)
+            ys, xs = np.nonzero(dark)
+            return xs.mean() / w, dark.sum()
+
+        (xm, nm), (xs_, ns) = shadow(imgs_m[1]), shadow(imgs_s[1])
+        assert xm > xs_ + 0.03 and nm <= ns, (moving, xm, xs_, nm, ns)  # (18 degrees in the panorama)

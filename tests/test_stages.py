@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from grlens_addon.core import assemble, axis_patch, budget, culling, frame, interior, mapping, pipeline, subdivision
+from grlens_addon.core import assemble, axis_patch, budget, culling, frame, interior, mapping, observer_view, pipeline, subdivision
 from lutgen import LUTFamily, connect
 from meshes import grid
 
@@ -201,15 +201,15 @@ def test_kept_ring_pieces_are_within_the_ring_sagitta(table, name):
             continue
         fr, sub, img = s["frame"], s["pieces"].sub, s["pieces"].images
         t = sub.tris[s["keep"]]
-        x, y, z = culling.axis_coordinates(sub.positions, SCENE.camera, HOLE)
-        src_c = culling.circumference(culling.unit_directions(sub.positions, SCENE.camera), t)
-        img_c = culling.circumference(img.direction, t)
+        x, y, z = observer_view.axis_coordinates(sub.positions, SCENE.camera, HOLE)
+        src_c = observer_view.circumference(observer_view.unit_directions(sub.positions, SCENE.camera), t)
+        img_c = observer_view.circumference(img.direction, t)
         ring = img_c > fr.settings.cull_ratio * src_c
         if not ring.any():
             continue
-        _, span = culling.axis_geometry(sub.positions, t[ring], SCENE.camera, HOLE, order, axis_xyz=(x, y, z))
-        r_px = culling.hole_angle(img.direction, SCENE.camera, HOLE)[t[ring]].max(axis=1) / fr.budget.pixel_angle
-        assert np.all(culling.ring_sagitta(r_px, span) <= fr.budget.tolerance_px * (1 + 1e-12))
+        _, span = observer_view.axis_geometry(sub.positions, t[ring], SCENE.camera, HOLE, order, axis_xyz=(x, y, z))
+        r_px = observer_view.hole_angle(img.direction, SCENE.camera, HOLE)[t[ring]].max(axis=1) / fr.budget.pixel_angle
+        assert np.all(observer_view.ring_sagitta(r_px, span) <= fr.budget.tolerance_px * (1 + 1e-12))
 
 
 @pytest.mark.parametrize("angle", [180, 0, 4])
@@ -229,14 +229,14 @@ def test_patches_cross_the_ring(table, angle):
             look = axis_patch._limit_look(p.crossing, fr.map, (order,))[order]
             lim = p.images[order]
             n = p.n_azimuths
-            theta = culling.hole_angle(lim.direction[:n], SCENE.camera, HOLE)
-            exact = float(culling.hole_angle(axis_patch.limit_images(p.crossing, np.zeros(1), fr.map, order,
+            theta = observer_view.hole_angle(lim.direction[:n], SCENE.camera, HOLE)
+            exact = float(observer_view.hole_angle(axis_patch.limit_images(p.crossing, np.zeros(1), fr.map, order,
                                                                      look).direction, SCENE.camera, HOLE)[0])
             sag = abs(axis_patch.chord_sag(look.xi[0], 2 * np.pi / n)) / fr.budget.pixel_angle
             assert sag <= fr.budget.patch_edge_px * (1 + 1e-9)
             mids = lim.direction[:n] + np.roll(lim.direction[:n], -1, axis=0)
             mids /= np.linalg.norm(mids, axis=1)[:, None]
-            mid_theta = culling.hole_angle(mids, SCENE.camera, HOLE)
+            mid_theta = observer_view.hole_angle(mids, SCENE.camera, HOLE)
             outside = np.sign(theta - exact)
             inside = np.sign(mid_theta - exact)
             assert np.all(outside == outside[0]) and np.all(inside == -outside[0])

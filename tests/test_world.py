@@ -656,11 +656,201 @@ def test_cycles_procedural_checker_world(tmp_path):
 
 
 # ---------------------------------------------------------------------------------------------
+# a moving camera (physical time): its sky aberrated by its own velocity
+# ---------------------------------------------------------------------------------------------
+def _moving(scene, cam, velocity=(-3.0, 4.0, 1.0), c=10.0, shift_colours=False):
+    """Key the camera moving linearly (BU per frame) through its position at frame 2, set the speed
+    of light (BU per frame) and the colour switches (off: the sky's directions alone); returns beta in
+    the local static frame at frame 2 (units of c)."""
+    from grlens_addon.core import observer_view
+
+    pos = np.array(cam.location)
+    v = np.array(velocity)
+    cam.animation_data_clear()
+    for f in (1, 3):
+        cam.location = tuple(pos + (f - 2) * v)
+        cam.keyframe_insert("location", frame=f)
+    from grlens_addon.blender import motion
+
+    for fc in motion._fcurves(cam):
+        for kp in fc.keyframe_points:
+            kp.interpolation = "LINEAR"
+    scene.grlens.speed_of_light = c
+    g = scene.grlens
+    g.use_doppler_colour = g.use_beaming = g.use_gravitational_shift = shift_colours
+    scene.frame_set(2)
+    return observer_view.static_frame_beta(pos, v, np.zeros(3), R_S, c)[0]
+
+
+def _boosted_back(d, beta):
+    """The static frame's directions of the light a camera moving with ``beta`` sees from ``d``
+    (H, W, 3): the photons' 4-momenta (1, -d) boosted back with the Lorentz matrix."""
+    b2 = beta @ beta
+    g = 1 / np.sqrt(1 - b2)
+    L = np.eye(4)
+    L[0, 0] = g
+    L[0, 1:] = L[1:, 0] = g * beta  # the boost by -beta
+    L[1:, 1:] += (g - 1) * np.outer(beta, beta) / b2
+    p = np.concatenate([np.ones(d.shape[:-1] + (1,)), -d], -1) @ L.T
+    return -p[..., 1:] / np.linalg.norm(p[..., 1:], axis=-1, keepdims=True)
+
+
+@pytest.mark.parametrize("panorama", [False, True])
+def test_cycles_render_of_a_moving_cameras_sky_matches_the_exact_aberrated_escape_directions(tmp_path, panorama):
+    """With speed_of_light > 0 the camera's keyed motion aberrates its sky: each pixel shows the escape
+    direction of its ray taken back to the static frame (a Lorentz matrix here), per pixel, in a
+    perspective view and a full equirectangular panorama; the world status names the speed."""
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene(size=(48, 24) if panorama else (48, 32))
+    if panorama:
+        cam.data.type = "PANO"
+        cam.data.panorama_type = "EQUIRECTANGULAR"
+    beta = _moving(scene, cam)
+    assert 0.3 < np.linalg.norm(beta) < 0.9
+    assert f"camera at {np.linalg.norm(beta):.3g} c" in scene.grlens.world_status, scene.grlens.world_status
+    img = _render(scene, tmp_path / "moving.exr")
+    pos = np.array(cam.matrix_world.translation)
+    dirs = _equirect_dirs if panorama else _pixel_dirs
+
+    def want(du, dv):
+        d = _boosted_back(dirs(scene, cam, du, dv), beta)
+        return _direction_colours(escape_directions(d, pos, hole.location, R_S))
+
+    assert _check_per_pixel(img, want) > 0.9
+    static = _direction_colours(escape_directions(dirs(scene, cam), pos, hole.location, R_S))
+    assert np.abs(img - static).max() > 0.1  # (the aberration shows)
+
+
+def test_a_camera_at_rest_keeps_the_aberration_out_of_the_sky_shader():
+    """The inverse aberration is linked into the group only while the camera moves (a camera at rest
+    pays nothing for it); switching back relinks D itself."""
+    from grlens_addon.blender import world
+
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene()
+    world.update(scene)
+    grp = world._group_node(scene.world.node_tree).node_tree
+
+    def source():
+        return {s.links[0].from_node.name for s in world._direction_inputs(grp)}
+
+    assert source() == {"D"}
+    _moving(scene, cam)
+    world.update(scene)
+    assert source() == {"static direction"}
+    assert grp.nodes["gamma_beta"].outputs[0].default_value > 0.3
+    scene.grlens.use_aberration = False  # for teaching: the sky of a camera at rest
+    world.update(scene)
+    assert source() == {"D"} and "aberration off" in scene.grlens.world_status
+    scene.grlens.use_aberration = True
+    scene.grlens.speed_of_light = 0.0
+    world.update(scene)
+    assert source() == {"D"} and grp.nodes["gamma_beta"].outputs[0].default_value == 0.0
+
+
+@pytest.mark.parametrize("velocity", [(-3.0, 4.0, 1.0), (0.0, 0.0, 0.0)])
+def test_cycles_render_of_the_skys_colours_shifted_for_the_moving_camera(tmp_path, velocity):
+    """With physical time and the colour switches on, the sky's light (emitted at rest at infinity)
+    reaches the camera with g = gamma (1 + beta . D_static) / sqrt(1 - r_s/r): each pixel shows the
+    colour of its escape direction shifted by that g (core.spectrum), per pixel; a camera at rest
+    sees the whole sky blue-shifted by 1 / sqrt(1 - r_s/r)."""
+    from grlens_addon.core import spectrum
+
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene(size=(40, 24))
+    beta = _moving(scene, cam, velocity=velocity, shift_colours=True)
+    img = _render(scene, tmp_path / "shifted.exr")
+    pos = np.array(cam.matrix_world.translation)
+    r = np.linalg.norm(pos - np.array(hole.location)) / R_S
+
+    def want(du, dv):
+        d = _pixel_dirs(scene, cam, du, dv)
+        ds = _boosted_back(d, beta) if np.any(beta) else d
+        colour = _direction_colours(escape_directions(ds, pos, hole.location, R_S))
+        gamma = 1 / np.sqrt(1 - beta @ beta)
+        g = gamma * (1 + ds @ beta) / np.sqrt(1 - 1 / r)
+        m = spectrum.shift_matrix(g.ravel()).reshape(g.shape + (3, 3))
+        return np.maximum(np.einsum("hwij,hwj->hwi", m, colour), 0.0)
+
+    assert _check_per_pixel(img, want, tol=2e-2) > 0.9
+    if not np.any(beta):
+        assert 1.02 < 1 / np.sqrt(1 - 1 / r) < 1.03  # (20 r_s)
+
+
+def test_the_skys_colour_shift_is_hooked_restorably():
+    """The sky's colour shift hooks every Background colour through a grlens node: switching the speed
+    of light off takes it out again, lens_world off gives back the user's tree exactly, and a
+    Background with an unlinked colour keeps its own colour in the shift node."""
+    from grlens_addon.blender import world
+
+    scene = bpy.context.scene
+    w = _direction_world(scene)
+    plain_bg = w.node_tree.nodes.new("ShaderNodeBackground")  # a second, unlinked one
+    plain_bg.inputs["Color"].default_value = (0.2, 0.3, 0.4, 1.0)
+    _, cam, hole = _scene()
+    scene.grlens.lens_world = False
+    before = _snapshot(w.node_tree)
+    scene.grlens.lens_world = True
+    lensed = _snapshot(w.node_tree)
+    _moving(scene, cam, shift_colours=True)
+    world.update(scene)
+    shifts = [n for n in w.node_tree.nodes if n.get("grlens_own") == "sky shift"]
+    assert len(shifts) == 2
+    for bg in (w.node_tree.nodes["Background"], plain_bg):
+        assert bg.inputs["Color"].links[0].from_node.get("grlens_own") == "sky shift"
+    plain_shift = plain_bg.inputs["Color"].links[0].from_node
+    assert tuple(plain_shift.inputs["Color"].default_value) == pytest.approx((0.2, 0.3, 0.4, 1.0))
+    scene.grlens.speed_of_light = 0.0
+    world.update(scene)
+    assert not [n for n in w.node_tree.nodes if n.get("grlens_own") == "sky shift"]
+    assert _snapshot(w.node_tree) == lensed
+    scene.grlens.speed_of_light = 10.0
+    world.update(scene)
+    scene.grlens.lens_world = False
+    assert _snapshot(w.node_tree) == before
+
+
+def test_check_frame_of_a_moving_camera_checks_its_aberrated_sky(tmp_path):
+    """bpy.ops.grlens.check_frame with a moving camera: the reference traces the camera's own pixel
+    rays and the sky model takes them back to the static frame as the node group does: they agree."""
+    scene = bpy.context.scene
+    _direction_world(scene)
+    _, cam, hole = _scene(size=(64, 40))
+    sphere = bpy.data.objects.new("Ball", bpy.data.meshes.new("Ball"))
+    import bmesh
+
+    bm = bmesh.new()
+    bmesh.ops.create_uvsphere(bm, u_segments=16, v_segments=8, radius=2.0)
+    bm.to_mesh(sphere.data)
+    bm.free()
+    sphere.location = (-12.0, 6.0, 1.0)
+    scene.collection.objects.link(sphere)
+    sphere.grlens.enabled = True
+    _moving(scene, cam, velocity=(-2.0, 3.0, 0.5))
+    assert bpy.ops.grlens.check_frame(percentage=100, filepath="") == {"FINISHED"}
+    summary = scene.grlens.check_summary
+    assert "sky" in summary, summary
+    from grlens_addon.blender import check
+    from grlens_addon.blender.rebuild import scene_geometry
+
+    result, _ = check.check_scene(scene, bpy.context.evaluated_depsgraph_get(), 100, "")
+    sky = result.metrics["sky"]
+    assert sky["compared"] > 1000 and sky["sky_angle_px"]["p99"] < 0.05 and sky["shadow_mismatch"] <= 3, sky
+    assert np.linalg.norm(scene_geometry(scene, bpy.context.evaluated_depsgraph_get())[0].beta) > 0.1
+
+
+# ---------------------------------------------------------------------------------------------
 # Eevee: one smoke render in a subprocess (bpy 4.2 may crash at exit after a GPU-engine render)
 # ---------------------------------------------------------------------------------------------
-def test_eevee_smoke(tmp_path):
+@pytest.mark.parametrize("mode", ["eevee", "eevee_moving", "eevee_shifted"])
+def test_eevee_smoke(tmp_path, mode):
+    """Eevee renders the lensed sky, of a camera at rest, of one moving (aberrated), and of one moving
+    with the sky's colour shift."""
     out = tmp_path / "eevee.exr"
-    p = subprocess.run([sys.executable, __file__, "eevee", str(out)], capture_output=True, text=True, timeout=600,
+    p = subprocess.run([sys.executable, __file__, mode, str(out)], capture_output=True, text=True, timeout=600,
                        cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     assert "GRLENS_EEVEE_ERR" in p.stdout, p.stdout[-3000:] + p.stderr[-3000:]
     line = next(ln for ln in p.stdout.splitlines() if ln.startswith("GRLENS_EEVEE_ERR"))
@@ -670,7 +860,7 @@ def test_eevee_smoke(tmp_path):
     assert p99 < 3e-3 and frac > 0.95, line
 
 
-def _eevee_main(out):
+def _eevee_main(out, moving=False, shifted=False):
     grlens_addon.register()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
@@ -679,17 +869,28 @@ def _eevee_main(out):
     scene.render.engine = "BLENDER_EEVEE" if bpy.app.version >= (5, 0, 0) else "BLENDER_EEVEE_NEXT"
     scene.eevee.taa_render_samples = 1
     scene.view_settings.view_transform = "Standard"
+    beta = _moving(scene, cam, shift_colours=shifted) if moving else None
     img = _render(scene, out)
     d = _pixel_dirs(scene, cam)
-    exact = escape_directions(d, cam.location, hole.location, R_S)
+    if beta is not None:
+        d = _boosted_back(d, beta)
+    pos = np.array(cam.matrix_world.translation)
+    exact = escape_directions(d, pos, hole.location, R_S)
     want = _direction_colours(exact)
+    if shifted:
+        from grlens_addon.core import spectrum
+
+        r = np.linalg.norm(pos - np.array(hole.location)) / R_S
+        g = (d @ beta + 1) / np.sqrt(1 - beta @ beta) / np.sqrt(1 - 1 / r)
+        m = spectrum.shift_matrix(g.ravel()).reshape(g.shape + (3, 3))
+        want = np.maximum(np.einsum("hwij,hwj->hwi", m, want), 0.0)
     err = np.abs(img - want).max(-1)
     dark = np.isnan(exact).any(-1)
     print("GRLENS_EEVEE_ERR", np.percentile(err, 99), np.mean(err < 2e-3), int(dark.sum()),
           float(np.abs(img[dark]).max()) if dark.any() else 0.0, flush=True)
 
 
-if __name__ == "__main__" and len(sys.argv) == 3 and sys.argv[1] == "eevee":
-    _eevee_main(sys.argv[2])
+if __name__ == "__main__" and len(sys.argv) == 3 and sys.argv[1] in ("eevee", "eevee_moving", "eevee_shifted"):
+    _eevee_main(sys.argv[2], moving=sys.argv[1] != "eevee", shifted=sys.argv[1] == "eevee_shifted")
     sys.stdout.flush()
     os._exit(0)

@@ -113,7 +113,7 @@ def check_scene(scene, depsgraph=None, percentage: int = 50, filepath: str = "")
         raise rebuild.RebuildError("no marked object has faces")
     sky = None
     if world.wants_lensing(scene) and world.is_lensed(scene.world) and world.lensing_camera(scene) == cam.original:
-        sky = frame_check.lensed_world_sky(geo.hole, geo.r_s)
+        sky = frame_check.lensed_world_sky(geo.hole, geo.r_s, geo.beta)
     result = frame_check.check_frame(meshes, geo, lut, settings, camera, names=names, sky=sky)
     path = ""
     if filepath:

@@ -101,6 +101,10 @@ def request_rebuild(scene):
 @persistent
 def on_frame_change(scene, depsgraph=None):
     try:
+        if scene is not None and hasattr(scene, "grlens"):
+            from . import hole
+
+            hole.sync(scene)  # (an animated r_s: the horizon and photon sphere shown follow it)
         if scene.grlens.auto_update:
             _run(scene, depsgraph)  # rebuild_scene updates the world too
         else:
@@ -178,6 +182,11 @@ def on_depsgraph_update(scene, depsgraph):
     if _busy or _rendering or depsgraph.mode == "RENDER":
         return
     ups = list(depsgraph.updates)
+    hole_obj = scene.grlens.black_hole
+    if hole_obj is not None and any(_original(u.id) == hole_obj for u in ups):
+        from . import hole
+
+        hole.sync(scene)  # (the hole scaled: its horizon is still shown at r_s)
     if scene.grlens.auto_update and any(_relevant(scene, u) for u in ups):
         _run(scene, depsgraph)
     elif scene.grlens.lens_world and any(_world_relevant(scene, u) for u in ups):

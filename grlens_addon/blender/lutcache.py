@@ -1,6 +1,12 @@
 """Lookup tables: built on demand, cached by their parameters, optionally packed into the .blend.
 
-Units: all radii in r_s. Two kinds, chosen by ``scene.grlens.lut_mode``:
+Units: all radii in r_s. Three kinds, chosen by ``scene.grlens.lut_mode``:
+
+* ``ONE_TABLE``: the one orbit table of :mod:`lutgen.rays` serves every camera and light radius from
+  1.001 r_s (inside the photon sphere too) to 1e7 r_s: a moving camera costs no table build on any
+  frame, the first pass as the second (each point's ray is solved from the table, so a frame costs
+  more than with the family's tables: docs/tables.md). Observers closer than FAMILY_MIN get it in
+  every mode.
 
 * ``EVERY_DISTANCE`` (default): :class:`lutgen.LUTFamily` tables, which reach from ``lut_r_min`` to
   infinity and serve any camera (or light) radius by interpolating exact tables built at fixed radii
@@ -14,7 +20,8 @@ two render-farm processes get identical geometry; packing (``bpy.ops.grlens.pack
 the build time when the file is opened elsewhere. Packed tables live, exactly (float64), as hidden
 custom-property arrays on the Text data-block "grlens LUTs" (fake user), one per table.
 
-A disk cache, when the environment variable ``GRLENS_LUT_CACHE`` names a directory: every table
+A disk cache, when the add-on preference "Table Cache Folder" or else the environment variable
+``GRLENS_LUT_CACHE`` names a directory (preferences.lut_cache_folder): every table
 built is also written there (``grlens-<sha1 of its name>.npz``, float64, exact; about 7 MB per
 family table) and read back by later processes, so a farm machine or a shared directory builds each
 table once, whatever the .blend holds. A file that cannot be read, is damaged, or holds another
@@ -31,6 +38,7 @@ import bpy
 import numpy as np
 
 from ..core.mapping import round_radius
+from . import preferences
 
 STORE = "grlens LUTs"
 _CACHE = OrderedDict()
@@ -42,12 +50,19 @@ FAMILY_TABLES = 24
 by a factor of 20 (e.g. a fly-in from 60 to 4 r_s) to be scrubbed back and forth without rebuilding."""
 
 
-CACHE_ENV = "GRLENS_LUT_CACHE"
-"""Environment variable naming the directory of the disk cache (unset or empty: no disk cache)."""
+FAMILY_MIN = 1.6
+"""Observers (camera or light) closer than this (r_s) get the orbit table's rays in every mode: the
+family's and fixed-range tables stop at the photon sphere (1.5 r_s), and the family interpolates only
+from about 1.6 r_s (its exact tables at 1 + exp(k/8) r_s from 1.51 r_s, four around each radius)."""
+
+
+CACHE_ENV = preferences.CACHE_ENV
+"""Environment variable naming the directory of the disk cache (unset or empty: no disk cache), used
+when the add-on preference "Table Cache Folder" is empty (preferences.lut_cache_folder)."""
 
 
 def _disk_path(name):
-    folder = os.environ.get(CACHE_ENV, "")
+    folder = preferences.lut_cache_folder()
     if not folder:
         return None
     return os.path.join(folder, "grlens-" + hashlib.sha1(name.encode()).hexdigest() + ".npz")
@@ -191,10 +206,45 @@ def family(r_min):
     return fam
 
 
+def orbit_map(r_obs, r_min):
+    """The connecting rays of an observer at r_obs (r_s) read from the one orbit table of the process
+    (:class:`lutgen.rays.RayMap`; the table is built on first use, about a second, or read from the
+    disk cache); cached by radius like the other tables."""
+    from lutgen import rays
+
+    r, r_min = round_radius(r_obs), round_radius(r_min)  # (r_min may exceed r: targets below are not imaged)
+    return _cached(("orbits", r, r_min), lambda: rays.RayMap(r, r_min=r_min, table=orbit_table()))
+
+
+def orbit_table():
+    """The process's orbit table (lutgen.rays): from the disk cache when ``GRLENS_LUT_CACHE`` is set and
+    holds it, else built (and written there)."""
+    from lutgen import rays
+
+    key = (rays.DEFAULT_STEP, rays.DEFAULT_COLUMNS)
+    if key in rays._TABLES:
+        return rays._TABLES[key]
+    name = "_orbits " + " ".join(repr(v) for v in key) + f" v{rays.TABLE_VERSION}"
+    probe = rays.OrbitTable.shapes()
+    got = _disk_load(name, probe)
+    if got is not None:
+        table = rays.OrbitTable.from_arrays(got)
+    else:
+        table = rays.OrbitTable()
+        _disk_save(name, table.arrays())
+    rays._TABLES[key] = table
+    return table
+
+
 def get_table(g, r_obs):
     """The table for an observer (the camera, or the light of GR illumination) at r_obs (r_s) under the
-    scene settings ``g`` (scene.grlens): a family's table (``lut_mode`` EVERY_DISTANCE) or a
-    fixed-range LUT. Raises ValueError for bad settings or radii."""
+    scene settings ``g`` (scene.grlens): the orbit table's rays (``lut_mode`` ONE_TABLE, and for any
+    observer inside the photon sphere or next to it, below FAMILY_MIN r_s, whatever the mode), a
+    family's table (EVERY_DISTANCE) or a fixed-range LUT. Which one depends on the radius and the
+    settings only, so every process computes the same geometry. Raises ValueError for bad settings or
+    radii."""
+    if g.lut_mode == "ONE_TABLE" or round_radius(r_obs) < FAMILY_MIN:
+        return orbit_map(r_obs, g.lut_r_min)
     if g.lut_mode == "FIXED_RANGE":
         return get_lut(r_obs, g.lut_r_min, g.lut_r_max, g.lut_n_r, g.lut_n_phi)
     r = round_radius(r_obs)
@@ -211,6 +261,9 @@ def pack(lut) -> str:
     store = bpy.data.texts.get(STORE) or bpy.data.texts.new(STORE)
     store.use_fake_user = True
     p = lut.parameters
+    if p.get("kind") == "orbits":
+        return ("nothing: the orbit table serves every radius and is the same in every process (built once "
+                "per process, or read from the disk cache)")
     if p.get("kind") != "wide":
         key = _key(*(p[k] for k in ("r_obs", "r_min", "r_max", "n_r", "n_phi")))
         store[_prop_name(key)] = lut.data.ravel()
@@ -239,6 +292,7 @@ def unpack_all() -> int:
 
 
 def clear():
-    """Forget the memory caches (packed tables stay in the file)."""
+    """Forget the memory caches (packed tables stay in the file; the orbit table, the same for every
+    scene, stays built)."""
     _CACHE.clear()
     _FAMILIES.clear()

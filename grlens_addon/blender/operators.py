@@ -1,6 +1,7 @@
 """Operators (public scripting contract): ``bpy.ops.grlens.rebuild()``, ``bpy.ops.grlens.clear()``,
 ``bpy.ops.grlens.demo_scene()``, ``bpy.ops.grlens.pack_lut()``, ``bpy.ops.grlens.unpack_luts()``,
-``bpy.ops.grlens.check_frame()``."""
+``bpy.ops.grlens.check_frame()``, ``bpy.ops.grlens.add_black_hole()`` (Add > Black Hole),
+``bpy.ops.grlens.lens_selected()`` and ``bpy.ops.grlens.unlens_selected()``."""
 import math
 
 import bpy
@@ -27,24 +28,169 @@ class GRLENS_OT_rebuild(bpy.types.Operator):
 
 
 class GRLENS_OT_clear(bpy.types.Operator):
-    """Remove all image objects made by grlens and show the source objects to the camera again"""
+    """Switch Lens off on every object of the scene, remove every image object grlens made and show the
+    source objects to the camera again (the black hole and all settings are kept)"""
 
     bl_idname = "grlens.clear"
-    bl_label = "Remove Lensed Images"
+    bl_label = "Unlens All"
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
         from .rebuild import is_image_object, remove_image_object, _set_source_visibility
 
+        removed = unmarked = 0
         for obj in list(bpy.data.objects):
             if is_image_object(obj):
                 remove_image_object(obj)
+                removed += 1
         for obj in context.scene.objects:
             if not is_image_object(obj):
                 if obj.grlens.enabled:
                     obj.grlens.enabled = False
+                    unmarked += 1
                 _set_source_visibility(obj, False)
+        self.report({"INFO"}, f"unlensed {_plural(unmarked, 'object')}, removed {_plural(removed, 'image object')}")
         return {"FINISHED"}
+
+
+def _plural(n, word):
+    return f"{n} {word}" + ("" if n == 1 else "s")
+
+
+def _set_lens(scene, objs, on: bool) -> int:
+    """Switch Lens (``obj.grlens.enabled``) to ``on`` for ``objs``, then rebuild once (if auto update is
+    on) instead of once per object. Returns how many objects changed."""
+    g = scene.grlens
+    auto, g.auto_update = g.auto_update, False
+    n = 0
+    try:
+        for obj in objs:
+            if obj.grlens.enabled != on:
+                obj.grlens.enabled = on
+                n += 1
+    finally:
+        g.auto_update = auto
+    if n:
+        from . import handlers
+
+        handlers.request_rebuild(scene)
+    return n
+
+
+def lensable(obj, scene) -> bool:
+    """Whether Lens Selected marks ``obj``: grlens can image it (any kind with geometry, or an empty
+    instancing a collection), it is not an image grlens made, and it is not the black hole (or the
+    photon sphere of Add > Black Hole)."""
+    from .gather import can_lens
+    from .hole import is_hole_marker
+
+    return (can_lens(obj) and obj.grlens.order == 0 and obj != scene.grlens.black_hole
+            and not is_hole_marker(obj))
+
+
+class GRLENS_OT_lens_selected(bpy.types.Operator):
+    """Lens every selected object that grlens can image (meshes, curves, text, surfaces, metaballs,
+    Geometry Nodes output, collection instances); cameras, lights, the black hole and grlens' own
+    images are left alone"""
+
+    bl_idname = "grlens.lens_selected"
+    bl_label = "Lens Selected"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        scene = context.scene
+        sel = list(context.selected_objects)
+        objs = [o for o in sel if lensable(o, scene)]
+        if not objs:
+            self.report({"WARNING"}, "no selected object that grlens can image")
+            return {"CANCELLED"}
+        n = _set_lens(scene, objs, True)
+        rest = len(sel) - len(objs)
+        self.report({"INFO"}, f"lensed {_plural(n, 'object')}" + (f" ({rest} left alone: not imageable)" if rest
+                                                                  else ""))
+        return {"FINISHED"}
+
+
+class GRLENS_OT_unlens_selected(bpy.types.Operator):
+    """Switch Lens off on every selected object: their images are removed and they render again"""
+
+    bl_idname = "grlens.unlens_selected"
+    bl_label = "Unlens Selected"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        objs = [o for o in context.selected_objects if o.grlens.enabled]
+        if not objs:
+            self.report({"WARNING"}, "no selected object is lensed")
+            return {"CANCELLED"}
+        n = _set_lens(context.scene, objs, False)
+        self.report({"INFO"}, f"unlensed {_plural(n, 'object')}")
+        return {"FINISHED"}
+
+
+class GRLENS_OT_add_black_hole(bpy.types.Operator):
+    """Add a black hole at the 3D cursor: an empty showing its event horizon (r_s) and photon sphere
+    (1.5 r_s) at true size, which never renders, and make it the scene's black hole (a former one is
+    kept, no longer used)"""
+
+    bl_idname = "grlens.add_black_hole"
+    bl_label = "Black Hole"
+    bl_options = {"REGISTER", "UNDO"}
+
+    lens_selected: bpy.props.BoolProperty(
+        name="Lens Selected Objects", default=False,
+        description="Also lens the objects selected before the hole is added (those grlens can image)")
+    location: bpy.props.FloatVectorProperty(
+        name="Location", subtype="TRANSLATION", size=3,
+        description="Where the hole's centre goes (default: the 3D cursor)")
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None and context.mode == "OBJECT"
+
+    def execute(self, context):
+        from . import hole
+
+        scene = context.scene
+        g = scene.grlens
+        chosen = [o for o in context.selected_objects if lensable(o, scene)] if self.lens_selected else []
+        collection = context.collection or scene.collection
+        if collection.library is not None or collection.override_library is not None:
+            collection = scene.collection
+        auto, g.auto_update = g.auto_update, False  # (one rebuild at the end, not one per change)
+        try:
+            if not self.properties.is_property_set("location"):
+                self.location = scene.cursor.location  # (then shown, and kept, in the redo panel)
+            new, former = hole.add(scene, collection, tuple(self.location))
+            lensed = 0
+            for obj in chosen:
+                if not obj.grlens.enabled:
+                    obj.grlens.enabled = True
+                    lensed += 1
+        finally:
+            g.auto_update = auto
+        for o in context.selected_objects:
+            o.select_set(False)
+        if new.name in context.view_layer.objects:
+            new.select_set(True)
+            context.view_layer.objects.active = new
+        if former is not None:
+            self.report({"WARNING"}, hole.replaced_note(former))
+        msg = f"added '{new.name}' as the black hole (r_s = {g.r_s:g})"
+        if self.lens_selected:
+            msg += f", lensed {_plural(lensed, 'object')}"
+        self.report({"INFO"}, msg)
+        from . import handlers
+
+        handlers.request_rebuild(scene)  # (the images and the sky of the new hole)
+        return {"FINISHED"}
+
+
+def menu_add(self, context):
+    """Add > Black Hole in the 3D viewport's Add menu."""
+    self.layout.separator()
+    self.layout.operator_context = "INVOKE_REGION_WIN"
+    self.layout.operator(GRLENS_OT_add_black_hole.bl_idname, text="Black Hole", icon="SHADING_SOLID")
 
 
 class GRLENS_OT_demo_scene(bpy.types.Operator):
@@ -60,10 +206,12 @@ class GRLENS_OT_demo_scene(bpy.types.Operator):
     def execute(self, context):
         scene = context.scene
         r_s = self.r_s
-        hole = bpy.data.objects.new("BlackHole", None)
-        hole.empty_display_type = "SPHERE"
-        hole.empty_display_size = r_s
-        scene.collection.objects.link(hole)
+        from . import hole as hole_marker
+
+        g = scene.grlens
+        g.auto_update = False
+        g.r_s = r_s
+        hole, _ = hole_marker.add(scene, scene.collection, name="BlackHole")  # (replaces a former hole)
         mesh = bpy.data.meshes.new("OrbitingSphere")
         sphere = bpy.data.objects.new("OrbitingSphere", mesh)
         scene.collection.objects.link(sphere)
@@ -96,10 +244,6 @@ class GRLENS_OT_demo_scene(bpy.types.Operator):
         cam.rotation_euler = (math.radians(90.0), 0.0, math.radians(90.0))
         scene.collection.objects.link(cam)
         scene.camera = cam
-        g = scene.grlens
-        g.auto_update = False
-        g.black_hole = hole
-        g.r_s = r_s
         g.max_tess_level, g.tess_a, g.tess_b = 64, 5.0, 0.75
         sphere.grlens.enabled = True
         g.auto_update = True
@@ -200,4 +344,4 @@ class GRLENS_OT_check_frame(bpy.types.Operator):
 
 
 CLASSES = (GRLENS_OT_rebuild, GRLENS_OT_clear, GRLENS_OT_demo_scene, GRLENS_OT_pack_lut, GRLENS_OT_unpack_luts,
-           GRLENS_OT_check_frame)
+           GRLENS_OT_check_frame, GRLENS_OT_lens_selected, GRLENS_OT_unlens_selected, GRLENS_OT_add_black_hole)

@@ -13,6 +13,23 @@ def _changed(self, context):
     handlers.request_rebuild(context.scene if context else None)
 
 
+def _r_s_changed(self, context):
+    """r_s set: the hole of Add > Black Hole shows the new horizon and photon sphere, then rebuild."""
+    from . import hole
+
+    hole.sync(self.id_data)  # (the scene whose r_s this is)
+    _changed(self, context)
+
+
+def _hole_changed(self, context):
+    """Black Hole chosen: a hole of Add > Black Hole shows the scene's r_s (it may have been made for
+    another), then rebuild (a mesh as the hole gets its note in the panel and the report)."""
+    from . import hole
+
+    hole.sync(self.id_data)
+    _changed(self, context)
+
+
 def _gr_illumination_changed(self, context):
     """Switching GR illumination on creates its node group at once (for material set-up before any
     rebuild), then rebuilds like any setting."""
@@ -21,6 +38,26 @@ def _gr_illumination_changed(self, context):
 
         shading.ensure_node_group()
     _changed(self, context)
+
+
+def _speed_changed(self, context):
+    """Physical time switched on: the "grlens Shifted Colour" node group is created at once (for
+    material set-up before any rebuild), then it rebuilds like any setting."""
+    if self.speed_of_light > 0:
+        from . import shading
+
+        shading.ensure_shift_node_group()
+    _changed(self, context)
+
+
+def _switch_changed(self, context):
+    """A colour switch of physical time: into the shifted-colour node group and the sky at once (no
+    rebuild needed)."""
+    from . import handlers, shading
+
+    if context is not None and context.scene is not None:
+        shading.set_shift_switches(context.scene)
+        handlers.update_world(context.scene)  # the sky's switches
 
 
 def _world_changed(self, context):
@@ -38,21 +75,47 @@ def _is_camera(self, obj) -> bool:
 
 class GRLENS_SceneSettings(bpy.types.PropertyGroup):
     black_hole: PointerProperty(
-        name="Black Hole", type=bpy.types.Object, update=_changed,
+        name="Black Hole", type=bpy.types.Object, update=_hole_changed,
         description="Object whose location is the centre of the black hole (usually an empty)")
     observer: PointerProperty(
         name="Observer", type=bpy.types.Object, update=_changed, poll=_is_camera,
         description="Camera whose view is lensed (the static observer); empty: the scene's active camera. "
                     "Render through another camera to see the image meshes from outside")
     r_s: FloatProperty(
-        name="Schwarzschild Radius", default=1.0, soft_min=1e-6, soft_max=100.0, unit="LENGTH", update=_changed,
+        name="Schwarzschild Radius", default=1.0, soft_min=1e-6, soft_max=100.0, unit="LENGTH", update=_r_s_changed,
         description="Schwarzschild radius r_s of the black hole, in scene length units (a positive length; "
                     "zero or a negative value is refused with a message, never clamped)")
+    speed_of_light: FloatProperty(
+        name="Speed of Light", default=0.0, soft_min=0.0, soft_max=100.0, precision=4, update=_speed_changed,
+        description="Speed of light c in scene length units per frame. 0: infinite, every frame a still seen by "
+                    "a camera at rest (as without it). Above 0, frames measure Schwarzschild coordinate time (the "
+                    "clock of a distant observer at rest; a fall seen in this time slows near the horizon): the "
+                    "camera's motion, read from its animation, aberrates the images and shifts their light "
+                    "(point attribute grlens_redshift = 1 + z; node group 'grlens Shifted Colour'), and the black "
+                    "hole must stay at rest. A negative value is refused with a message")
+    use_aberration: BoolProperty(
+        name="Aberration", default=True, update=_changed,
+        description="Physical time: the camera's motion aberrates its view (images and sky). Off, for teaching: "
+                    "the directions of a camera at rest, the light still shifted")
+    use_doppler_colour: BoolProperty(
+        name="Doppler Colour", default=True, update=_switch_changed,
+        description="Physical time: the motions' shift changes the hue (node group 'grlens Shifted Colour')")
+    use_beaming: BoolProperty(
+        name="Beaming", default=True, update=_switch_changed,
+        description="Physical time: the motions' shift changes the brightness (node group 'grlens Shifted Colour')")
+    use_gravitational_shift: BoolProperty(
+        name="Gravitational Shift", default=True, update=_switch_changed,
+        description="Physical time: the gravitational shift between the surface and the camera changes hue and "
+                    "brightness (node group 'grlens Shifted Colour')")
     lut_mode: EnumProperty(
         name="Lookup Table", default="EVERY_DISTANCE", update=_changed,
         items=[("EVERY_DISTANCE", "Every Distance",
                 "Tables from LUT r min out to infinity for any camera distance: a camera or light that moves "
                 "needs no new table per frame (exact tables at fixed distances, interpolated)"),
+               ("ONE_TABLE", "One Table",
+                "One table of light orbits for every camera distance (inside the photon sphere too): a camera "
+                "that moves never waits for a table; each frame solves its points' rays from it (slower per "
+                "frame than Every Distance once its tables exist)"),
                ("FIXED_RANGE", "Fixed Range",
                 "One table over [LUT r min, LUT r max] with LUT rows x LUT columns nodes, built for the camera's "
                 "distance (a new one whenever it changes); geometry outside the range is not imaged")],

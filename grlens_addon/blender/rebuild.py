@@ -15,8 +15,8 @@ import uuid
 import bpy
 import numpy as np
 
-from ..core import budget, culling, losses, mapping, pipeline
-from . import gather, lutcache, shading, upload, world
+from ..core import budget, culling, losses, mapping, observer_view, pipeline
+from . import gather, lutcache, motion, shading, upload, world
 
 COLLECTION = "grlens"
 
@@ -155,6 +155,9 @@ def check_settings(scene) -> None:
         raise RebuildError("no black hole object is set (scene.grlens.black_hole)")
     if not (math.isfinite(g.r_s) and g.r_s > 0):
         raise RebuildError(f"the Schwarzschild radius must be a positive length (scene.grlens.r_s = {g.r_s:g})")
+    if not (math.isfinite(g.speed_of_light) and g.speed_of_light >= 0):
+        raise RebuildError(f"the speed of light must be positive, or 0 for stills (scene.grlens.speed_of_light = "
+                           f"{g.speed_of_light:g})")
 
 
 GEOMETRY_TYPES = ("MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES", "POINTCLOUD", "VOLUME")
@@ -167,7 +170,7 @@ def hole_notes(scene) -> list[str]:
     hole = scene.grlens.black_hole
     if hole is not None and hole.type in GEOMETRY_TYPES and not hole.hide_render:
         return [f"the black hole '{hole.name}' is a {hole.type.lower()} and renders inside the shadow: "
-                "use an empty for the hole, or hide it from renders"]
+                "use Add > Black Hole (an empty that never renders), or hide it from renders"]
     return []
 
 
@@ -179,19 +182,58 @@ def scene_geometry(scene, depsgraph, preview: bool = False):
     cam = observer_camera(scene)
     cam_eval = cam.evaluated_get(depsgraph)
     hole_eval = g.black_hole.evaluated_get(depsgraph)
-    geo = mapping.Scene(np.array(cam_eval.matrix_world.translation), np.array(hole_eval.matrix_world.translation), g.r_s)
+    cam_pos = np.array(cam_eval.matrix_world.translation)
+    hole_pos = np.array(hole_eval.matrix_world.translation)
+    for what, obj, pos in (("camera", cam, cam_pos), ("black hole", g.black_hole, hole_pos)):
+        if not np.all(np.isfinite(pos)):
+            raise RebuildError(f"the {what} '{obj.name}' has a location that is not a finite number")
+    geo = mapping.Scene(cam_pos, hole_pos, g.r_s)
     r_obs = geo.r_obs
     if r_obs <= 1.0:
         raise RebuildError(f"the camera is inside the event horizon (r = {r_obs:.4g} r_s)")
-    if r_obs <= 1.5:
-        raise RebuildError(f"the camera is inside the photon sphere (r = {r_obs:.4g} r_s): the images need "
-                           "r > 1.5 r_s")
+    from lutgen.rays import R_OBS_MIN
+    if r_obs < R_OBS_MIN:
+        raise RebuildError(f"the camera is too close to the horizon (r = {r_obs:.6g} r_s): the images need "
+                           f"r >= {R_OBS_MIN} r_s")
+    if g.speed_of_light > 0:
+        geo.beta = observer_beta(scene, cam, cam_eval, g.black_hole, hole_eval, geo)
+        geo.aberration = bool(g.use_aberration)
     orders = tuple(o for o, on in ((1, g.show_order_1), (2, g.show_order_2)) if on)
     settings = pipeline.Settings(max_tess_level=g.max_tess_level, tess_a=g.tess_a, tess_b=g.tess_b,
                                  cull_ratio=g.cull_ratio, orders=orders,
                                  pixel_angle=_pixel_angle(scene, cam_eval),
                                  max_error_px=max_error_px(g, preview), max_triangles=g.max_triangles)
     return geo, settings, cam_eval
+
+
+HOLE_AT_REST = 1e-7
+"""Largest speed of the black hole (r_s per frame) that counts as at rest when frames measure
+physical time (float32 keyframes of a hole that does not move differ by less)."""
+
+
+def observer_beta(scene, cam, cam_eval, hole, hole_eval, geo) -> np.ndarray:
+    """(3,) the observer camera's velocity (units of c, world axes) in its local static frame, from its
+    own animation (motion.velocity: no frame change; the camera of a timeline marker by its own
+    motion, so a cut starts from the new camera's motion) and ``scene.grlens.speed_of_light`` (BU per
+    frame, > 0): observer_view.static_frame_beta. RebuildError when the hole moves, when either's
+    motion cannot be read from its keyframes, or when the camera moves at or above the speed of light
+    in the static frame."""
+    g = scene.grlens
+    try:
+        v_hole = motion.velocity(scene, hole, hole_eval)
+        v_cam = motion.velocity(scene, cam, cam_eval)
+    except motion.MotionError as exc:
+        raise RebuildError(f"physical time needs the camera's and the black hole's motion from their keyframes: "
+                           f"{exc}") from None
+    if np.linalg.norm(v_hole) > HOLE_AT_REST * g.r_s:
+        raise RebuildError(f"the black hole '{hole.name}' moves ({np.linalg.norm(v_hole):.4g} BU per frame): with "
+                           "physical time (speed_of_light > 0) it must stay at rest")
+    beta = observer_view.static_frame_beta(geo.camera, v_cam, geo.hole, g.r_s, g.speed_of_light)[0]
+    speed = float(np.linalg.norm(beta))
+    if not speed < 1.0:
+        raise RebuildError(f"the camera '{cam.name}' moves at {speed:.4g} c in the local static frame (at "
+                           f"r = {geo.r_obs:.4g} r_s): raise speed_of_light or slow the camera")
+    return beta
 
 
 def _image_object(scene, src, order):
@@ -328,9 +370,10 @@ def _inputs(mesh, geo, settings, lut, light, mats, planes, disc=None):
     """Everything an image depends on: world-space geometry and attributes, camera, hole, r_s,
     settings, LUT parameters, light and material slots. Equal inputs give identical images."""
     arrays = (mesh.positions, mesh.tris, mesh.corner_uv, mesh.material, mesh.corner_normals,
-              geo.camera, geo.hole, planes)
-    rest = repr((geo.r_s, settings, None if disc is None else (tuple(disc.axis), disc.prograde, disc.mode, disc.r_in,
-                                                               disc.t_peak, disc.exposure),
+              geo.camera, geo.hole, planes, geo.beta)
+    disc_key = None if disc is None else (tuple(disc.axis), disc.prograde, disc.mode, disc.r_in, disc.t_peak,
+                                          disc.exposure)
+    rest = repr((geo.r_s, geo.aberration, settings, disc_key,
                  tuple(sorted(lut.parameters.items())), [m.name if m else None for m in mats],
                  None if light is None else (tuple(light.position), light.intensity,
                                              tuple(sorted(light.lut.parameters.items())))))
@@ -477,6 +520,8 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
             raise _WorldOnly(f"no object marked; {world_line}")
         geo, settings, cam = scene_geometry(scene, depsgraph, preview)
         warn.extend(hole_notes(scene))
+        if geo.beta is not None:
+            shading.set_shift_switches(scene)  # (a file saved with other switches: its group follows)
         planes = frustum_planes(scene, cam)
         g = scene.grlens
         lut = lutcache.get_table(g, geo.r_obs)
@@ -488,8 +533,10 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
             else:
                 lpos = np.array(g.light.evaluated_get(depsgraph).matrix_world.translation)
                 r_light = float(np.linalg.norm(lpos - geo.hole) / geo.r_s)
-                if r_light <= 1.5:
-                    warn.append(f"the light is inside the photon sphere (r = {r_light:.3g} r_s)")
+                from lutgen.rays import R_OBS_MIN
+                if r_light < R_OBS_MIN:
+                    warn.append(f"the light is too close to the horizon (r = {r_light:.6g} r_s, needs "
+                                f">= {R_OBS_MIN} r_s)")
                 else:
                     light = pipeline.Light(lpos, g.light_intensity,
                                            lutcache.get_table(g, r_light))
@@ -520,6 +567,8 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
             if counts[key]:
                 report["status"] += f", {counts[key]} {key}"
         report["status"] += f", r_obs = {geo.r_obs:.4g} r_s"
+        if geo.beta is not None:
+            report["status"] += f", camera at {np.linalg.norm(geo.beta):.3g} c"
         if settings.max_error_px != max_error_px(g):
             report["status"] += f" (viewport preview: {settings.max_error_px:.3g} px)"
         if world_line and world_line.startswith("sky lensed"):

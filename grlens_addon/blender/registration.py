@@ -7,9 +7,9 @@ the marks and settings are kept in the file meanwhile.
 """
 import bpy
 
-from . import handlers, operators, panels, properties
+from . import geodesic_camera, handlers, operators, panels, preferences, properties
 
-_CLASSES = properties.CLASSES + operators.CLASSES + panels.CLASSES
+_CLASSES = properties.CLASSES + preferences.CLASSES + operators.CLASSES + geodesic_camera.CLASSES + panels.CLASSES
 _registered = False
 
 
@@ -21,6 +21,7 @@ def register():
         bpy.utils.register_class(cls)
     properties.attach()
     handlers.attach()
+    bpy.types.VIEW3D_MT_add.append(operators.menu_add)
     _registered = True
     if not bpy.app.timers.is_registered(_rebuild_after_enable):
         bpy.app.timers.register(_rebuild_after_enable, first_interval=0.0)
@@ -31,6 +32,7 @@ def unregister():
     if not _registered:
         return
     handlers.detach()
+    bpy.types.VIEW3D_MT_add.remove(operators.menu_add)
     if bpy.app.timers.is_registered(_rebuild_after_enable):
         bpy.app.timers.unregister(_rebuild_after_enable)
     from . import rebuild, world

@@ -3,8 +3,9 @@
 Units: positions in Blender units, written in world space (image objects have identity transforms).
 Attributes written: UV map ``UVMap`` (corner), ``light_travel_time`` (point, float: c*dt in scene
 length units), ``grlens_order`` (point, float: 1 or 2), ``grlens_irradiance`` (corner, float; only
-with GR illumination), ``grlens_redshift`` (point, float: 1 + z) and ``grlens_disc_colour`` (point,
-colour: linear RGB) for thin-disc sources, material indices, and the source's shading normals as the
+with GR illumination), ``grlens_redshift`` (point, float: 1 + z; thin discs, and everything with
+physical time), ``grlens_redshift_gravity`` (point, float: its gravitational part; physical time) and
+``grlens_disc_colour`` (point, colour: linear RGB) for thin-disc sources, material indices, and the source's shading normals as the
 image's custom normals (:func:`set_normals`).
 """
 import uuid
@@ -91,6 +92,7 @@ def upload(mesh, img, materials) -> None:
     elif mesh.attributes.get("grlens_irradiance") is not None:
         mesh.attributes.remove(mesh.attributes["grlens_irradiance"])
     for name, values, type_ in (("grlens_redshift", img.redshift, "FLOAT"),
+                                ("grlens_redshift_gravity", img.redshift_gravity, "FLOAT"),
                                 ("grlens_disc_colour", img.disc_colour, "FLOAT_COLOR")):
         if values is not None:
             a = _attr(mesh, name, type_, "POINT")

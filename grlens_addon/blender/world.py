@@ -24,8 +24,17 @@ records what it had in its custom property ``grlens_hooked`` ({input identifier:
 "<from node name>\\t<from output identifier>"}), so :func:`restore` puts the tree back exactly.
 :func:`apply` is idempotent: nodes the user adds while lensing is on are hooked at the next update.
 
-Per frame only values change (never the tree): e1 and xi_lim inside the group, and the table's
-pixels when the camera's radius changes (r_obs rounded to 7 digits, as the LUTs). Saving stores
+With physical time and a colour switch on, every Background colour of the user's tree is passed
+through "grlens Shift by g" with the sky's g (:func:`_sky_shift`, :func:`_hook_sky_shift`), recorded
+and restored like the rest.
+
+Before all this, D is taken back to the camera's local static frame (exact inverse aberration in
+four nodes, :func:`_static_direction`) when frames measure physical time and the camera moves (its velocity
+from its own keyframes, as the images'); at rest the nodes give D itself.
+
+Per frame only values change (never the tree): e1, xi_lim and the camera's velocity inside the
+group, and the table's pixels when the camera's radius changes (r_obs rounded to 7 digits, as the
+LUTs). Saving stores
 the user's own world: the file is restored before it is written and lensed again after
 (save_pre / save_post), so a .blend never holds grlens' nodes or its table.
 
@@ -106,6 +115,8 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
     ng = bpy.data.node_groups.new(name, "ShaderNodeTree")
     ng.interface.new_socket(name="Vector", in_out="OUTPUT", socket_type="NodeSocketVector")
     ng.interface.new_socket(name="Escapes", in_out="OUTPUT", socket_type="NodeSocketFloat")
+    ng.interface.new_socket(name="ln g hue", in_out="OUTPUT", socket_type="NodeSocketFloat")
+    ng.interface.new_socket(name="ln g bright", in_out="OUTPUT", socket_type="NodeSocketFloat")
     N, L = ng.nodes, ng.links
     geo = N.new("ShaderNodeNewGeometry")
     e1 = N.new("ShaderNodeCombineXYZ")
@@ -115,12 +126,16 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
     lim.name = lim.label = "xi_lim"
     lim.location = (0, -500)
     d = _vmath(N, "SCALE", 200)  # D = -Incoming (unit in Cycles' background and Eevee's world)
+    d.name = "D"
     d.inputs["Scale"].default_value = -1.0
     L.new(geo.outputs["Incoming"], d.inputs[0])
+    _static_direction(N, L, d.outputs["Vector"])  # linked in for a moving camera only (_use_aberration)
     cos = _vmath(N, "DOT_PRODUCT", 400)
+    cos.name = "cos xi"
     L.new(d.outputs["Vector"], cos.inputs[0])
     L.new(e1.outputs[0], cos.inputs[1])
     axis = _vmath(N, "CROSS_PRODUCT", 400)  # e1 x D: |.| = sin(xi), the axis of the deflection
+    axis.name = "deflection axis"
     L.new(e1.outputs[0], axis.inputs[0])
     L.new(d.outputs["Vector"], axis.inputs[1])
     sin = _vmath(N, "LENGTH", 600)
@@ -200,7 +215,109 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
     out.location = (2600, 0)
     L.new(rot.outputs["Vector"], out.inputs["Vector"])
     L.new(esc.outputs[0], out.inputs["Escapes"])
+    hue, bright = _sky_shift(N, L, d.outputs["Vector"])
+    L.new(hue, out.inputs["ln g hue"])
+    L.new(bright, out.inputs["ln g bright"])
     return ng
+
+
+def _static_direction(N, L, d):
+    """Nodes taking the camera's ray direction ``d`` (a socket, unit) back to its local static frame,
+    the exact inverse aberration of observer_view.unaberrate in four nodes: with n = -beta / |beta|
+    (node "beta_dir"), gamma - 1 ("gamma_minus_1") and gamma |beta| ("gamma_beta") and c = D . n,
+    D_static = ((c + b) / (1 + b c)) n + (D - c n) / (gamma (1 + b c)), which is the unit vector of
+    D + ((gamma - 1) c + gamma b) n (times gamma (1 + b c) > 0). Per frame values only; left out of the
+    path for a camera at rest (:func:`_use_aberration`). Returns the node whose output "Vector" is
+    D_static."""
+    n = N.new("ShaderNodeCombineXYZ")
+    n.name = n.label = "beta_dir"
+    n.location = (0, -800)
+    gm1 = N.new("ShaderNodeValue")
+    gm1.name = gm1.label = "gamma_minus_1"
+    gm1.location = (0, -1000)
+    gm1.outputs[0].default_value = 0.0
+    gb = N.new("ShaderNodeValue")
+    gb.name = gb.label = "gamma_beta"
+    gb.location = (0, -1200)
+    gb.outputs[0].default_value = 0.0
+    c = _vmath(N, "DOT_PRODUCT", 250)
+    L.new(d, c.inputs[0])
+    L.new(n.outputs[0], c.inputs[1])
+    k = _math(N, "MULTIPLY_ADD", x=300)  # (gamma - 1) c + gamma b
+    L.new(c.outputs["Value"], k.inputs[0])
+    L.new(gm1.outputs[0], k.inputs[1])
+    L.new(gb.outputs[0], k.inputs[2])
+    v = _vmath(N, "MULTIPLY_ADD", 350)  # D + k n
+    L.new(n.outputs[0], v.inputs[0])
+    L.new(k.outputs[0], v.inputs[1])
+    L.new(d, v.inputs[2])
+    out = _vmath(N, "NORMALIZE", 400)
+    out.name = "static direction"
+    L.new(v.outputs["Vector"], out.inputs[0])
+    return out
+
+
+def _sky_shift(N, L, d):
+    """Nodes giving ln g of the sky's light for the ray direction ``d`` (a socket; relinked to the
+    static direction with the others, :func:`_direction_inputs`): light emitted at rest at infinity
+    reaches the camera with g = gamma (1 + beta . D_static) / sqrt(1 - r_s/r_obs) (the motion's part:
+    ln(gamma - gamma |beta| (D_static . n)), n = "beta_dir"; the gravitational part: node
+    "ln_g_gravity"), each part times its switch ("sky gravitational shift", "sky Doppler colour",
+    "sky beaming"). Returns the sockets (ln g of the hue, ln g of the brightness), for
+    "grlens Shift by g" in front of the user's Background colours (:func:`_hook_sky_shift`)."""
+    t = _vmath(N, "DOT_PRODUCT", 450)
+    t.name = "sky doppler dot"
+    L.new(d, t.inputs[0])
+    L.new(N["beta_dir"].outputs[0], t.inputs[1])
+    values = {}
+    for k, (name, default) in enumerate((("gamma", 1.0), ("minus_gamma_beta", 0.0), ("ln_g_gravity", 0.0),
+                                         ("sky gravitational shift", 1.0), ("sky Doppler colour", 1.0),
+                                         ("sky beaming", 1.0))):
+        v = N.new("ShaderNodeValue")
+        v.name = v.label = name
+        v.location = (200, -1400 - 150 * k)
+        v.outputs[0].default_value = default
+        values[name] = v.outputs[0]
+    lin = _math(N, "MULTIPLY_ADD", x=500)  # gamma - gamma b t
+    L.new(t.outputs["Value"], lin.inputs[0])
+    L.new(values["minus_gamma_beta"], lin.inputs[1])
+    L.new(values["gamma"], lin.inputs[2])
+    motion = _math(N, "LOGARITHM", x=550)
+    motion.inputs[1].default_value = math.e
+    L.new(lin.outputs[0], motion.inputs[0])
+    grav = _math(N, "MULTIPLY", x=550)
+    L.new(values["ln_g_gravity"], grav.inputs[0])
+    L.new(values["sky gravitational shift"], grav.inputs[1])
+    out = []
+    for switch in ("sky Doppler colour", "sky beaming"):
+        m = _math(N, "MULTIPLY_ADD", x=600)
+        L.new(motion.outputs[0], m.inputs[0])
+        L.new(values[switch], m.inputs[1])
+        L.new(grav.outputs[0], m.inputs[2])
+        out.append(m.outputs[0])
+    return out
+
+
+def _direction_inputs(group):
+    """The inputs that take the ray's direction: xi's cosine, the deflection's axis, the rotated
+    vector, the sky's Doppler factor."""
+    return (group.nodes["cos xi"].inputs[0], group.nodes["deflection axis"].inputs[1],
+            group.nodes["rotate"].inputs["Vector"], group.nodes["sky doppler dot"].inputs[0])
+
+
+def _use_aberration(group, moving: bool) -> bool:
+    """Feed the direction inputs from the inverse aberration (``moving``) or from D itself; relinks
+    (and so recompiles the world's shader) only when that changes. Returns whether it relinked."""
+    src = group.nodes["static direction" if moving else "D"].outputs["Vector"]
+    changed = False
+    for sock in _direction_inputs(group):
+        if sock.is_linked and sock.links[0].from_socket == src:
+            continue
+        for lk in list(sock.links):
+            group.links.remove(lk)
+        group.links.new(src, sock)
+        changed = True
+    return changed
 
 
 def _table_lookup(nodes, name, image, interpolation, location):
@@ -308,7 +425,10 @@ def _socket(sockets, ident):
 
 def _group_ok(group) -> bool:
     return group is not None and all(k in group.nodes for k in (*TABLE_LOOKUPS, "spare", "e1", "xi_lim", "rotate",
-                                                                 *LOOKUPS.values()))
+                                                                 "beta_dir", "gamma_minus_1", "gamma_beta", "D",
+                                                                 "static direction", "sky doppler dot",
+                                                                 "gamma", "minus_gamma_beta", "ln_g_gravity",
+                                                                 "cos xi", "deflection axis", *LOOKUPS.values()))
 
 
 def _incoming(tree) -> dict:
@@ -591,10 +711,124 @@ def update(scene, depsgraph=None) -> str | None:
         _set(e1_node.inputs[k], float(e1[k]))
     _set(lim_sock, float(escape_limit(round_radius(r_obs))))
     line = f"sky lensed, r_obs = {r_obs:.4g} r_s"
+    beta = np.zeros(3)
+    if g.speed_of_light > 0:  # physical time: the camera's own motion aberrates its sky
+        from ..core import mapping
+        from .rebuild import RebuildError, observer_beta
+
+        try:
+            beta = observer_beta(scene, lensing_camera(scene), cam, g.black_hole, hole,
+                                 mapping.Scene(p_cam, p_hole, g.r_s))
+        except RebuildError as exc:
+            raise WorldError(str(exc)) from None
+        line += f", camera at {np.linalg.norm(beta):.3g} c"
+        if not g.use_aberration:
+            line += " (aberration off)"
+            beta = np.zeros(3)
+    set_velocity(grp, beta)
+    _use_aberration(grp, bool(np.any(beta != 0)))
+    shifted = g.speed_of_light > 0 and any(getattr(g, prop) for prop in SKY_SWITCHES)
+    if shifted:
+        set_sky_shift(grp, scene, r_obs)
+    _hook_sky_shift(world, _group_node(world.node_tree), shifted)
     skipped = unhooked(world)
     if skipped:
         line += f"; not lensed (no Vector input, e.g. a Sky Texture with Sun Disc on): {', '.join(skipped)}"
     return line
+
+
+def set_velocity(group, beta) -> None:
+    """The group's inverse aberration for a camera moving with ``beta`` (3,; units of c, world axes;
+    zero: at rest) in its local static frame (see _static_direction)."""
+    beta = np.asarray(beta, dtype=np.float64).reshape(3)
+    b = float(np.linalg.norm(beta))
+    n = -beta / b if b > 0 else np.zeros(3)
+    gamma = 1.0 / math.sqrt(max(1.0 - b * b, 1e-300))
+    node = group.nodes["beta_dir"]
+    for k in range(3):
+        _set(node.inputs[k], float(n[k]))
+    _set(group.nodes["gamma_minus_1"].outputs[0], gamma - 1.0)
+    _set(group.nodes["gamma_beta"].outputs[0], gamma * b)
+    _set(group.nodes["gamma"].outputs[0], gamma)
+    _set(group.nodes["minus_gamma_beta"].outputs[0], -gamma * b)
+
+
+SKY_SWITCHES = {"use_gravitational_shift": "sky gravitational shift", "use_doppler_colour": "sky Doppler colour",
+                "use_beaming": "sky beaming"}
+"""scene.grlens switch -> the sky group's Value node that carries it."""
+
+
+def _hook_sky_shift(world, group_node, on: bool) -> None:
+    """With ``on`` (physical time, a colour switch on), every Background node of the user's tree takes
+    its colour through a "grlens Shift by g" node (marked ``grlens_own == "sky shift"``) fed by the sky
+    group's ln g outputs, its Color input recorded as the lensed world records inputs (so
+    :func:`restore` puts it back); without, those nodes are taken out again and the colours relinked.
+    An unlinked colour is copied into the shift node (again whenever it changes)."""
+    from . import shading
+
+    tree = world.node_tree
+    links = tree.links
+    incoming = _incoming(tree)
+    for node in _own(tree, "sky shift"):  # left over (the user linked the Background's colour anew)
+        if not node.outputs["Color"].is_linked:
+            tree.nodes.remove(node)
+    backgrounds = [n for n in tree.nodes if n.bl_idname == "ShaderNodeBackground" and not n.get(OWN)]
+    for bg in backgrounds:
+        sock = bg.inputs["Color"]
+        lk = incoming.get(sock.as_pointer())
+        hooked = lk is not None and lk.from_node.get(OWN) == "sky shift"
+        if on:
+            if hooked:
+                shift = lk.from_node
+            else:
+                shift = tree.nodes.new("ShaderNodeGroup")
+                shift.node_tree = shading.ensure_shift_by_g_group()
+                shift[OWN] = "sky shift"
+                shift.label = "grlens: the sky's colour shift (physical time)"
+                shift.location = (bg.location.x - 250.0, bg.location.y - 200.0)
+                rec = bg.get(HOOKED)
+                was = rec.get(sock.identifier) if rec is not None else None
+                if lk is not None:
+                    src = lk.from_socket
+                    _record(bg, sock.identifier, f"{lk.from_node.name}\t{src.identifier}")
+                    links.remove(lk)
+                    links.new(src, shift.inputs["Color"])
+                elif was:  # hooked before and our node deleted by hand: the recorded source again
+                    fn = tree.nodes.get(was.split("\t")[0])
+                    out = _socket(fn.outputs, was.split("\t")[1]) if fn is not None else None
+                    if out is not None:
+                        links.new(out, shift.inputs["Color"])
+                else:
+                    _record(bg, sock.identifier, "")
+                links.new(shift.outputs["Color"], sock)
+                links.new(group_node.outputs["ln g hue"], shift.inputs["ln g hue"])
+                links.new(group_node.outputs["ln g bright"], shift.inputs["ln g bright"])
+            if not shift.inputs["Color"].is_linked and tuple(shift.inputs["Color"].default_value) != \
+                    tuple(sock.default_value):
+                shift.inputs["Color"].default_value = tuple(sock.default_value)
+        elif hooked or (bg.get(HOOKED) is not None and sock.identifier in bg[HOOKED].keys()):
+            if hooked:
+                shift = lk.from_node
+                src = shift.inputs["Color"].links[0].from_socket if shift.inputs["Color"].is_linked else None
+                links.remove(lk)
+                if src is not None:
+                    links.new(src, sock)
+            rec = bg[HOOKED]
+            if sock.identifier in rec.keys():
+                del rec[sock.identifier]
+            if not rec.keys():
+                del bg[HOOKED]
+    if not on:
+        for node in _own(tree, "sky shift"):
+            tree.nodes.remove(node)
+
+
+def set_sky_shift(group, scene, r_obs: float) -> None:
+    """The sky group's gravitational shift for the camera at ``r_obs`` (r_s; light from infinity is
+    blue-shifted by 1 / sqrt(1 - r_s/r_obs)) and the scene's colour switches."""
+    _set(group.nodes["ln_g_gravity"].outputs[0], -0.5 * math.log(1.0 - 1.0 / r_obs))
+    for prop, name in SKY_SWITCHES.items():
+        _set(group.nodes[name].outputs[0], 1.0 if getattr(scene.grlens, prop) else 0.0)
 
 
 def refresh(scene, depsgraph=None):

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import budget as B
-from . import culling, illumination, mapping, subdivision, thin_disc
+from . import culling, illumination, observer_view, subdivision, thin_disc
 from .frame import DiscEmitter, Frame, Source
 
 
@@ -29,9 +29,12 @@ class ImageMesh:
     the source's unit shading normal (world space) at each corner's source point, or None when the
     source has no normals; report: culling counts;
     source_tri (F,) the source triangle of each face; source_position (V, 3) BU: the undistorted
-    world point each image vertex shows; with a :class:`DiscEmitter`: redshift (V,) 1 + z (0 where
-    gas has no circular orbit: r <= 1.5 r_s or on the disc axis) and disc_colour (V, 3) linear RGB
-    (black there), else None. source_tri indexes the caller's SourceMesh.tris.
+    world point each image vertex shows; redshift (V,) 1 + z of the light each vertex shows
+    (:func:`image_redshift`), with a :class:`DiscEmitter` or a scene with a velocity (physical time;
+    0 where there is none: disc gas without a circular orbit, r <= 1.5 r_s or on the disc axis), else
+    None; with a disc, disc_colour (V, 3) linear RGB (black there), else None; with physical time,
+    redshift_gravity (V,) its gravitational part sqrt((1 - r_s/r_cam) / (1 - r_s/r)) (static emitter
+    and camera), else None. source_tri indexes the caller's SourceMesh.tris.
     """
 
     order: int
@@ -47,6 +50,7 @@ class ImageMesh:
     redshift: np.ndarray | None = field(repr=False, default=None)
     disc_colour: np.ndarray | None = field(repr=False, default=None)
     corner_normal: np.ndarray | None = field(repr=False, default=None)
+    redshift_gravity: np.ndarray | None = field(repr=False, default=None)
 
 
 def empty_image(order, report: culling.CullReport) -> ImageMesh:
@@ -66,7 +70,7 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
     everything = bool(keep.all())
     kept = None if everything else np.flatnonzero(keep)
     tris = sub.tris if everything else sub.tris.take(kept, axis=0)
-    used = mapping.used_vertices(tris, len(sub.positions))
+    used = observer_view.used_vertices(tris, len(sub.positions))
     if used.size == len(sub.positions):  # every vertex is used: indices stay as they are
         image_tris = tris
     else:
@@ -115,18 +119,40 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
         irr = e.reshape(-1, 3)
     if patch_corners is not None:
         src_tri = np.concatenate([src_tri, p_src])
-    redshift = colour = None
+    redshift = colour = gravity = None
+    if disc is not None or scene.beta is not None:
+        redshift = image_redshift(scene, v_src, v_dir, disc)
+    if scene.beta is not None:  # physical time: the gravitational part too, for the colour's switches
+        gravity = 1.0 / observer_view.frequency_ratio(np.linalg.norm(v_src - scene.hole, axis=1) / scene.r_s,
+                                                       scene.r_obs, None)
+        gravity = np.nan_to_num(gravity, nan=0.0)
     if disc is not None:
-        redshift = thin_disc.vertex_redshift_from_direction(v_src, scene.hole, scene.camera, scene.r_s,
-                                                            disc.axis, v_dir, disc.prograde)
         r = np.linalg.norm(v_src - scene.hole, axis=1) / scene.r_s
         colour = np.nan_to_num(thin_disc.disc_colour(r, redshift, disc.mode, r_in=disc.r_in,
                                                      t_peak=disc.t_peak, exposure=disc.exposure))
+    if redshift is not None:
         redshift = np.nan_to_num(redshift, nan=0.0)  # 0: no circular orbit there (r <= 1.5 r_s, axis)
     return ImageMesh(order=order, positions=v_pos, tris=image_tris, corner_uv=corner_uv,
                      material=mesh.material[src_tri], light_travel_time=v_dist, irradiance=irr, report=report,
                      source_tri=source.origin[src_tri], source_position=v_src, redshift=redshift,
-                     disc_colour=colour, corner_normal=n)
+                     disc_colour=colour, corner_normal=n, redshift_gravity=gravity)
+
+
+def image_redshift(scene, points, directions, disc: DiscEmitter | None = None) -> np.ndarray:
+    """(N,) 1 + z = nu_emitted / nu_seen of the light from the source ``points`` (N, 3; BU) that the
+    camera of ``scene`` sees in the image ``directions`` (N, 3; its own frame: aberrated when the scene
+    has a velocity ``beta``). Emitters at rest in their static frames (the gravitational shift and
+    the camera's motion: observer_view.frequency_ratio), or a thin disc's gas on circular orbits
+    (thin_disc, its shift for the static observer, divided by the camera's Doppler factor). NaN where
+    there is none (r <= 1 r_s; disc gas at r <= 1.5 r_s or on the disc axis)."""
+    view = scene.view_beta
+    static = directions if view is None else observer_view.unaberrate(directions, view)
+    if disc is not None:
+        z1 = thin_disc.vertex_redshift_from_direction(points, scene.hole, scene.camera, scene.r_s, disc.axis, static,
+                                                      disc.prograde)
+        return z1 if scene.beta is None else z1 / observer_view.doppler_factor(static, scene.beta)
+    r = np.linalg.norm(points - scene.hole, axis=1) / scene.r_s
+    return 1.0 / observer_view.frequency_ratio(r, scene.r_obs, -static, scene.beta)
 
 
 def _patch_parts(patches, patch_keep, order, offset):
@@ -144,7 +170,7 @@ def _patch_parts(patches, patch_keep, order, offset):
         faces = p.tris[ok]
         if len(faces) == 0:
             continue
-        used = mapping.used_vertices(faces, len(p.source_position))
+        used = observer_view.used_vertices(faces, len(p.source_position))
         remap = np.full(len(p.source_position), -1, dtype=np.int64)
         remap[used] = np.arange(used.size)
         out[0].append(remap.take(faces) + offset)

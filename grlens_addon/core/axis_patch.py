@@ -49,7 +49,7 @@ the part that is not lies well away from the axis (B.HIDDEN_CORE), where kept pi
 
 Units: positions in Blender units (BU); delta in BU; angles in radians; pixel quantities in pixels
 of ``pixel_angle`` radians. Axis coordinates: (x, y, z) relative to the hole, z along the axis
-towards the camera (culling.axis_coordinates).
+towards the camera (observer_view.axis_coordinates).
 """
 from __future__ import annotations
 
@@ -61,10 +61,9 @@ from scipy.sparse.csgraph import connected_components
 
 from . import budget as B
 from . import mapping, silhouette
-from .mapping import row_norm
+from .observer_view import (any_perpendicular, axis_coordinates, axis_crossing, axis_distance, hole_angle,
+                            longest_side, max_ring_span, place_images, projected_area, row_norm, within_axis_distance)
 from .ragged import group_offsets
-from .culling import (axis_coordinates, axis_crossing, axis_distance, hole_angle, longest_side, max_ring_span,
-                      projected_area, within_axis_distance)
 
 @dataclass
 class Crossing:
@@ -116,8 +115,8 @@ class Patch:
 def find_crossings(points, tris, camera, hole, candidates=None, axis_xyz=None) -> list[Crossing]:
     """The points where the observer-hole axis crosses the triangles ``tris`` of ``points`` (BU), one
     per point (a crossing through a shared edge or vertex is found once). ``candidates``: indices or a
-    mask of the triangles to test (e.g. culling.near_axis); default all. Ordered along the axis.
-    ``axis_xyz``: culling.axis_coordinates of ``points``, when the caller has them."""
+    mask of the triangles to test (e.g. observer_view.near_axis); default all. Ordered along the axis.
+    ``axis_xyz``: observer_view.axis_coordinates of ``points``, when the caller has them."""
     tris = np.asarray(tris, dtype=np.int64)
     idx = np.arange(len(tris)) if candidates is None else np.arange(len(tris))[candidates]
     if idx.size == 0:
@@ -151,7 +150,7 @@ def ring_orders(crossing: Crossing, orders) -> tuple:
 def limit_images(crossing: Crossing, psi, mp: mapping.Mapper, order, look=None,
                  chords: int | None = None) -> mapping.Images:
     """Images of order ``order`` of the crossing point approached from azimuth ``psi`` (K,) radians
-    about the axis (measured in the frame of culling.axis_coordinates): the points of its Einstein
+    about the axis (measured in the frame of observer_view.axis_coordinates): the points of its Einstein
     ring, at the LUT's angle xi for phi = pi (behind the hole) or 0 (in front), at position angle psi
     (order 1) or psi + pi (order 2). ``look``: the LUT's (xi, dt) there (lutgen.Lookup of one point),
     when the caller has it (see :func:`_limit_look`).
@@ -167,12 +166,7 @@ def limit_images(crossing: Crossing, psi, mp: mapping.Mapper, order, look=None,
     xi, dt = np.broadcast_to(look.xi, plane.r.shape), np.broadcast_to(look.dt, plane.r.shape)
     if chords:
         xi = xi - B.CHORD_OUTSET * chord_sag(xi, 2.0 * np.pi / chords)
-    sign = 1.0 if order == 1 else -1.0
-    c, s = np.cos(xi), np.sin(xi)
-    direction = c[:, None] * scene.e1 + (sign * s)[:, None] * plane.e2
-    distance = dt * scene.r_s
-    position = scene.camera + distance[:, None] * direction
-    valid = np.isfinite(distance) & np.isfinite(c)
+    direction, distance, position, valid = place_images(xi, dt, plane.e2, scene, order)
     position[~valid] = np.nan
     return mapping.Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
                           xi=xi.copy(), dt=dt.copy(), ux=None, uy=None)
@@ -196,9 +190,9 @@ def _limit_look(crossing: Crossing, mp: mapping.Mapper, orders) -> dict:
 def _limit_plane(crossing: Crossing, psi, scene: mapping.Scene) -> mapping.PlaneCoordinates:
     """The plane coordinates of the crossing point approached from azimuths ``psi`` (K,) radians about
     the axis: its radius, phi = pi (behind the hole) or 0 (in front), and the planes through the axis
-    at those azimuths (frame of culling.axis_coordinates)."""
+    at those azimuths (frame of observer_view.axis_coordinates)."""
     psi = np.asarray(psi, np.float64)
-    u = mapping.any_perpendicular(scene.e1)
+    u = any_perpendicular(scene.e1)
     v = np.cross(scene.e1, u)
     e2 = np.cos(psi)[:, None] * u + np.sin(psi)[:, None] * v
     r = np.full(psi.shape, np.linalg.norm(crossing.point - scene.hole) / scene.r_s)
@@ -296,7 +290,7 @@ def _polar_box(tris, x, y):
     """(d_lo, d_hi, a_lo, a_hi), each (T,): the range of distance from the axis (BU; d_lo = 0 when the
     axis passes through the projection) and of azimuth (radians, a_lo <= a_hi, unwrapped from the
     first corner's) of the triangles ``tris`` (T, 3) projected along it; x, y from
-    culling.axis_coordinates. When the axis passes through, every azimuth is in the box."""
+    observer_view.axis_coordinates. When the axis passes through, every azimuth is in the box."""
     px, py = x[tris], y[tris]  # (T, 3)
     ang = np.arctan2(py, px)
     rel = np.angle(np.exp(1j * (ang - ang[:, :1])))  # corners' azimuths relative to corner 0, (-pi, pi]
@@ -474,7 +468,7 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
     ring = {o: limit_images(cr, np.zeros(1), mp, o, look[o]) for o in orders}
     if not all(bool(im.valid[0]) for im in ring.values()):
         return None
-    theta_e = {o: float(hole_angle(im.direction, scene.camera, scene.hole)[0]) for o, im in ring.items()}
+    theta_e = {o: float(hole_angle(im.direction, scene.camera, scene.hole, scene.view_beta)[0]) for o, im in ring.items()}
     n_az, q = grid_shape(max(theta_e.values()) / pixel_angle, max_error_px)
     # the innermost circle: probe the image at B.PROBE_AZIMUTHS azimuths in the crossed triangle's plane
     k = np.arange(B.MAX_CIRCLES + 1)
@@ -487,7 +481,8 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
     band = B.PATCH_BAND_FACTOR * (B.COVERAGE_FACTOR * max_error_px) * pixel_angle
     gap = np.zeros(len(qx))
     for o, img in mp.images(probe, orders).items():
-        gap = np.maximum(gap, np.abs(hole_angle(img.direction, scene.camera, scene.hole) - theta_e[o]))  # NaN stays
+        gap = np.maximum(gap, np.abs(hole_angle(img.direction, scene.camera, scene.hole, scene.view_beta)
+                                     - theta_e[o]))  # NaN stays
     gap = gap.reshape(len(k), B.PROBE_AZIMUTHS).max(axis=1)
     # no image (outside the LUT, horizon) next to the axis: no patch; farther out: a smaller patch
     bad = np.flatnonzero(~np.isfinite(gap))

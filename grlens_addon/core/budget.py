@@ -11,7 +11,7 @@ edge midpoints, and the refine step cuts the pieces beyond).
   off its exact image (interior.midpoint_errors, subdivision.edge_levels).
 * Next to an Einstein ring the mapping turns azimuth about the observer-hole axis into position
   along the ring, so a piece covering the azimuth D at R pixels from the hole's direction has sides
-  R (1 - cos(D/2)) inside the ring (culling.ring_sagitta).
+  R (1 - cos(D/2)) inside the ring (observer_view.ring_sagitta).
 * An axis patch draws the ring's edge itself with chords of a circle (axis_patch.grid_shape).
 
 The budget gives each piece a tolerance in pixels:
@@ -19,7 +19,7 @@ The budget gives each piece a tolerance in pixels:
 * ``tolerance``: Settings.max_error_px (pixels): every piece, whatever it draws, everywhere inside
   it. The level plan cuts pieces to it, the refine step cuts further the pieces still beyond it
   inside (interior.refine), and the culling drops a piece whose ring sagitta exceeds it: one measure for
-  both (culling.ring_sagitta / culling.max_ring_span), so a piece the plan made is never culled for
+  both (observer_view.ring_sagitta / observer_view.max_ring_span), so a piece the plan made is never culled for
   being too wide (RING_LEVEL_MARGIN leaves room for the unequal pieces of a triangle cut uniformly
   in space).
 * ``coverage``: COVERAGE_FACTOR x tolerance: the edges that decide which pixels an image covers.

@@ -7,7 +7,8 @@ ratio of the circumference of its image to that of the undistorted triangle, bot
 chords on the camera's unit view sphere (dimensionless, so independent of the camera's lens). Triangles with a
 vertex without an image (outside the LUT's radial range, inside the horizon, non-finite, exactly on
 the axis) are dropped, as are triangles entirely outside the camera frustum and triangles whose
-source is degenerate (zero circumference).
+source is degenerate (zero circumference). The view-sphere and axis geometry these tests measure by
+is in observer_view.py.
 """
 from __future__ import annotations
 
@@ -16,8 +17,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import budget as B
-from . import mapping, subdivision
-from .mapping import any_perpendicular, row_norm, used_vertices
+from . import subdivision
+from .observer_view import (axis_coordinates, axis_geometry, chord_length, circumference, hole_angle,
+                            ring_sagitta, row_norm, unit_directions, used_vertices)
 
 
 @dataclass
@@ -43,196 +45,6 @@ class CullReport:
     def total_culled(self) -> int:
         return (self.invalid_vertex + self.degenerate_source + self.einstein_ring + self.outside_frustum
                 + self.below_pixel + self.back_face + self.patch_covered)
-
-
-def chord_length(u, v):
-    """(N,) distance between unit vectors ``u`` and ``v`` (N, 3): the chord on the view sphere."""
-    w = u - v
-    return np.sqrt(np.einsum("ij,ij->i", w, w))
-
-
-def circumference(d, tris):
-    """Perimeter of each triangle on the unit view sphere, as the sum of its corners' chord lengths
-    (dimensionless; equal to the sum of the angles in radians to second order for small triangles)."""
-    a, b, c = d.take(tris[:, 0], axis=0), d.take(tris[:, 1], axis=0), d.take(tris[:, 2], axis=0)
-    return chord_length(a, b) + chord_length(b, c) + chord_length(c, a)
-
-
-def unit_directions(points, camera):
-    """Unit vectors from ``camera`` (3,) to ``points`` (N, 3) (BU); NaN for the camera itself."""
-    v = np.asarray(points, dtype=np.float64) - camera
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return v / row_norm(v)[:, None]
-
-
-def hole_angle(directions, camera, hole) -> np.ndarray:
-    """Angle (radians) of unit ``directions`` (N, 3) from the camera's direction to the hole (BU)."""
-    towards_hole = np.asarray(hole, np.float64) - np.asarray(camera, np.float64)
-    towards_hole /= np.linalg.norm(towards_hole)
-    return np.arccos(np.clip(directions @ towards_hole, -1.0, 1.0))
-
-
-def ring_sagitta(radius, span):
-    """How far (same unit as ``radius``) the straight sides of a piece covering the azimuth ``span``
-    (radians about the observer-hole axis) fall inside a ring of angular radius ``radius`` around the
-    hole's direction: radius (1 - cos(span / 2)). The mapping keeps a point's angle about the axis,
-    so near an Einstein ring azimuth becomes position along the ring. :func:`max_ring_span` is its
-    inverse."""
-    return radius * (1.0 - np.cos(0.5 * np.minimum(span, np.pi)))
-
-
-def max_ring_span(radius, sagitta):
-    """The largest azimuth (radians) whose :func:`ring_sagitta` at ``radius`` stays within ``sagitta``:
-    2 arccos(1 - sagitta / radius) (2 pi when any azimuth would do)."""
-    return 2.0 * np.arccos(np.clip(1.0 - sagitta / radius, -1.0, 1.0))
-
-
-def axis_coordinates(source_points, camera, hole):
-    """Coordinates (x, y, z) of ``source_points`` (N, 3; BU) relative to the hole: z along the axis
-    towards the camera, x and y across it (a fixed perpendicular pair)."""
-    e1 = np.asarray(camera, np.float64) - hole
-    e1 = e1 / np.linalg.norm(e1)
-    u = any_perpendicular(e1)
-    v = np.cross(e1, u)
-    p = np.asarray(source_points, dtype=np.float64) - hole
-    return p @ u, p @ v, p @ e1
-
-
-def axis_crossing(x, y, z, tris):
-    """Where the observer-hole axis meets the triangles ``tris`` (T, 3) of points with
-    :func:`axis_coordinates` (x, y, z): (inside, crossed, along), each (T,). ``inside``: the origin lies
-    in the triangle's projection onto the plane perpendicular to the axis (same sign of the three edge
-    functions; touching counts); ``crossed``: inside and not edge-on, so there is a crossing point;
-    ``along`` (BU): its coordinate along the axis (NaN where edge-on)."""
-    xa, xb, xc = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
-    ya, yb, yc = y[tris[:, 0]], y[tris[:, 1]], y[tris[:, 2]]
-    # twice the signed areas of (origin, b, c), (origin, c, a), (origin, a, b): barycentrics of the axis
-    la, lb, lc = xb * yc - xc * yb, xc * ya - xa * yc, xa * yb - xb * ya
-    with np.errstate(invalid="ignore", divide="ignore"):
-        inside = ((la >= 0) & (lb >= 0) & (lc >= 0)) | ((la <= 0) & (lb <= 0) & (lc <= 0))
-        total = la + lb + lc
-        along = (la * z[tris[:, 0]] + lb * z[tris[:, 1]] + lc * z[tris[:, 2]]) / np.where(total != 0, total, np.nan)
-    return inside, inside & (total != 0), along
-
-
-def axis_distance(x, y, tris) -> np.ndarray:
-    """(T,) distance (BU) from the observer-hole axis to the triangles ``tris`` (T, 3) projected along
-    it (0 when the axis passes through the projection); x, y from :func:`axis_coordinates`."""
-    inside, _, d = nearest_to_axis(x, y, tris)
-    return np.where(inside, 0.0, d.min(axis=1))
-
-
-def nearest_to_axis(x, y, tris):
-    """(inside, t, d) for the triangles ``tris`` (T, 3) projected along the axis (x, y from
-    :func:`axis_coordinates`): inside (T,) the axis passes through the projection (touching counts);
-    per side k (corner k -> k + 1) the parameter t (T, 3) in [0, 1] of its point nearest to the axis
-    and that point's distance d (T, 3) (BU)."""
-    px, py = x[tris], y[tris]  # (T, 3)
-    qx, qy = np.roll(px, -1, axis=1), np.roll(py, -1, axis=1)
-    cross = px * qy - py * qx  # twice the signed areas of (origin, corner k, corner k+1)
-    inside = (cross >= 0).all(axis=1) | (cross <= 0).all(axis=1)
-    dx, dy = qx - px, qy - py
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.clip(-(px * dx + py * dy) / (dx * dx + dy * dy), 0.0, 1.0)
-    t = np.nan_to_num(t)
-    return inside, t, np.hypot(px + t * dx, py + t * dy)
-
-
-def projected_area(x, y, tris) -> np.ndarray:
-    """(T,) twice the signed area of the triangles ``tris`` (T, 3) projected along the axis (BU^2;
-    positive: counter-clockwise seen from the camera's side); x, y from :func:`axis_coordinates`."""
-    ax, bx, cx = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
-    ay, by, cy = y[tris[:, 0]], y[tris[:, 1]], y[tris[:, 2]]
-    return (bx - ax) * (cy - ay) - (cx - ax) * (by - ay)
-
-
-def _beside_axis(x, y, tris, tol) -> np.ndarray:
-    """(T,) bits, nonzero where all three corners of the triangles ``tris`` lie more than ``tol`` (a
-    number, or one per point) to the same side of the axis along x or along y (bits 0-3: x > tol,
-    x < -tol, y > tol, y < -tol), which puts the whole triangle farther than ``tol`` from it. NaN
-    coordinates compare False: such a corner is on no side, so its triangle is never excluded."""
-    with np.errstate(invalid="ignore"):
-        side = ((x > tol).astype(np.uint8) | ((x < -tol).astype(np.uint8) << 1)
-                | ((y > tol).astype(np.uint8) << 2) | ((y < -tol).astype(np.uint8) << 3))
-    return side.take(tris[:, 0]) & side.take(tris[:, 1]) & side.take(tris[:, 2])
-
-
-def within_axis_distance(x, y, tris, limit) -> np.ndarray:
-    """(T,) bool: :func:`axis_distance` of the triangles ``tris`` (T, 3) <= ``limit`` (BU), computed only
-    for those not excluded by their corners' box (all corners more than ``limit`` to one side of the
-    axis along x or along y puts the whole triangle farther): the same answer, far cheaper on a large
-    mesh of which a few triangles lie next to the axis."""
-    maybe = _beside_axis(x, y, tris, limit) == 0
-    out = np.zeros(len(tris), bool)
-    t = np.flatnonzero(maybe)
-    out[t] = axis_distance(x, y, tris.take(t, axis=0)) <= limit
-    return out
-
-
-def side_azimuths(x, y, tris) -> np.ndarray:
-    """(T, 3) the angle (radians, <= pi) about the axis between the projected corners k and k + 1 of
-    the triangles ``tris`` (T, 3): the azimuth side k covers (0 for a side with a corner on the axis,
-    NaN with a corner without coordinates); x, y from :func:`axis_coordinates`."""
-    tris = np.asarray(tris, dtype=np.int64)
-    at = used_vertices(tris, len(x))
-    psi = np.full(len(x), np.nan)
-    psi[at] = np.arctan2(np.asarray(y).take(at), np.asarray(x).take(at))  # once per corner point
-    psi[at[(np.asarray(x).take(at) == 0) & (np.asarray(y).take(at) == 0)]] = np.inf  # on the axis: no azimuth
-    a = psi.take(tris)
-    d = a[:, [1, 2, 0]] - a
-    with np.errstate(invalid="ignore"):
-        out = np.abs(np.mod(d + np.pi, 2.0 * np.pi) - np.pi)
-    return np.where(np.isinf(a) | np.isinf(a[:, [1, 2, 0]]), 0.0, out)  # a side from the axis covers none
-
-
-def longest_side(x, y, tris) -> np.ndarray:
-    """(T,) the longest side (BU) of the triangles ``tris`` (T, 3) projected along the axis; x, y from
-    :func:`axis_coordinates`."""
-    px, py = x.take(tris), y.take(tris)
-    return np.maximum(np.maximum(np.hypot(px[:, 1] - px[:, 0], py[:, 1] - py[:, 0]),
-                                 np.hypot(px[:, 2] - px[:, 1], py[:, 2] - py[:, 1])),
-                      np.hypot(px[:, 0] - px[:, 2], py[:, 0] - py[:, 2]))
-
-
-def axis_geometry(source_points, tris, camera, hole, order, span_of=None, axis_xyz=None):
-    """Per triangle: (straddles, span).
-
-    ``straddles`` (F,) bool: the observer-hole axis passes through the triangle on a half where that
-    order's images form an Einstein ring, so no mesh can show it. The axis is the line through
-    ``hole`` and ``camera`` (BU); a triangle is crossed when the origin lies inside the projection of
-    its corners onto the plane perpendicular to the axis (same sign of the three edge functions;
-    touching counts). The crossing point's coordinate along the axis decides the half: behind the
-    hole (phi = pi) both orders are rings; in front of the hole (phi = 0) only order 2 is (its ray
-    sweeps 2 pi), the order-1 image there is regular.
-
-    ``span`` (F,) radians: the angle around the axis the triangle covers (pi for triangles containing
-    the axis in projection); with ``span_of`` (a boolean mask or index array) only for those
-    triangles, the others get NaN. ``axis_xyz``: :func:`axis_coordinates` of ``source_points``, when the
-    caller has them (the same numbers).
-    """
-    tris = np.asarray(tris, dtype=np.int64)
-    x, y, z = axis_coordinates(source_points, camera, hole) if axis_xyz is None else axis_xyz
-    inside, crossed, along = axis_crossing(x, y, z, tris)
-    span = np.full(len(tris), np.nan)
-    sel = slice(None) if span_of is None else span_of
-    sides = side_azimuths(x, y, tris[sel])
-    span[sel] = np.maximum(np.maximum(sides[:, 0], sides[:, 1]), sides[:, 2])
-    span = np.where(inside, np.pi, span)
-    straddles = crossed & (along < 0) if order == 1 else crossed
-    return straddles, span
-
-
-def near_axis(source_points, tris, camera, hole, margin=1e-9, axis_xyz=None) -> np.ndarray:
-    """(F,) bool: triangles that may be crossed by the observer-hole axis: False only for those whose
-    corners all lie, by more than ``margin`` times their distance from the hole, on one side of one of
-    two perpendicular planes through the axis. A superset of the triangles :func:`axis_geometry`
-    finds crossed, and of every sub-triangle of theirs (sub-triangles lie inside their source
-    triangle), for ``cull(..., axis_candidates=...)``. Non-finite corners make a candidate.
-    ``axis_xyz``: :func:`axis_coordinates` of ``source_points``, when the caller has them."""
-    tris = np.asarray(tris, dtype=np.int64)
-    x, y, z = axis_coordinates(source_points, camera, hole) if axis_xyz is None else axis_xyz
-    tol = margin * np.sqrt(x * x + y * y + z * z)  # margin times the distance from the hole (orthonormal axes)
-    return _beside_axis(x, y, tris, tol) == 0
 
 
 def side_planes(origin, corner_directions) -> np.ndarray:
@@ -264,7 +76,7 @@ def outside_bits(points, planes) -> np.ndarray:
 
 def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_planes=None, image_points=None,
          hole=None, order=None, pixel_angle=None, max_error_px=None, *, source_circumference=None,
-         image_circumference=None, image_outside_bits=None, axis_candidates=None):
+         image_circumference=None, image_outside_bits=None, axis_candidates=None, beta=None):
     """Mask of image triangles to keep, and a :class:`CullReport`.
 
     tris (F, 3) index the per-vertex arrays: image_dirs (V, 3) unit apparent directions of the images,
@@ -286,7 +98,10 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     same): ``source_circumference`` and ``image_circumference`` (F,), :func:`circumference` of the
     undistorted and image directions; ``image_outside_bits`` (V,), :func:`outside_bits` of
     ``image_points``; ``axis_candidates`` (F,) bool, a superset of the triangles the axis may pass
-    through (e.g. from :func:`near_axis` of their source triangles; others are not tested).
+    through (e.g. from :func:`near_axis` of their source triangles; others are not tested). ``beta``
+    (3,; units of c): the camera's velocity (mapping.Scene.beta), whose view ``image_dirs`` are; the
+    undistorted view and the ring measure are then the moving camera's (observer_view.unit_directions,
+    observer_view.hole_angle).
     """
     tris = np.asarray(tris, dtype=np.int64)
     rep = CullReport()
@@ -296,7 +111,7 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     keep &= ~bad_v
     src_c = source_circumference
     if src_c is None:
-        src_c = circumference(unit_directions(source_points, camera), tris)
+        src_c = circumference(unit_directions(source_points, camera, beta), tris)
     degenerate = keep & ~(src_c > 0)
     rep.degenerate_source = int(degenerate.sum())
     keep &= ~degenerate
@@ -318,7 +133,7 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
             if pixel_angle and max_error_px:
                 at = used_vertices(t_sel, len(image_dirs))  # once per corner point
                 angle = np.full(len(image_dirs), np.nan)
-                angle[at] = hole_angle(image_dirs.take(at, axis=0), camera, hole)
+                angle[at] = hole_angle(image_dirs.take(at, axis=0), camera, hole, beta)
                 r_px = angle.take(t_sel)
                 r_px = np.maximum(np.maximum(r_px[:, 0], r_px[:, 1]), r_px[:, 2]) / pixel_angle
                 wide[sel] = ring_sagitta(r_px, span[sel]) > max_error_px
@@ -367,10 +182,10 @@ def cull_pieces(frame, source, coarse, plan, pieces, patches, order):
         sub.tris, img.direction, img.valid, sub.positions, scene.camera, settings.cull_ratio, planes,
         img.position, scene.hole, order, budget.pixel_angle, budget.tolerance_px,
         source_circumference=_face_values(sub, face_src, source.circumference, lambda t: circumference(
-            unit_directions(sub.positions, scene.camera), t)),
+            unit_directions(sub.positions, scene.camera, scene.view_beta), t)),
         image_circumference=_face_values(sub, face_src, coarse.circumference[order],
                                          lambda t: circumference(img.direction, t)),
-        image_outside_bits=bits, axis_candidates=source.near_axis[face_src])
+        image_outside_bits=bits, axis_candidates=source.near_axis[face_src], beta=scene.view_beta)
     rep.extra, rep.presplit = report.extra, report.presplit
     rep.outside_frustum += plan.set_aside.get("outside_frustum", 0)
     rep.back_face = plan.set_aside.get("back_face", 0)
@@ -448,7 +263,7 @@ def _under_patches(frame, patches, order, tris, face_src, points, img, keep, n_s
         t = tris.take(cand, axis=0)
         true = frame.map.images(points.take(t, axis=0).mean(axis=1), (order,))[order]
         drawn_dir = img.direction.take(t, axis=0).sum(axis=1)
-        drawn_dir /= np.maximum(mapping.row_norm(drawn_dir), 1e-300)[:, None]
+        drawn_dir /= np.maximum(row_norm(drawn_dir), 1e-300)[:, None]
         err = subdivision.angle_of_chord(chord_length(true.direction, drawn_dir))  # radians
         budget = frame.budget
         out[cand[err > B.UNDER_PATCH_FACTOR * budget.tolerance_px * budget.pixel_angle]] = True

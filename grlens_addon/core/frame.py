@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import culling, mapping, subdivision
+from . import mapping, observer_view, subdivision
 from .budget import Budget
 
 
@@ -136,8 +136,8 @@ class Source:
     mesh: the cleaned SourceMesh; origin (T,): each triangle's index into the caller's tris; n_bad:
     triangles dropped by the cleaning; presplit: triangles added by a first split (level_plan); edges
     (subdivision.Edges); plane (mapping.PlaneCoordinates) of the vertices; axis_xyz: their
-    culling.axis_coordinates (BU); circumference (T,): the triangles' undistorted circumference on the
-    view sphere; near_axis (T,): those the axis may cross (culling.near_axis); crossings: where the axis
+    observer_view.axis_coordinates (BU); circumference (T,): the triangles' undistorted circumference on the
+    view sphere; near_axis (T,): those the axis may cross (observer_view.near_axis); crossings: where the axis
     crosses the surface (axis_patch.crossings_of, found when first needed)."""
 
     mesh: SourceMesh
@@ -184,10 +184,11 @@ def prepare_source(frame: Frame, src: SourceMesh, origin=None, n_bad: int = 0) -
     scene = frame.scene
     out.edges = _edges_of(mesh.tris)
     out.plane = mapping.plane_coordinates(mesh.positions, scene)
-    out.axis_xyz = culling.axis_coordinates(mesh.positions, scene.camera, scene.hole)
+    out.axis_xyz = observer_view.axis_coordinates(mesh.positions, scene.camera, scene.hole)
     out.circumference = circumference_from_edges(
-        chord_lengths(culling.unit_directions(mesh.positions, scene.camera), out.edges.verts), out.edges.of_tri)
-    out.near_axis = culling.near_axis(mesh.positions, mesh.tris, scene.camera, scene.hole, axis_xyz=out.axis_xyz)
+        chord_lengths(observer_view.unit_directions(mesh.positions, scene.camera, scene.view_beta), out.edges.verts),
+        out.edges.of_tri)
+    out.near_axis = observer_view.near_axis(mesh.positions, mesh.tris, scene.camera, scene.hole, axis_xyz=out.axis_xyz)
     return out
 
 
@@ -257,12 +258,12 @@ def _edges_of(tris) -> subdivision.Edges:
 
 def chord_lengths(directions, edge_verts) -> np.ndarray:
     """(E,) chord length between the unit ``directions`` of each edge's end points (dimensionless)."""
-    return culling.chord_length(directions.take(edge_verts[:, 1], axis=0),
+    return observer_view.chord_length(directions.take(edge_verts[:, 1], axis=0),
                                 directions.take(edge_verts[:, 0], axis=0))
 
 
 def circumference_from_edges(chords, of_tri) -> np.ndarray:
-    """(T,) culling.circumference of triangles from the chord lengths (E,) of their edges."""
+    """(T,) observer_view.circumference of triangles from the chord lengths (E,) of their edges."""
     return chords[of_tri[:, 0]] + chords[of_tri[:, 1]] + chords[of_tri[:, 2]]
 
 
@@ -283,7 +284,8 @@ class SourceImages:
         """(N,) radians: the angle of each vertex's ``order`` image from the hole's direction."""
         if order not in self._hole:
             with np.errstate(invalid="ignore"):
-                self._hole[order] = culling.hole_angle(self.images[order].direction, self.scene.camera, self.scene.hole)
+                self._hole[order] = observer_view.hole_angle(self.images[order].direction, self.scene.camera,
+                                                             self.scene.hole, self.scene.view_beta)
         return self._hole[order]
 
 

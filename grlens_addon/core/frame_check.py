@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import image_metrics, mapping, pipeline, rasterize, raytrace
+from . import image_metrics, mapping, observer_view, pipeline, rasterize, raytrace
 
 @dataclass
 class FrameCheck:
@@ -88,11 +88,13 @@ class FrameCheck:
         return "; ".join(parts)
 
 
-def lensed_world_sky(hole, r_s):
+def lensed_world_sky(hole, r_s, beta=None):
     """The add-on's lensed world as a sky model for :func:`check_frame`: (directions (N, 3) unit
     world, camera position (3,) BU) -> escape directions (N, 3), the node group's mapping (the
     escape table of the camera's radius, rounded to 7 digits as the world update rounds it, read
-    linearly in s; ``lutgen.EscapeTable.directions``) in float64. ``hole`` (3,) and ``r_s`` in BU."""
+    linearly in s; ``lutgen.EscapeTable.directions``) in float64. ``hole`` (3,) and ``r_s`` in BU;
+    ``beta`` (3,; units of c): the camera's velocity in its local static frame, whose directions are
+    taken back to that frame first (observer_view.unaberrate), as the node group does."""
     from lutgen.escape import escape_table
 
     hole = np.asarray(hole, dtype=float)
@@ -103,6 +105,8 @@ def lensed_world_sky(hole, r_s):
         key = mapping.round_radius(np.linalg.norm(e1) / r_s)
         if key not in tables:
             tables[key] = escape_table(key)
+        if beta is not None:
+            d = observer_view.unaberrate(np.asarray(d, dtype=float), beta)
         return tables[key].directions(d, e1 / np.linalg.norm(e1))
 
     return sky
@@ -118,7 +122,8 @@ def check_frame(sources, scene: mapping.Scene, lut, settings: pipeline.Settings,
     camera's frustum planes (None for a panorama). ``sky``: optional model of the lensed world, a
     function (directions (N, 3) unit world, camera position (3,) BU) -> (N, 3) unit world directions at
     infinity, NaN rows for rays that fall in; it is asked for every pixel that has a ray and compared
-    with the reference's sky (``metrics["sky"]``)."""
+    with the reference's sky (``metrics["sky"]``). A moving observer (``scene.view_beta``) is checked as
+    such: the reference traces its aberrated pixel rays (raytrace.trace)."""
     sources = list(sources)
     if not sources:
         raise ValueError("nothing to check: no source mesh")
@@ -129,7 +134,7 @@ def check_frame(sources, scene: mapping.Scene, lut, settings: pipeline.Settings,
     settings = dataclasses.replace(settings, pixel_angle=camera.pixel_angle)
     tri_scene = raytrace.TriangleScene.concatenate([(s.positions, s.tris, s.corner_uv) for s in sources])
     t0 = time.perf_counter()
-    ref = raytrace.trace(tri_scene, camera, scene.hole, scene.r_s)
+    ref = raytrace.trace(tri_scene, camera, scene.hole, scene.r_s, beta=scene.view_beta)
     t_ref = time.perf_counter() - t0
     planes = camera.frustum_planes()
     meshes, t_poly = [], 0.0
@@ -140,7 +145,8 @@ def check_frame(sources, scene: mapping.Scene, lut, settings: pipeline.Settings,
         meshes += rasterize.from_images(images, object_id=i)
     poly = rasterize.rasterize(meshes, camera) if meshes else raytrace.PixelBuffers.empty((camera.height, camera.width))
     metrics = image_metrics.compare(
-        ref, poly, image_pixels=lambda points, order: raytrace.image_pixels(points, camera, scene.hole, scene.r_s, order),
+        ref, poly, image_pixels=lambda points, order: raytrace.image_pixels(points, camera, scene.hole, scene.r_s, order,
+                                                                            beta=scene.view_beta),
         column_period=camera.column_period)
     model, t_sky = None, 0.0
     dirs = camera.pixel_directions()

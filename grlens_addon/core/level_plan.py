@@ -9,7 +9,7 @@ Per order, in this sequence:
    (:func:`probe_edges`), and become vertices of the cut where the level is even.
 2. Silhouette: edges on the silhouette (visibility.Sight.silhouette) get the coverage tolerance.
 3. Rings: strongly magnified triangles next to the observer-hole axis get levels that keep the
-   azimuth each piece covers within the ring sagitta the tolerance allows (culling.max_ring_span):
+   azimuth each piece covers within the ring sagitta the tolerance allows (observer_view.max_ring_span):
    the same measure the culling applies. Next to axis patches, the ring's edge gets the coverage
    tolerance; triangles in a thin band around the ring are cut into strips instead (subdivision).
 4. Selection: source triangles outside the frustum, replaced by an axis patch or hidden behind a
@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import axis_patch, culling, interior, mapping, silhouette, subdivision
+from . import axis_patch, culling, interior, mapping, observer_view, silhouette, subdivision
 from . import budget as B
 from .frame import Frame, Source, SourceImages
 
@@ -177,7 +177,7 @@ def _ring_and_silhouette(frame, source, coarse, sight, order_patches, order, lev
         # coverage, whatever the level
         reach = B.RING_EDGE_REACH * max(p.radius for p in order_patches)
         xy = source.xy
-        near = culling.within_axis_distance(xy[:, 0], xy[:, 1], tris.take(cand, axis=0), reach)
+        near = observer_view.within_axis_distance(xy[:, 0], xy[:, 1], tris.take(cand, axis=0), reach)
         want = np.where(near, np.maximum(want, sharp), want)
     strip = np.zeros(cand.size, bool)
     if B.STRIP_BAND_PX and cand.size:
@@ -212,9 +212,9 @@ def _ring_candidates(src_circ, img_circ) -> np.ndarray:
 
 def _ring_levels(frame, source, img_circ, hole_r, order, tol, cov, skip=None, cap=None, on_sheets=None, hidden=None):
     """The levels that strongly magnified source triangles near the axis need so that their pieces are
-    narrow enough on screen (culling.ring_sagitta: a piece covering an azimuth d at an angular radius R
+    narrow enough on screen (observer_view.ring_sagitta: a piece covering an azimuth d at an angular radius R
     from the hole's direction has straight sides R (1 - cos(d/2)) inside the ring): a triangle
-    covering D gets ceil(D / (RING_LEVEL_MARGIN d_max)), d_max = culling.max_ring_span(R_px, tolerance),
+    covering D gets ceil(D / (RING_LEVEL_MARGIN d_max)), d_max = observer_view.max_ring_span(R_px, tolerance),
     on all its edges (levels are per edge, so neighbours stay crack-free), capped at max_tess_level.
 
     ``img_circ``: the triangles' image circumferences of this order; ``hole_r`` (N,): the angles
@@ -239,7 +239,7 @@ def _ring_levels(frame, source, img_circ, hole_r, order, tol, cov, skip=None, ca
     if cand.size == 0:
         return cand, np.ones(0, np.int64), np.ones(0, np.int64), np.zeros((0, 3))
     scene = frame.scene
-    _, span = culling.axis_geometry(source.positions, tris[cand], scene.camera, scene.hole, order,
+    _, span = observer_view.axis_geometry(source.positions, tris[cand], scene.camera, scene.hole, order,
                                     axis_xyz=source.axis_xyz)
     if cap is not None:
         span = np.fmin(span, cap(cand))
@@ -251,20 +251,20 @@ def _ring_levels(frame, source, img_circ, hole_r, order, tol, cov, skip=None, ca
         t_off = tris.take(cand[off], axis=0)
         # only triangles nearly parallel to the axis (projected area under EDGE_ON_RATIO of their own):
         # the others' pieces spread their azimuth evenly enough for the level of the azimuth they span
-        proj = np.abs(culling.projected_area(x, y, t_off))
-        own = mapping.row_norm(silhouette.normals(source.positions, t_off))
+        proj = np.abs(observer_view.projected_area(x, y, t_off))
+        own = observer_view.row_norm(silhouette.normals(source.positions, t_off))
         keep = proj < B.EDGE_ON_RATIO * own
         off, t_off = off[keep], t_off[keep]
     if off.size:
-        d_min = culling.axis_distance(x, y, t_off)
+        d_min = observer_view.axis_distance(x, y, t_off)
         with np.errstate(invalid="ignore", divide="ignore"):
-            near = np.where(d_min > 0, culling.longest_side(x, y, t_off) / d_min, np.nan)
+            near = np.where(d_min > 0, observer_view.longest_side(x, y, t_off) / d_min, np.nan)
         span[off] = np.fmax(span[off], near)
     with np.errstate(invalid="ignore", divide="ignore"):
         radius = hole_r / frame.budget.pixel_angle  # px
         corner_px = radius.take(tris.take(cand, axis=0))
         r_px = np.maximum(np.maximum(corner_px[:, 0], corner_px[:, 1]), corner_px[:, 2])
-        out = [_azimuth_levels(span, culling.max_ring_span(r_px, t), top) for t in (tol, cov)]
+        out = [_azimuth_levels(span, observer_view.max_ring_span(r_px, t), top) for t in (tol, cov)]
     return cand, out[0], out[1], corner_px
 
 
@@ -286,7 +286,7 @@ def _span_cap(patches, tris, xy) -> np.ndarray:
     only make the pieces narrow enough from delta outwards."""
     x, y = xy[:, 0], xy[:, 1]
     out = np.full(len(tris), np.inf)
-    near = np.flatnonzero(culling.within_axis_distance(x, y, tris, max(p.radius for p in patches)))
+    near = np.flatnonzero(observer_view.within_axis_distance(x, y, tris, max(p.radius for p in patches)))
     if near.size == 0:
         return out
     t = tris.take(near, axis=0)
@@ -294,7 +294,7 @@ def _span_cap(patches, tris, xy) -> np.ndarray:
     for p in patches:
         delta = np.minimum(delta, axis_patch.open_distance(p, t, x, y))
     with np.errstate(divide="ignore", invalid="ignore"):
-        out[near] = np.where(np.isfinite(delta), culling.longest_side(x, y, t) / delta, np.inf)
+        out[near] = np.where(np.isfinite(delta), observer_view.longest_side(x, y, t) / delta, np.inf)
     return out
 
 
@@ -329,7 +329,7 @@ def _nearest_point_radius(frame, source, tris_idx, order) -> np.ndarray:
     point nearest to the axis in projection (on its boundary; NaN when the axis passes through it)."""
     xy = source.xy
     t3 = source.tris.take(tris_idx, axis=0)
-    inside, t, d = culling.nearest_to_axis(xy[:, 0], xy[:, 1], t3)
+    inside, t, d = observer_view.nearest_to_axis(xy[:, 0], xy[:, 1], t3)
     k = np.argmin(d, axis=1)  # the side with the nearest point
     rows = np.arange(len(t3))
     a = source.positions.take(t3[rows, k], axis=0)
@@ -338,7 +338,7 @@ def _nearest_point_radius(frame, source, tris_idx, order) -> np.ndarray:
     img = frame.map.images(point, (order,))[order]
     scene = frame.scene
     with np.errstate(invalid="ignore"):
-        r = culling.hole_angle(img.direction, scene.camera, scene.hole) / frame.budget.pixel_angle
+        r = observer_view.hole_angle(img.direction, scene.camera, scene.hole, scene.view_beta) / frame.budget.pixel_angle
     return np.where(inside | ~img.valid, np.nan, r)
 
 
@@ -348,9 +348,9 @@ def _side_levels(xy, tris, corner_px, tolerance, settings) -> np.ndarray:
     about the axis gets ceil(D_k / (RING_LEVEL_MARGIN d_max)) as in :func:`_ring_levels`, with d_max
     from the triangle's largest corner radius ``corner_px`` and ``tolerance`` (pixels)."""
     top = int(np.clip(settings.max_tess_level, 1, subdivision.GRID))
-    span = culling.side_azimuths(xy[:, 0], xy[:, 1], tris)
+    span = observer_view.side_azimuths(xy[:, 0], xy[:, 1], tris)
     with np.errstate(invalid="ignore", divide="ignore"):
-        d_max = culling.max_ring_span(corner_px.max(axis=1), tolerance)
+        d_max = observer_view.max_ring_span(corner_px.max(axis=1), tolerance)
     return _azimuth_levels(span, np.reshape(d_max, (-1, 1)), top)
 
 
@@ -379,10 +379,10 @@ def presplit(frame: Frame, source: Source, coarse: SourceImages, sight) -> np.nd
         t = source.tris[cand]
         px, py = x[t], y[t]
         h = np.hypot(px - np.roll(px, -1, axis=1), py - np.roll(py, -1, axis=1)).max(axis=1)
-        dmin = culling.axis_distance(x, y, t)
+        dmin = observer_view.axis_distance(x, y, t)
         with np.errstate(invalid="ignore", divide="ignore"):
             radius = coarse.hole_angle(order) / budget.pixel_angle
-            d_max = culling.max_ring_span(radius[t].max(axis=1), budget.tolerance_px)
+            d_max = observer_view.max_ring_span(radius[t].max(axis=1), budget.tolerance_px)
             n = np.where(dmin > 0, h / (B.RING_LEVEL_MARGIN * d_max * dmin), 1.0)
         need[cand] = np.maximum(need[cand], np.nan_to_num(n, nan=1.0, posinf=1.0))
     split = need > B.PRESPLIT_MIN

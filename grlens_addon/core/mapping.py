@@ -9,13 +9,16 @@ unit vector of p's component perpendicular to e1, so p has polar coordinates (r,
 phi in [0, pi] in the plane (e1, e2). The observer sees the order-1 image in the direction
 cos(xi) e1 + sin(xi) e2 and the order-2 image in cos(xi) e1 - sin(xi) e2, both in its static
 orthonormal frame, which grlens identifies with Blender's Euclidean axes at the camera. Each image
-is placed at its light-travel-time distance dt * r_s from the camera.
+is placed at its light-travel-time distance dt * r_s from the camera. That step from the table's
+values to the world is observer_view.place_images.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+
+from .observer_view import any_perpendicular, lorentz_gamma, place_images, row_norm
 
 # A vertex this close to the observer-hole axis (|p_perp| / |p|) has no unique plane: it is seen as
 # an Einstein ring, which a mesh cannot show. Such vertices are flagged and their triangles culled.
@@ -37,11 +40,18 @@ def round_radius(r_obs) -> float:
 
 @dataclass
 class Scene:
-    """Camera and hole in world space (BU) and the Schwarzschild radius r_s (BU)."""
+    """Camera and hole in world space (BU) and the Schwarzschild radius r_s (BU); ``beta`` (3,), when
+    frames measure physical time: the camera's velocity in its local static frame (units of c, world
+    axes; observer_view.static_frame_beta), which aberrates every image direction and shifts every
+    image's light (assemble's 1 + z); None: a still, seen by the static observer (beta = 0 aberrates
+    nothing but still gives every image its 1 + z). ``aberration`` False (for teaching): the directions
+    are the static observer's though the camera moves (its light is still shifted)."""
 
     camera: np.ndarray  # (3,)
     hole: np.ndarray  # (3,)
     r_s: float
+    beta: np.ndarray | None = None
+    aberration: bool = True
 
     def __post_init__(self):
         self.camera = np.asarray(self.camera, dtype=np.float64).reshape(3)
@@ -53,6 +63,15 @@ class Scene:
             raise ValueError("camera and black hole positions must be finite")
         if not np.linalg.norm(self.camera - self.hole) > 0:
             raise ValueError("the camera is at the centre of the black hole")
+        if self.beta is not None:
+            self.beta = np.asarray(self.beta, dtype=np.float64).reshape(3)
+            lorentz_gamma(self.beta)  # refuses |beta| >= 1
+
+    @property
+    def view_beta(self) -> np.ndarray | None:
+        """The velocity that aberrates the camera's view (units of c): ``beta``, or None without one or
+        with ``aberration`` off."""
+        return self.beta if self.aberration else None
 
     @property
     def r_obs(self) -> float:
@@ -101,28 +120,6 @@ def plane_coordinates(points: np.ndarray, scene: Scene) -> PlaneCoordinates:
     return PlaneCoordinates(r=r, phi=phi, e2=e2, on_axis=on_axis)
 
 
-def row_norm(v) -> np.ndarray:
-    """(N,) Euclidean lengths of the rows of ``v`` (N, 3): as np.linalg.norm(v, axis=1) to the last bit
-    or so, several times faster on long arrays (one fused pass instead of a reduction per row)."""
-    return np.sqrt(np.einsum("ij,ij->i", v, v))
-
-
-def used_vertices(tris, n_vertices) -> np.ndarray:
-    """Sorted indices, among ``n_vertices`` points, of those the triangles ``tris`` (T, 3) use (like
-    np.unique of their indices, without sorting)."""
-    mask = np.zeros(n_vertices, dtype=bool)
-    mask[np.asarray(tris).ravel()] = True
-    return np.flatnonzero(mask)
-
-
-def any_perpendicular(e1):
-    """A unit vector perpendicular to the unit vector ``e1`` (3,), chosen deterministically (from the z
-    axis, or the x axis when e1 is close to z)."""
-    a = np.array([0.0, 0.0, 1.0]) if abs(e1[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    v = a - (a @ e1) * e1
-    return v / np.linalg.norm(v)
-
-
 @dataclass
 class Images:
     """Lensed images of N vertices for one order.
@@ -169,12 +166,8 @@ class Mapper:
         out = {}
         for order in orders:
             look = looks[order]
-            sign = 1.0 if order == 1 else -1.0
-            c, s = np.cos(look.xi), np.sin(look.xi)
-            direction = c[:, None] * scene.e1 + (sign * s)[:, None] * plane.e2
-            distance = look.dt * scene.r_s
-            position = scene.camera + distance[:, None] * direction
-            valid = np.isfinite(distance) & np.isfinite(c) & ~plane.on_axis
+            direction, distance, position, finite = place_images(look.xi, look.dt, plane.e2, scene, order)
+            valid = finite & ~plane.on_axis
             position[~valid] = np.nan
             out[order] = Images(position=position, direction=direction, distance=distance, valid=valid, plane=plane,
                                 xi=look.xi, dt=look.dt, ux=look.ux, uy=look.uy)

@@ -8,7 +8,8 @@ Units and conventions
 ---------------------
 World positions, r_s, distances and light travel times c*dt are in Blender units (BU); internally
 lengths are in units of r_s (as in ``lutgen``), c = 1. The camera is a static observer at
-r_obs = |camera - hole| / r_s (> 1.5). ``e1 = (camera - hole)/|camera - hole|`` is its outward radial
+r_obs = |camera - hole| / r_s (> 1; inside the photon sphere too).
+``e1 = (camera - hole)/|camera - hole|`` is its outward radial
 direction; a ray leaving the camera in the world direction ``d`` makes the angle ``xi`` with e1 (in
 the observer's static orthonormal frame, which grlens identifies with Blender's Euclidean axes at the
 camera) and lies in the plane through the hole spanned by e1 and ``e2 = unit(d - (d.e1) e1)``. In
@@ -27,8 +28,11 @@ w = w_obs + s c Phi (s = +1 for rays that leave towards the hole, cos xi < 0, el
 * plunging orbits (b < b_crit): u = e1 + A (1 - cn(w|k^2)) / (1 + cn(w|k^2)), A = |m + i n - e1|,
   k^2 = (A + m - e1)/(2A), c = sqrt(A);
 
-both the inverse of lutgen.orbit.sweep (``w / c`` is the F(u) of that module). The swept angle is
-therefore exact, however often a ray near the critical impact parameter winds around the hole.
+both the inverse of lutgen.orbit.sweep (``w / c`` is the F(u) of that module). For an observer inside
+the photon sphere (r_obs <= 1.5) the turning rays lie on the inner branch u >= e3 (they climb to an
+apoapsis and fall in): u = (e3 - e2 sn^2(w | k^2)) / cn^2(w | k^2), same k^2 and c, w = 0 at the
+apoapsis, the inverse of the angle swept from it (lutgen.rays._sweep_inner, Carlson's form). The swept
+angle is therefore exact, however often a ray near the critical impact parameter winds around the hole.
 
 Intersections
 -------------
@@ -53,7 +57,8 @@ there is no step-size error; the answers are exact up to rounding (tested agains
 and, for the curve itself, against lutgen.reference's DOP853 integrator).
 
 Light travel time: lutgen.orbit.travel_time from u_obs to u_hit, or, for a hit after the periapsis,
-from u_obs to the periapsis plus from there to u_hit (as lutgen.solver._finish does).
+from u_obs to the periapsis plus from there to u_hit (as lutgen.solver._finish does); on the inner
+branch a Gauss-Legendre quadrature in v, u = e3 + (e3 - e2) sinh^2(v) (lutgen.orbit.travel_time_inner).
 
 Sky
 ---
@@ -66,6 +71,18 @@ cos(Phi_inf) e1 + sin(Phi_inf) e2: the sky it shows (``PixelBuffers.sky``, :func
 no lutgen table and no emitter-observer solver involved). Accurate to ~1e-13 rad, except near
 xi = pi/2 (a turning point next to the camera: ~1e-9 rad) and next to the critical angle, where
 Phi_inf grows like -ln(xi_crit - xi) and the rounding of xi (4e-16 rad) is amplified accordingly.
+
+Moving cameras
+--------------
+Everything above is the static observer's view. A camera moving with the velocity ``beta`` (units
+of c, world axes) in its local static frame (observer_view.static_frame_beta) sees through each
+pixel the light that the static observer at the same event sees from the pixel's direction taken
+back to the static frame (observer_view.unaberrate, exact Lorentz aberration): the tracer traces
+those static directions. Light from a hit reaches the camera with the frequency ratio
+g = nu_seen / nu_emitted = 1 / (1 + z) of observer_view.frequency_ratio (the hit at rest, the
+camera moving with beta; ``PixelBuffers.g``), the sky's light (emitted at rest at infinity) with
+g = gamma (1 + beta . d) / sqrt(1 - r_s/r_obs), d the static direction. Without beta (or beta = 0)
+the camera is static and every other buffer is what it was.
 
 Cameras
 -------
@@ -92,9 +109,11 @@ import numpy as np
 from scipy.special import ellipj
 
 from lutgen import orbit as _orb
-from lutgen.solver import check_observer_radius, connect
+from lutgen.orbit import sweep_inner as _sweep_inner
+from lutgen.solver import connect, static_observer_radius
 from .culling import side_planes
-from .mapping import Scene, any_perpendicular, plane_coordinates
+from .mapping import Scene, plane_coordinates
+from .observer_view import aberrate, any_perpendicular, frequency_ratio, ray_planes, unaberrate, view_directions
 from .ragged import group_offsets
 
 TWO_PI = 2.0 * np.pi
@@ -401,7 +420,8 @@ _BUFFER_FIELDS = (  # name, dtype, fill value, trailing shape
     ("hit", bool, False, ()), ("object_id", np.int64, -1, ()), ("face", np.int64, -1, ()),
     ("bary", np.float64, np.nan, (3,)), ("uv", np.float64, np.nan, (2,)), ("order", np.int64, 0, ()),
     ("light_time", np.float64, np.nan, ()), ("fell", bool, False, ()), ("point", np.float64, np.nan, (3,)),
-    ("phi", np.float64, np.nan, ()), ("depth", np.float64, np.nan, ()), ("sky", np.float64, np.nan, (3,)))
+    ("phi", np.float64, np.nan, ()), ("depth", np.float64, np.nan, ()), ("sky", np.float64, np.nan, (3,)),
+    ("g", np.float64, np.nan, ()))
 
 
 @dataclass
@@ -422,8 +442,10 @@ class PixelBuffers:
     sky (S, 3): where the ray neither hits anything nor falls in, the unit world direction in which it
     travels at infinity (the direction of the sky it sees; raytracer: :func:`escape_directions`), NaN
     elsewhere (and everywhere in the rasterizer's buffers). A fisheye's pixels outside its circle have
-    no ray: no hit, not fallen, no sky. ``sky`` may be left out (None) when constructing: it is then
-    NaN everywhere (buffers stored before it existed).
+    no ray: no hit, not fallen, no sky. g (S): the frequency ratio nu_seen / nu_emitted = 1 / (1 + z)
+    of the light of the hit, or of the sky (raytracer; see the module docstring), NaN elsewhere (and
+    everywhere in the rasterizer's buffers). ``sky`` and ``g`` may be left out (None) when
+    constructing: they are then NaN everywhere (buffers stored before they existed).
     """
 
     hit: np.ndarray
@@ -438,11 +460,14 @@ class PixelBuffers:
     phi: np.ndarray
     depth: np.ndarray
     sky: np.ndarray | None = None
+    g: np.ndarray | None = None
     info: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if self.sky is None:
             self.sky = np.full(np.shape(self.hit) + (3,), np.nan)
+        if self.g is None:
+            self.g = np.full(np.shape(self.hit), np.nan)
 
     @classmethod
     def empty(cls, shape) -> "PixelBuffers":
@@ -524,29 +549,21 @@ class Rays:
         self.hole = np.asarray(hole, dtype=np.float64).reshape(3)
         self.r_s = float(r_s)
         rel = (self.origin - self.hole) / self.r_s
-        self.r_obs = check_observer_radius(np.linalg.norm(rel))
+        self.r_obs = static_observer_radius(np.linalg.norm(rel))
         if self.r_obs > _R_OBS_MAX:
             raise ValueError(f"the camera is {self.r_obs:.3g} r_s from the hole; above {_R_OBS_MAX:.0e} r_s "
                              "lutgen's orbit roots lose their precision (use a larger r_s for a flat-space limit)")
         self.e1 = rel / self.r_obs
         self.uo = 1.0 / self.r_obs
-        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-        d = d / np.linalg.norm(d, axis=1, keepdims=True)
-        cos_xi = np.clip(d @ self.e1, -1.0, 1.0)
-        perp = d - cos_xi[:, None] * self.e1
-        sin_xi = np.linalg.norm(perp, axis=1)
-        fallback = any_perpendicular(self.e1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            self.e2 = np.where((sin_xi > 1e-300)[:, None], perp / sin_xi[:, None], fallback)
+        self.xi, cos_xi, sin_xi, self.e2 = ray_planes(directions, self.e1)
         self.normal = np.cross(self.e1, self.e2)
-        self.xi = np.arctan2(sin_xi, cos_xi)
         k = np.sqrt(1.0 - self.uo)
         self.b = np.maximum(sin_xi / (self.uo * k), _B_MIN)
         self.inward = cos_xi < 0.0
         orb = _orb.orbit_from_b(self.b)
         self.orbit = orb
         self.turning = np.asarray(orb.real, dtype=bool)
-        n = len(d)
+        n = len(self.xi)
         self.amp = np.empty(n)   # e2 - e1 (turning) or A (plunging)
         self.mk = np.empty(n)    # elliptic parameter k^2
         self.c = np.empty(n)     # dw / dPhi
@@ -564,6 +581,18 @@ class Rays:
         self.f_obs = _orb.sweep(orb, np.full(n, self.uo))
         self.w0 = self.c * self.f_obs
         self.s = np.where(self.inward, 1.0, -1.0)
+        # an observer inside the photon sphere: its turning rays are on the inner branch u >= e3, from the
+        # apoapsis u = e3 (w = 0): u = (e3 - e2 sn^2(w)) / cn^2(w), w = c G, G the angle swept from the
+        # apoapsis (lutgen.rays._sweep_inner), c = sqrt(e3 - e1)/2, the same k^2
+        self.inner = self.turning & (self.uo >= _orb.U_PHOTON)
+        self.g_obs = np.full(n, np.nan)
+        if self.inner.any():
+            i = self.inner
+            oi = orb.subset(i)
+            p_uo = self.uo * self.uo * (1.0 - self.uo) * (cos_xi[i] / sin_xi[i]) ** 2  # P(uo), no cancellation
+            gap = p_uo / ((self.uo - oi.e1) * (self.uo - oi.e2))
+            self.g_obs[i] = _sweep_inner(oi, np.full(int(i.sum()), self.uo), gap)
+            self.w0[i] = self.c[i] * self.g_obs[i]
         with np.errstate(invalid="ignore"):
             f_peri = _orb.sweep_to_turning_point(orb)
         self.f_peri = f_peri
@@ -574,14 +603,20 @@ class Rays:
             f1[p] = _orb.sweep(orb.subset(p), np.ones(int(p.sum())))
         self.phi_end = np.where(~self.inward, self.f_obs - f0,
                                 np.where(self.turning, 2.0 * f_peri - self.f_obs - f0, f1 - self.f_obs))
+        if self.inner.any():  # to the horizon: out to the apoapsis and back, or straight in
+            i = self.inner
+            g1 = _sweep_inner(orb.subset(i), np.ones(int(i.sum())))
+            self.phi_end[i] = np.where(self.inward[i], g1 - self.g_obs[i], g1 + self.g_obs[i])
+            self.phi_peri[i] = np.nan
 
     def __len__(self):
         return len(self.b)
 
     @property
     def falls_in(self) -> np.ndarray:
-        """Rays that cross the horizon (inward and b < b_crit)."""
-        return self.inward & ~self.turning
+        """Rays that cross the horizon (inward and b < b_crit; inside the photon sphere also every ray with
+        b > b_crit)."""
+        return (self.inward & ~self.turning) | self.inner
 
     def u(self, idx, phi):
         """u = r_s/r and du/dPhi of rays ``idx`` at swept angles ``phi`` (arrays of one shape)."""
@@ -594,6 +629,13 @@ class Rays:
             one_p = 1.0 + cn
             u = self.e1r[idx] + amp * np.where(turn, sn * sn, (1.0 - cn) / one_p)
             du = dw * amp * 2.0 * sn * dn * np.where(turn, cn, 1.0 / (one_p * one_p))
+            inner = self.inner[idx]
+            if inner.any():
+                o = self.orbit
+                e2, e3 = o.e2[idx][inner], o.e3[idx][inner]
+                s_, c_, d_ = sn[inner], cn[inner], dn[inner]
+                u[inner] = (e3 - e2 * s_ * s_) / (c_ * c_)
+                du[inner] = dw[inner] * 2.0 * s_ * d_ * (e3 - e2) / (c_ * c_ * c_)
         return u, du
 
     def shell_intervals(self, r_lo: float, r_hi: float, pad: float = 1e-9) -> np.ndarray:
@@ -635,6 +677,29 @@ class Rays:
             lo_c, hi_c = np.where(ok3, u_a, 0.5 * uo), np.where(ok3, hi3, 0.5 * uo)
             a, b = fo - F(hi_c), fo - F(lo_c)
             out[ok3, 0, 0], out[ok3, 0, 1] = a[ok3], b[ok3]
+        if self.inner.any():  # inside the photon sphere: the turning rays' legs on the inner branch
+            i = np.flatnonzero(self.inner)
+            out[i] = np.nan
+            oi = orb.subset(i)
+            g_o = self.g_obs[i]
+            e3 = oi.e3
+
+            def G(u):
+                return _sweep_inner(oi, u)
+
+            with np.errstate(invalid="ignore"):
+                inw = self.inward[i]
+                # inward: u from uo up to 1; outward: from uo down to e3, then (after the apoapsis) up to 1
+                lo, hi = np.maximum(np.where(inw, uo, e3), u_a), np.minimum(np.where(inw, 1.0, uo), u_b)
+                ok = lo <= hi
+                lo_c, hi_c = np.where(ok, lo, e3), np.where(ok, hi, e3)
+                a = np.where(inw, G(lo_c) - g_o, g_o - G(hi_c))
+                b = np.where(inw, G(hi_c) - g_o, g_o - G(lo_c))
+                out[i[ok], 0, 0], out[i[ok], 0, 1] = a[ok], b[ok]
+                lo2, hi2 = np.maximum(e3, u_a), np.minimum(1.0, u_b)
+                ok2 = ~inw & (lo2 <= hi2)
+                lo_c, hi_c = np.where(ok2, lo2, e3), np.where(ok2, hi2, e3)
+                out[i[ok2], 1, 0], out[i[ok2], 1, 1] = (g_o + G(lo_c))[ok2], (g_o + G(hi_c))[ok2]
         out[..., 0] = np.maximum(out[..., 0] - pad, 0.0)
         out[..., 1] += pad
         return out
@@ -642,6 +707,19 @@ class Rays:
     def travel_time(self, idx, phi, u):
         """Light travel time (units of r_s/c) from the observer to the points at swept angle ``phi``
         (inverse radius ``u``) of rays ``idx``."""
+        inner = self.inner[idx]
+        if inner.any():
+            out = np.empty(len(idx))
+            i = idx[inner]
+            oi = self.orbit.subset(i)
+            t_o = _orb.travel_time_inner(oi, np.full(len(i), self.uo))
+            t_u = _orb.travel_time_inner(oi, u[inner])
+            after = ~self.inward[i] & (phi[inner] > self.g_obs[i])
+            out[inner] = np.where(self.inward[i], t_u - t_o, np.where(after, t_o + t_u, t_o - t_u))
+            rest = ~inner
+            if rest.any():
+                out[rest] = self.travel_time(idx[rest], phi[rest], u[rest])
+            return out
         orb = self.orbit.subset(idx)
         after = self.turning[idx] & self.inward[idx] & (phi > self.phi_peri[idx])
         uo = np.full(len(idx), self.uo)
@@ -671,45 +749,59 @@ class Rays:
 # --------------------------------------------------------------------------------------------------
 # Tracing
 # --------------------------------------------------------------------------------------------------
-def trace(scene: TriangleScene, camera: Camera, hole, r_s, *, pair_chunk: int = 400_000) -> PixelBuffers:
+def trace(scene: TriangleScene, camera: Camera, hole, r_s, *, beta=None, pair_chunk: int = 400_000) -> PixelBuffers:
     """Reference image: the first triangle hit by the exact null geodesic through each pixel centre.
 
-    scene: world triangles (BU); camera: :class:`Camera` (its position is the static observer);
-    hole: (3,) BU; r_s: Schwarzschild radius in BU. Returns :class:`PixelBuffers` of shape
-    (camera.height, camera.width); ``info`` holds counts (pairs, candidates, roots, seconds).
+    scene: world triangles (BU); camera: :class:`Camera` (at rest in its local static frame, or moving
+    with ``beta`` (3,; units of c, world axes) there: see the module docstring); hole: (3,) BU; r_s:
+    Schwarzschild radius in BU. Returns :class:`PixelBuffers` of shape (camera.height, camera.width);
+    ``info`` holds counts (pairs, candidates, roots, seconds).
     """
     dirs = camera.pixel_directions()
     ray = np.all(np.isfinite(dirs), axis=2)
     if ray.all():
-        out = trace_rays(scene, camera.position, dirs.reshape(-1, 3), hole, r_s, pair_chunk=pair_chunk)
+        out = trace_rays(scene, camera.position, dirs.reshape(-1, 3), hole, r_s, beta=beta, pair_chunk=pair_chunk)
         return out.reshape((camera.height, camera.width))
     # a fisheye's pixels outside its circle: no ray
-    return trace_rays(scene, camera.position, dirs[ray], hole, r_s, pair_chunk=pair_chunk).scatter(ray)
+    return trace_rays(scene, camera.position, dirs[ray], hole, r_s, beta=beta, pair_chunk=pair_chunk).scatter(ray)
 
 
-def escape_directions(origin, directions, hole, r_s) -> np.ndarray:
+def escape_directions(origin, directions, hole, r_s, beta=None) -> np.ndarray:
     """(M, 3) the unit world directions in which the null geodesics leaving the static observer at
     ``origin`` (BU) in the world ``directions`` (M, 3) travel at infinity (where they reach r = inf,
     u(Phi) = 0 on this module's closed-form curve: swept angle ``Rays.phi_end``, = xi in flat space),
     NaN rows for rays that fall into the hole (xi beyond the shadow's edge); objects are ignored. The
-    lensed sky each direction sees. hole: (3,) BU; r_s: BU."""
-    return Rays(origin, directions, hole, r_s).escape_directions()
+    lensed sky each direction sees. hole: (3,) BU; r_s: BU; ``beta`` (3,; units of c): the observer's
+    velocity in its local static frame, whose ``directions`` they then are (taken back to the static
+    frame first)."""
+    return Rays(origin, _static_directions(directions, beta), hole, r_s).escape_directions()
 
 
-def image_pixels(points, camera: Camera, hole, r_s, order: int) -> tuple[np.ndarray, np.ndarray]:
+def _static_directions(directions, beta):
+    """The moving observer's ``directions`` (M, 3) taken back to its local static frame
+    (observer_view.unaberrate); unchanged (the same array) without ``beta``."""
+    return directions if beta is None else unaberrate(np.asarray(directions, dtype=np.float64).reshape(-1, 3), beta)
+
+
+def image_pixels(points, camera: Camera, hole, r_s, order: int, beta=None) -> tuple[np.ndarray, np.ndarray]:
     """Where the image of ``order`` (1 or 2) of each world point (N, 3; BU) appears: continuous pixel
-    coordinates (column, row) of ``camera`` (pixel centres at integer + 0.5, as :meth:`Camera.project`).
+    coordinates (column, row) of ``camera`` (pixel centres at integer + 0.5, as :meth:`Camera.project`),
+    moving with ``beta`` (3,; units of c) in its local static frame if given (the static observer's
+    direction, aberrated exactly: observer_view.aberrate).
 
     The direction comes from the exact connecting geodesic (lutgen.connect, the closed-form
     emitter-observer solver), not from a LUT and not from this module's ray tracing, so it is an
-    independent check of both. NaN where the point has no image of that order (inside the horizon,
-    on the camera-hole axis, non-finite) or the image lies behind the camera. hole: (3,) BU; r_s: BU.
+    independent check of both (inside the photon sphere lutgen.connect polishes lutgen.rays' ray on
+    the closed-form swept angle: exact to rounding there too). NaN where the point has no image of
+    that order (inside the horizon, on the camera-hole axis, non-finite) or the image lies behind the
+    camera. hole: (3,) BU; r_s: BU.
     """
     scene = Scene(camera.position, hole, r_s)
     plane = plane_coordinates(np.asarray(points, dtype=np.float64).reshape(-1, 3), scene)
     conn = connect(scene.r_obs, plane.r, plane.phi, order)
-    sign = 1.0 if order == 1 else -1.0
-    direction = np.cos(conn.xi)[:, None] * scene.e1 + (sign * np.sin(conn.xi))[:, None] * plane.e2
+    direction = view_directions(conn.xi, plane.e2, scene.e1, order)
+    if beta is not None:
+        direction = aberrate(direction, beta)
     col, row, depth = camera.project(camera.position + direction)
     with np.errstate(invalid="ignore"):
         bad = plane.on_axis | ~(depth > 0)
@@ -971,12 +1063,15 @@ def _roots(rays: Rays, ray, a, b, mx, my, p, max_depth=48, newton_iter=60):
     return c, x
 
 
-def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, pair_chunk: int = 400_000) -> PixelBuffers:
-    """First hits of the exact null geodesics leaving the static observer at ``origin`` (BU) in the
-    world ``directions`` (M, 3), for a hole at ``hole`` (BU) with Schwarzschild radius ``r_s`` (BU).
-    Returns flat :class:`PixelBuffers` of shape (M,). See the module docstring for the method."""
+def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, beta=None,
+               pair_chunk: int = 400_000) -> PixelBuffers:
+    """First hits of the exact null geodesics leaving the observer at ``origin`` (BU) in the world
+    ``directions`` (M, 3), for a hole at ``hole`` (BU) with Schwarzschild radius ``r_s`` (BU); the
+    observer is static, or moving with ``beta`` (3,; units of c, world axes) in its local static
+    frame, whose directions they then are. Returns flat :class:`PixelBuffers` of shape (M,). See the
+    module docstring for the method."""
     t0 = time.perf_counter()
-    rays = Rays(origin, directions, hole, r_s)
+    rays = Rays(origin, _static_directions(directions, beta), hole, r_s)
     m = len(rays)
     out = PixelBuffers.empty((m,))
     info = dict(pairs=0, candidates=0, roots=0)
@@ -987,7 +1082,7 @@ def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, pair_chun
         f1 = any_perpendicular(rays.e1)
         f2 = np.cross(rays.e1, f1)
         ct, st = rays.e2 @ f1, rays.e2 @ f2
-        beta = np.mod(np.arctan2(st, ct), np.pi)
+        plane_azimuth = np.mod(np.arctan2(st, ct), np.pi)
         X, Q1, Q2 = V @ rays.e1, V @ f1, V @ f2
         az_lo, az_hi, surround = _triangle_azimuths(V, f1, f2)
         objs = np.unique(scene.object_id)
@@ -997,8 +1092,8 @@ def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, pair_chun
             active = np.flatnonzero(np.isfinite(shells[:, :, 0]).any(axis=1))
             if not active.size:
                 continue
-            order_b = active[np.argsort(beta[active], kind="stable")]
-            beta_sorted = beta[order_b]
+            order_b = active[np.argsort(plane_azimuth[active], kind="stable")]
+            beta_sorted = plane_azimuth[order_b]
             tri_ids = np.flatnonzero(scene.object_id == obj)
             for ray, tri in _pairs(order_b, beta_sorted, az_lo[tri_ids], az_hi[tri_ids], surround[tri_ids],
                                    tri_ids, pair_chunk):
@@ -1034,6 +1129,9 @@ def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, pair_chun
     out.fell[:] = ~hit & rays.falls_in
     if m:
         out.sky[:] = np.where(hit[:, None], np.nan, rays.escape_directions())
+        arriving = -view_directions(rays.xi, rays.e2, rays.e1, 1)  # photons' direction of travel (static frame)
+        sky = np.flatnonzero(np.isfinite(out.sky[:, 0]))
+        out.g[sky] = frequency_ratio(np.full(len(sky), np.inf), rays.r_obs, arriving[sky], beta)
     if idx.size:
         phi = best_phi[idx]
         tri = best_tri[idx]
@@ -1049,6 +1147,7 @@ def trace_rays(scene: TriangleScene, origin, directions, hole, r_s, *, pair_chun
             out.uv[idx] = np.einsum("pk,pkx->px", bary, scene.corner_uv[tri])
         out.order[idx] = np.maximum(1, np.ceil(phi / np.pi - 1e-15)).astype(np.int64)
         out.light_time[idx] = rays.travel_time(idx, phi, u) * rays.r_s
+        out.g[idx] = frequency_ratio(1.0 / u, rays.r_obs, arriving[idx], beta)
     info["seconds"] = time.perf_counter() - t0
     info["higher_order_pixels"] = int((out.order >= 3).sum())
     out.info = info

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mapping import row_norm, used_vertices
+from .observer_view import row_norm, used_vertices
 
 
 def compact(points, tris):

@@ -1,0 +1,1095 @@
+"""One table of light orbits for every observer radius, and the connecting rays read from it.
+
+Units: lengths in r_s, c = 1 (times in r_s/c), angles in radians. Conventions as in
+:mod:`lutgen.solver` (observer static at (r_obs, phi = 0); xi from the outward radial direction in the
+observer's static frame; order 1 sweeps phi, order 2 sweeps 2*pi - phi).
+
+Every light orbit in the plane obeys (du/dtheta)^2 = P(u) = e^2 - u^2 (1 - u), u = 1/r, e = 1/b, and
+u'' = -u + 3/2 u^2 in the swept angle theta. An orbit is therefore one function u(theta) of one
+parameter, whatever observer looks along it. :class:`OrbitTable` holds these functions, each from
+the orbit's own reference point (the point nearest the photon sphere), in three kinds:
+
+* ``T`` (b > b_crit, outside the photon sphere): from the periapsis (theta = 0) out to infinity
+  (theta = H, the half sweep); rows labelled by rho = ln((b / b_crit)^2 - 1);
+* ``P`` (b < b_crit, the rays that cross the photon sphere): from infinity (u = 0) through the photon
+  sphere (theta = 0) to the horizon (u = 1); rows labelled by rho = ln((b_crit / b)^2 - 1) (so the
+  nearly radial rays, whose theta range shrinks like b, are as finely sampled in ln b);
+* ``I`` (b > b_crit, inside the photon sphere): from the apoapsis (theta = 0) down to the horizon;
+  rows labelled as ``T``.
+
+Near the critical orbit (rho -> -inf) the orbits wind about the photon sphere; rows are uniform in
+rho (a fixed step in the logarithm of the distance from the critical impact parameter), so the
+winding, an exponential in theta and rho, is smooth in the table's coordinates. Columns are uniform in
+theta over the row's range. Each node holds u (times b for ``T``, where u ~ 1/b) and the
+travel-time remainder J = integral dtheta / (e + |u'|) times e/L (L the row's theta range): along any
+piece of orbit on which u is monotone the coordinate time is |r*(u_2) - r*(u_1)| + |J_2 - J_1|, with
+the tortoise coordinate r* = r + ln(r - 1) (dt - |dr*| = dtheta / (e + |du/dtheta|) exactly), so the
+growth of the time to infinity and its logarithm at the horizon are closed forms. The nodes are
+integrated from each row's reference point (u'' = -u + 3/2 u^2 with RK4, started exactly at the
+periapsis, apoapsis or the photon sphere crossing, where an orbit that winds is still determined to
+full precision by its label).
+
+:class:`RayMap` reads the connecting rays of one observer from the table. Along the observer's rays,
+ordered by xi from 0 to pi in four segments (outward rays that cross the photon sphere, outward and
+inward turning rays, inward rays that cross it; the turning rays are of kind ``T`` for an observer
+outside the photon sphere and ``I`` inside it), the radius a ray has reached after sweeping the
+target's angle, less the target's radius, changes sign exactly once: at the connecting ray (rays
+that escaped before count as below, rays that fell in as above). A point's segment is found from the
+signs at the segments' ends, its ray bracketed between two of the table's rows by a binary search
+(1-D lookups along rows) and found by secant steps in d = |xi - crit| with the bicubic interpolation
+(:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius costs a few 1-D
+arrays (its own phase on each ray), not a table build. docs/inside.md describes it with its figures.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import orbit as _orb
+from .lut import QUANTITIES, Lookup, _cubic_stencil
+
+B_C = _orb.B_CRIT
+E_C2 = 4.0 / 27.0  # e_crit^2 = 1 / b_crit^2
+
+RHO_MIN = -32.0
+"""Rows start at rho = -32: |b^2 / b_crit^2 - 1| = 1.3e-14, orbits that wind about 16 rad on either side of
+the photon sphere before they leave it (more than a ray of order 1 or 2 sweeps from an observer beyond
+1.5001 r_s or inside 1.4999 r_s). Closer to the critical orbit the rounding of the start, amplified by
+e^theta, reaches 1e-8."""
+
+RHO_MAX_T = 32.0
+"""Largest label of kind T (b = 2.3e7 r_s): observers out to about 1e7 r_s."""
+
+RHO_MAX_P = 36.0
+"""Largest label of kind P (b = 4e-8 r_s): rays within 4e-8 b_crit of the radial one, below the
+double-precision resolution of any target's angle worth imaging."""
+
+RHO_MAX_I = 5.0
+"""Largest label of kind I (b = 32 r_s): observers down to r_obs = 1.001 r_s."""
+
+R_OBS_MIN = 1.001
+"""Innermost observer radius (r_s) the table serves."""
+
+DEFAULT_STEP = 1.0 / 16.0
+"""Row spacing in rho."""
+
+DEFAULT_COLUMNS = 577
+"""Columns (uniform in theta over a row's range)."""
+
+SUBSTEPS = 6
+"""RK4 steps per column interval when the table is built."""
+
+
+# ------------------------------------------------------------------------------------------------
+# The orbits of a row label
+# ------------------------------------------------------------------------------------------------
+def impact_parameter(kind: str, rho) -> np.ndarray:
+    """b (r_s) of row labels ``rho`` of kind "T"/"I" (b > b_crit) or "P" (b < b_crit)."""
+    rho = np.asarray(rho, dtype=float)
+    if kind == "P":
+        return B_C / np.sqrt(1.0 + np.exp(rho))
+    return B_C * np.sqrt(1.0 + np.exp(rho))
+
+
+def label_of_b(kind: str, b) -> np.ndarray:
+    """The row label rho of impact parameters b (r_s); inverse of :func:`impact_parameter`."""
+    q = (np.asarray(b, dtype=float) / B_C) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.log(1.0 / q - 1.0) if kind == "P" else np.log(q - 1.0)
+
+
+def _orbits(kind, rho) -> _orb.Orbit:
+    """Roots of P(u) for labels rho, accurate next to the critical orbit (from rho, not from b)."""
+    rho = np.asarray(rho, dtype=float)
+    x = np.exp(rho)
+    if kind == "P":  # y = 4 (b^2 - b_c^2) / b^2 = -4 e^rho
+        sigma = -4.0 * np.sinh(np.arcsinh(np.sqrt(x)) / 3.0) ** 2
+        return _orb._from_sigma_e1(sigma, (sigma - 1.0) / 3.0)
+    far = rho > 0.0
+    y = 4.0 * x / (1.0 + x)
+    sigma = 4.0 * np.sin(np.arcsin(np.minimum(0.5 * np.sqrt(y), 1.0)) / 3.0) ** 2
+    orb = _orb._from_sigma_e1(sigma, (sigma - 1.0) / 3.0)
+    if far.any():  # far orbits: orbit_from_b polishes e1 (~ -1/b)
+        ob = _orb.orbit_from_b(impact_parameter(kind, rho[far]))
+        for f in ("e1", "real", "e2", "e3", "delta", "m", "n"):
+            getattr(orb, f)[far] = getattr(ob, f)
+    return orb
+
+
+_sweep_inner = _orb.sweep_inner
+
+
+def row_ranges(kind, rho):
+    """(theta_start, L, e, u0): the theta range [theta_start, theta_start + L] of rows ``rho`` (the
+    reference point at theta = 0), e = 1/b and the reference point's u."""
+    rho = np.asarray(rho, dtype=float)
+    orb = _orbits(kind, rho)
+    e = orb.inv_b
+    if kind == "T":
+        h = _orb.sweep_from_turning_point(orb, np.zeros(rho.shape), np.sqrt(orb.e2))
+        return np.zeros(rho.shape), h, e, orb.e2
+    if kind == "I":
+        return np.zeros(rho.shape), _sweep_inner(orb, np.ones(rho.shape)), e, orb.e3
+    f0 = _orb.sweep(orb, np.zeros(rho.shape))
+    fc = _orb.sweep(orb, np.full(rho.shape, _orb.U_PHOTON))
+    f1 = _orb.sweep(orb, np.ones(rho.shape))
+    return -(fc - f0), f1 - f0, e, np.full(rho.shape, _orb.U_PHOTON)
+
+
+# ------------------------------------------------------------------------------------------------
+# The table
+# ------------------------------------------------------------------------------------------------
+def _rk4(u, w, j, h, e, sign):
+    """One RK4 step of (u, w = du/dtheta, J) over theta-steps h (arrays), J' = 1/(e + sign * w)."""
+    def f(u, w):
+        return w, u * (1.5 * u - 1.0), 1.0 / (e + sign * w)
+    k1 = f(u, w)
+    k2 = f(u + 0.5 * h * k1[0], w + 0.5 * h * k1[1])
+    k3 = f(u + 0.5 * h * k2[0], w + 0.5 * h * k2[1])
+    k4 = f(u + h * k3[0], w + h * k3[1])
+    c = h / 6.0
+    return (u + c * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0]),
+            w + c * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1]),
+            j + c * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2]))
+
+
+def _integrate(u, w, h_col, n_steps, e, sign, record, start_col, direction, first_h):
+    """Integrate rows from their reference point through ``n_steps`` column intervals, the first of
+    length ``first_h`` (theta), the rest ``h_col``; ``record(cols, rows, u, w, j)`` gets each column.
+    Rows whose columns run out get zero steps (they stop)."""
+    n_rows = u.size
+    j = np.zeros(n_rows)
+    col = start_col.copy()
+    rows = np.arange(n_rows)
+    for s in range(n_steps):
+        active = (col >= 0) & (col < record.n_cols)
+        if not active.any():
+            break
+        h = np.where(active, first_h if s == 0 else h_col, 0.0) * direction
+        for _ in range(SUBSTEPS):
+            u, w, j = _rk4(u, w, j, h / SUBSTEPS, e, sign)
+        record(col[active], rows[active], u[active], w[active], j[active])
+        col = col + direction
+
+
+class _Record:
+    def __init__(self, n_rows, n_cols):
+        self.n_cols = n_cols
+        self.u = np.full((n_rows, n_cols), np.nan)
+        self.w = np.full((n_rows, n_cols), np.nan)
+        self.j = np.full((n_rows, n_cols), np.nan)
+
+    def __call__(self, cols, rows, u, w, j):
+        self.u[rows, cols], self.w[rows, cols], self.j[rows, cols] = u, w, j
+
+
+def _range_scale(kind, b):
+    """The factor the stored theta ranges of kind ``kind`` are divided by (so that they are smooth in rho):
+    T 1, P b (start and length ~ b as b -> 0), I 1/b (length ~ 2/b as b -> inf)."""
+    if kind == "T":
+        return np.ones_like(b)
+    return b if kind == "P" else 1.0 / b
+
+
+def _derivative_weights(g, n):
+    """d/dg of the cubic Lagrange weights of :func:`lutgen.lut._cubic_stencil` (4, N)."""
+    i0 = np.clip(np.floor(g).astype(np.int64) - 1, 0, n - 4)
+    t = g - i0
+    d = np.empty((4, g.size))
+    d[0] = -((t - 2.0) * (t - 3.0) + (t - 1.0) * (t - 3.0) + (t - 1.0) * (t - 2.0)) / 6.0
+    d[1] = ((t - 2.0) * (t - 3.0) + t * (t - 3.0) + t * (t - 2.0)) / 2.0
+    d[2] = -((t - 1.0) * (t - 3.0) + t * (t - 3.0) + t * (t - 1.0)) / 2.0
+    d[3] = ((t - 1.0) * (t - 2.0) + t * (t - 2.0) + t * (t - 1.0)) / 6.0
+    return d
+
+
+@dataclass(eq=False)
+class Kind:
+    """One kind of orbit (T, P or I): rows uniform in rho from ``rho0`` with step ``step``, columns
+    uniform in theta over each row's range [start, start + length] (stored divided by
+    :func:`_range_scale`). ``u``: u (T: u b) at the nodes; ``j``: J e / L (see the module docstring);
+    both (n_rows, n_cols) float64."""
+
+    name: str
+    rho0: float
+    step: float
+    start: np.ndarray
+    length: np.ndarray
+    u: np.ndarray
+    j: np.ndarray
+
+    @property
+    def n_rows(self) -> int:
+        return self.u.shape[0]
+
+    @property
+    def n_cols(self) -> int:
+        return self.u.shape[1]
+
+    @property
+    def rho_max(self) -> float:
+        return self.rho0 + self.step * (self.n_rows - 1)
+
+    @property
+    def rho(self) -> np.ndarray:
+        """The rows' labels."""
+        return self.rho0 + self.step * np.arange(self.n_rows)
+
+    def evaluate(self, rho, theta, want_j=False):
+        """u and, with ``want_j``, J (r_s/c) on the orbits of labels ``rho`` at angles ``theta`` from
+        their reference points (arrays). Beyond a row's theta range the values continue linearly (an
+        orbit that escaped is below u = 0, one that fell in above 1)."""
+        n_r, n_c = self.n_rows, self.n_cols
+        g = np.clip((rho - self.rho0) / self.step, 0.0, n_r - 1)
+        i0, wr = _cubic_stencil(g, n_r)
+        b = impact_parameter(self.name, rho)
+        sc = _range_scale(self.name, b)
+        ridx = i0[None, :] + np.arange(4)[:, None]
+        st = (wr * self.start.take(ridx)).sum(0) * sc
+        ln = (wr * self.length.take(ridx)).sum(0) * sc
+        c = (theta - st) / ln * (n_c - 1)
+        u = self._bicubic(self.u, i0, wr, c)
+        if self.name == "T":
+            u = u / b
+        if not want_j:
+            return u, None
+        return u, self._bicubic(self.j, i0, wr, c) * ln * b
+
+    def _bicubic(self, data, i0, wr, c):
+        n_c = self.n_cols
+        cc = np.clip(c, 0.0, n_c - 1)
+        j0, wc = _cubic_stencil(cc, n_c)
+        flat = data.reshape(-1)
+        base = i0 * n_c + j0
+        return _gather(flat, base, wr, wc, n_c) + _linear_tail(flat, base, n_c, c, cc, wr)
+
+
+def build_kind(name, rho_max, step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS, rho_min=RHO_MIN) -> Kind:
+    """Integrate the orbits of one kind on its grid (see the module docstring)."""
+    n_rows = int(round((rho_max - rho_min) / step)) + 1
+    rho = rho_min + step * np.arange(n_rows)
+    start, length, e, u0 = row_ranges(name, rho)
+    rec = _Record(n_rows, n_cols)
+    h_col = length / (n_cols - 1)
+    if name in ("T", "I"):
+        rec(np.zeros(n_rows, dtype=int), np.arange(n_rows), u0, np.zeros(n_rows), np.zeros(n_rows))
+        sign = -1.0 if name == "T" else 1.0  # T: u falls as theta grows (w <= 0); I: u rises
+        _integrate(u0.copy(), np.zeros(n_rows), h_col, n_cols - 1, e, sign, rec, np.ones(n_rows, dtype=int), 1,
+                   h_col)
+    else:
+        w0 = np.sqrt(E_C2 * np.exp(rho))  # sqrt(e^2 - 4/27) at u = 2/3
+        t_ref = -start / h_col  # the reference point's fractional column
+        up = np.floor(t_ref).astype(int) + 1  # first column beyond it
+        _integrate(u0.copy(), w0.copy(), h_col, n_cols, e, 1.0, rec, up, 1, (up - t_ref) * h_col)
+        down = up - 1
+        _integrate(u0.copy(), w0.copy(), h_col, n_cols, e, 1.0, rec, down, -1, (t_ref - down) * h_col)
+    if name == "T":
+        b = 1.0 / e
+        rec.u *= b[:, None]
+    rec.j *= (e / length)[:, None]
+    sc = _range_scale(name, 1.0 / e)
+    return Kind(name, float(rho_min), float(step), start / sc, length / sc, rec.u, rec.j)
+
+
+TABLE_VERSION = 1
+"""Bumped whenever the table's contents change (disk caches key on it)."""
+
+_RHO_MAX = {"T": RHO_MAX_T, "P": RHO_MAX_P, "I": RHO_MAX_I}
+
+
+class OrbitTable:
+    """The three kinds of orbits (see the module docstring); built once, for every observer (about a
+    second; ``nbytes`` about 26 MB). Deterministic: the same size gives a bit-identical table."""
+
+    def __init__(self, step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS, kinds=None):
+        self.step, self.n_cols = float(step), int(n_cols)
+        self.kinds = kinds if kinds is not None else {
+            k: build_kind(k, _RHO_MAX[k], step, n_cols) for k in ("T", "P", "I")}
+
+    @staticmethod
+    def shapes(step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS) -> dict:
+        """{array name: shape} of :meth:`arrays` for a table of this size."""
+        out = {}
+        for k, mx in _RHO_MAX.items():
+            n = int(round((mx - RHO_MIN) / step)) + 1
+            out.update({f"{k}_start": (n,), f"{k}_length": (n,), f"{k}_u": (n, n_cols), f"{k}_j": (n, n_cols)})
+        return out
+
+    def arrays(self) -> dict:
+        """The table as float64 arrays (for a disk cache); :meth:`from_arrays` reads them back exactly."""
+        out = {}
+        for k, kind in self.kinds.items():
+            out.update({f"{k}_start": kind.start, f"{k}_length": kind.length, f"{k}_u": kind.u, f"{k}_j": kind.j})
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays, step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS) -> "OrbitTable":
+        kinds = {k: Kind(k, RHO_MIN, float(step), *(np.asarray(arrays[f"{k}_{a}"], dtype=np.float64)
+                                                     for a in ("start", "length", "u", "j")))
+                 for k in ("T", "P", "I")}
+        return cls(step, n_cols, kinds)
+
+    @property
+    def nbytes(self) -> int:
+        return sum(k.u.nbytes + k.j.nbytes for k in self.kinds.values())
+
+    @property
+    def parameters(self) -> dict:
+        return dict(kind="orbits", step=self.step, n_cols=self.n_cols)
+
+
+_TABLES: dict = {}
+
+
+def orbit_table(step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS) -> OrbitTable:
+    """The process's :class:`OrbitTable` of this size (built on first use, then kept)."""
+    key = (float(step), int(n_cols))
+    if key not in _TABLES:
+        _TABLES[key] = OrbitTable(step, n_cols)
+    return _TABLES[key]
+
+
+# ------------------------------------------------------------------------------------------------
+# One observer's connecting rays
+# ------------------------------------------------------------------------------------------------
+SEGMENT_NODES = 769
+"""Nodes of an observer's 1-D arrays per segment (its phase on each orbit, uniform in z)."""
+
+FAR_GAP_T = 1e-9
+"""The segments of turning rays end this far (rad) from xi = pi/2 (the ray tangent at the observer)."""
+
+R_MIN = 1.05
+"""Default innermost target radius (r_s), as the wide tables'."""
+
+NEAR = 0.3
+"""Order-1 targets closer to the observer than this many times r_obs subtract the table's own error
+at the observer (its value there less uo, from the same row stencil): next to the observer the
+target's offset in u and the swept angle are both small."""
+
+SECANT_DONE = 1e-6
+"""A secant step shorter than this relative to d ends the iteration (the error left is of order its
+square times the curvature: below 1e-11 relative)."""
+
+TOL_D = 1e-12
+"""Iterations stop when their step in d = |xi - crit| is below this relative to d."""
+
+_KINDS = ("T", "P", "I")
+
+
+def check_any_observer(r_obs) -> float:
+    """A static observer radius (r_s) the orbit table serves: R_OBS_MIN <= r_obs <= 1e7; ValueError else."""
+    from .solver import static_observer_radius
+    r = static_observer_radius(r_obs, f">= {R_OBS_MIN} r_s")
+    if r < R_OBS_MIN or r > 1e7:
+        raise ValueError(f"observer at r_obs = {r:.6g} r_s: the orbit table serves {R_OBS_MIN} <= r_obs <= 1e7 r_s")
+    return r
+
+
+class _Flat:
+    """The orbit table's three kinds as one array of rows (same columns), for lookups that mix kinds:
+    per kind its first row, label origin and count."""
+
+    def __init__(self, table: OrbitTable):
+        ks = [table.kinds[k] for k in _KINDS]
+        self.n_cols = ks[0].n_cols
+        self.u = np.ascontiguousarray(np.concatenate([k.u for k in ks])).reshape(-1)
+        self.j = np.ascontiguousarray(np.concatenate([k.j for k in ks])).reshape(-1)
+        self.start = np.concatenate([k.start for k in ks])
+        self.length = np.concatenate([k.length for k in ks])
+        self.offset = np.cumsum([0] + [k.n_rows for k in ks])[:-1]
+        self.rho0 = np.array([k.rho0 for k in ks])
+        self.step = ks[0].step
+        self.n_rows = np.array([k.n_rows for k in ks])
+
+
+def _b_of(kind, rho):
+    """b of labels rho of kind codes ``kind`` (0 T, 1 P, 2 I)."""
+    x = np.exp(rho)
+    return np.where(kind == 1, B_C / np.sqrt(1.0 + x), B_C * np.sqrt(1.0 + x))
+
+
+def _scale(kind, b):
+    """The factor of the stored theta ranges (see :func:`_range_scale`) for kind codes."""
+    return np.where(kind == 0, 1.0, np.where(kind == 1, b, 1.0 / b))
+
+
+def _gather(flat, base, wr, wc, n_c):
+    """Bicubic sum of the 4 x 4 nodes of a row-major table (``flat``, ``n_c`` columns) from the flat
+    indices ``base`` (N,), with row and column weights wr, wc (4, N)."""
+    v = np.zeros(base.size)
+    for i in range(4):
+        b = base + i * n_c
+        v += wr[i] * (wc[0] * flat.take(b) + wc[1] * flat.take(b + 1) + wc[2] * flat.take(b + 2)
+                      + wc[3] * flat.take(b + 3))
+    return v
+
+
+def _linear_tail(flat, base, n_c, c, cc, wr):
+    """The linear continuation beyond a row's range: slope (per column) times the excess."""
+    out = np.flatnonzero(c != cc)
+    v = np.zeros(c.size)
+    if out.size:
+        dw = _derivative_weights(cc[out], n_c)
+        slope = np.zeros(out.size)
+        for i in range(wr.shape[0]):
+            for j in range(4):
+                slope += (wr[i, out] if wr.shape[0] > 1 else 1.0) * dw[j] * flat.take(base[out] + (i * n_c + j))
+        v[out] = slope * (c[out] - cc[out])
+    return v
+
+
+class RayMap:
+    """The connecting rays of a static observer at ``r_obs`` (r_s, R_OBS_MIN to 1e7) to points at
+    r >= ``r_min``, read from the process's :class:`OrbitTable` (see the module docstring). Offers the
+    interface of the wide tables (``lookup``, ``lookup_orders``, ``r_obs``, ``r_min``, ``r_max``,
+    ``parameters``), so the add-on's map stage uses it as it would a table of one radius. Making one
+    costs its observer's phase on each orbit (1-D arrays, about a millisecond)."""
+
+    r_max = math.inf
+    source = "orbits"
+
+    def __init__(self, r_obs, r_min=R_MIN, table: OrbitTable | None = None):
+        self.r_obs = check_any_observer(r_obs)
+        self.r_min = float(r_min)
+        if not (np.isfinite(self.r_min) and self.r_min > 1.0):
+            raise ValueError(f"r_min must be a number > 1 (r_s), got {r_min}")
+        self.table = table if table is not None else orbit_table()
+        if not hasattr(self.table, "_flat"):
+            self.table._flat = _Flat(self.table)
+        self.flat = self.table._flat
+        uo = self.uo = 1.0 / self.r_obs
+        self.k = math.sqrt(1.0 - uo)
+        sin_c = min(B_C * math.sqrt(uo * uo * (1.0 - uo)), 1.0)
+        self.xi_c = xi_c = math.asin(sin_c)
+        t_code = 0 if uo < _orb.U_PHOTON else 2
+        # per segment: kind code, direction of theta along the traced ray, critical angle, side, far
+        specs = [(1, -1.0, xi_c, -1.0, xi_c)]
+        if xi_c < 0.5 * math.pi - 1e-9:
+            d_out = 1.0 if t_code == 0 else -1.0
+            specs += [(t_code, d_out, xi_c, 1.0, 0.5 * math.pi - xi_c),
+                      (t_code, -d_out, math.pi - xi_c, -1.0, 0.5 * math.pi - xi_c)]
+        specs += [(1, 1.0, math.pi - xi_c, 1.0, xi_c)]
+        n_seg = len(specs)
+        self.n_seg = n_seg
+        self.s_kind = np.array([sp[0] for sp in specs])
+        self.s_dir = np.array([sp[1] for sp in specs])
+        self.s_crit = np.array([sp[2] for sp in specs])
+        self.s_side = np.array([sp[3] for sp in specs])
+        self.s_far = np.array([sp[4] for sp in specs])
+        self.c2, self.sin2c = 2.0 * xi_c, sin_c * sin_c
+        self._setup_nodes()
+        self._setup_rows()
+
+    # ---- per segment 1-D arrays -------------------------------------------------------------------
+    def _rho(self, seg, d):
+        """Labels of the rays d = |xi - crit| of segments ``seg`` (arrays)."""
+        kind = self.s_kind.take(seg)
+        c2 = self.c2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # T, I: (b/b_c)^2 - 1 = sin(d) sin(2 xi_c + d) / sin^2 xi_c;
+            # P: (b_c/b)^2 - 1 = sin(d) sin(2 xi_c - d) / sin^2(xi_c - d)
+            turning = kind != 1
+            s2 = np.sin(np.where(turning, c2 + d, c2 - d))
+            den = np.where(turning, self.sin2c, np.sin(0.5 * c2 - d) ** 2)
+            return np.log(np.sin(d) * s2 / den)
+
+    def _d_of_rho(self, seg, rho):
+        """Inverse of :meth:`_rho`."""
+        kind = self.s_kind.take(seg)
+        c = self.xi_c
+        x = np.exp(rho)
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            # P: sin d = sin c e^rho / ((sqrt(cos^2 c + e^rho) + cos c) sqrt(1 + e^rho))
+            sd = math.sin(c) * x / ((np.sqrt(math.cos(c) ** 2 + x) + math.cos(c)) * np.sqrt(1.0 + x))
+            d_p = np.arcsin(np.minimum(sd, 1.0))
+            # T, I: cos(2c + 2d) = cos 2c - 2 X, X = e^rho sin^2 c (Newton next to the critical angle)
+            xx = x * self.sin2c
+            d_t = np.where(xx > 1e-6, 0.5 * (np.arccos(np.clip(math.cos(self.c2) - 2.0 * xx, -1.0, 1.0)) - self.c2),
+                           xx / math.sin(self.c2))
+            for _ in range(3):
+                g = np.sin(d_t) * np.sin(self.c2 + d_t) - xx
+                dg = np.cos(d_t) * np.sin(self.c2 + d_t) + np.sin(d_t) * np.cos(self.c2 + d_t)
+                d_t = d_t - g / dg
+        return np.where(kind == 1, d_p, d_t)
+
+    def _twins(self):
+        """For each segment, the first segment of the same rays (same kind and d-range; the outward and
+        inward halves of the observer's sky: segments 0 and 3, 1 and 2)."""
+        if self.n_seg == 4:
+            return [0, 1, 1, 0]
+        return list(range(self.n_seg))
+
+    def _setup_nodes(self):
+        """Per segment, nodes uniform in z = logit(d / far) from the label RHO_MIN + 0.5 to the far end,
+        and the observer's phase theta_o and J there (closed forms)."""
+        n = SEGMENT_NODES
+        z_all, th_all, j_all = [], [], []
+        self.s_zlo, self.s_zhi = np.empty(self.n_seg), np.empty(self.n_seg)
+        uo = self.uo
+        twin = self._twins()
+        for i in range(self.n_seg):
+            if twin[i] < i:  # the same rays as an earlier segment, traced the other way: same phases
+                j = twin[i]
+                z_all.append(z_all[j])
+                th_all.append(th_all[j])
+                j_all.append(j_all[j])
+                self.s_zlo[i], self.s_zhi[i] = self.s_zlo[j], self.s_zhi[j]
+                continue
+            seg = np.array([i])
+            d_lo = self._d_of_rho(seg, np.array([RHO_MIN + 0.5]))[0]
+            if self.s_kind[i] == 1:
+                d_hi = self._d_of_rho(seg, np.array([RHO_MAX_P]))[0]
+            else:
+                d_hi = self.s_far[i] - FAR_GAP_T
+            far = self.s_far[i]
+            z = np.linspace(math.log(d_lo / (far - d_lo)), math.log(d_hi / (far - d_hi)), n)
+            d = far / (1.0 + np.exp(-z))
+            rho = self._rho(np.full(n, i), d)
+            name = _KINDS[self.s_kind[i]]
+            orb = _orbits(name, rho)
+            x = self.s_crit[i] + self.s_side[i] * d
+            with np.errstate(invalid="ignore", divide="ignore"):
+                if name == "P":
+                    theta = _orb.sweep(orb, np.full(n, uo)) - _orb.sweep(orb, np.full(n, _orb.U_PHOTON))
+                else:
+                    p_uo = uo * uo * (1.0 - uo) * (np.cos(x) / np.sin(x)) ** 2  # P(uo), no cancellation
+                    if name == "T":
+                        theta = _orb.sweep_from_turning_point(
+                            orb, uo, np.sqrt(p_uo / ((uo - orb.e1) * (orb.e3 - uo))))
+                    else:
+                        theta = _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
+            kind = np.full(n, self.s_kind[i])
+            j = self._evaluate(kind, rho, theta, want_j=True)[1]
+            z_all.append(z)
+            th_all.append(theta)
+            j_all.append(j)
+            self.s_zlo[i], self.s_zhi[i] = z[0], z[-1]
+        self.n_z = n
+        self.node_theta = np.concatenate(th_all)
+        self.node_j = np.concatenate(j_all)
+        self.s_dz = (self.s_zhi - self.s_zlo) / (n - 1)
+
+    def _nodes(self, seg, z, values, derivative=False):
+        n = self.n_z
+        g = np.clip((z - self.s_zlo.take(seg)) / self.s_dz.take(seg), 0.0, n - 1)
+        i0, w = _cubic_stencil(g, n)
+        base = i0 + seg * n
+        return w[0] * values.take(base) + w[1] * values.take(base + 1) + w[2] * values.take(base + 2) + \
+            w[3] * values.take(base + 3)
+
+    def _setup_rows(self):
+        """Per segment, the table's rows inside it (from the label RHO_MIN + 0.5, the critical end, to the
+        far end): global row index, d, the observer's phase, b, theta start and length. Concatenated;
+        ``r_first``, ``r_count`` per segment."""
+        fl = self.flat
+        rows, ds, ths, bs, sts, lns = [], [], [], [], [], []
+        self.r_first, self.r_count = np.empty(self.n_seg, dtype=np.int64), np.empty(self.n_seg, dtype=np.int64)
+        total = 0
+        twin = self._twins()
+        for i in range(self.n_seg):
+            if twin[i] < i:  # the same rows as an earlier segment
+                self.r_first[i], self.r_count[i] = self.r_first[twin[i]], self.r_count[twin[i]]
+                continue
+            kc = self.s_kind[i]
+            k_lo = int(round((RHO_MIN + 0.5 - fl.rho0[kc]) / fl.step))
+            if kc == 1:
+                k_hi = fl.n_rows[kc] - 1
+            else:
+                rho_far = self._rho(np.array([i]), np.array([self.s_far[i] - FAR_GAP_T]))[0]
+                k_hi = min(int(math.floor((rho_far - fl.rho0[kc]) / fl.step - 1e-9)), fl.n_rows[kc] - 1)
+            k = np.arange(k_lo, k_hi + 1)
+            rho = fl.rho0[kc] + fl.step * k
+            seg = np.full(k.size, i)
+            d = self._d_of_rho(seg, rho)
+            far = self.s_far[i]
+            with np.errstate(divide="ignore"):
+                z = np.log(d) - np.log(far - d)
+            b = _b_of(np.full(k.size, kc), rho)
+            sc = _scale(np.full(k.size, kc), b)
+            g = k + fl.offset[kc]
+            rows.append(g)
+            ds.append(d)
+            ths.append(self._nodes(seg, z, self.node_theta))
+            bs.append(b)
+            sts.append(fl.start[g] * sc)
+            lns.append(fl.length[g] * sc)
+            self.r_first[i], self.r_count[i] = total, k.size
+            total += k.size
+        self.row_g, self.row_d, self.row_theta = np.concatenate(rows), np.concatenate(ds), np.concatenate(ths)
+        self.row_b, self.row_start, self.row_length = np.concatenate(bs), np.concatenate(sts), np.concatenate(lns)
+        # the ray tangent at the observer (pi/2, the far end of the turning segments) as a row
+        self.tan = None
+        if self.n_seg == 4:
+            i = 1
+            d_far = self.s_far[i] - FAR_GAP_T
+            rho_t = self._rho(np.array([i]), np.array([d_far]))
+            kc = self.s_kind[i]
+            n_c = fl.n_cols
+            kind = np.full(n_c, kc)
+            b = _b_of(kind[:1], rho_t)[0]
+            st_ln = [(self.flat.start, 0), (self.flat.length, 0)]
+            g = np.clip((rho_t[0] - fl.rho0[kc]) / fl.step, 0.0, fl.n_rows[kc] - 1)
+            i0, w = _cubic_stencil(np.array([g]), fl.n_rows[kc])
+            rows_t = i0[0] + fl.offset[kc] + np.arange(4)
+            w = w[:, 0]
+            sc = _scale(np.array([kc]), np.array([b]))[0]
+            st = float(w @ fl.start[rows_t]) * sc
+            ln = float(w @ fl.length[rows_t]) * sc
+            u_rows = fl.u.reshape(-1, n_c)[rows_t]
+            self.tan = dict(u=w @ u_rows, b=b, start=st, length=ln, kind=kc,
+                            theta=self.node_theta[(i + 1) * self.n_z - 1])
+        # the table's error at the observer on each row (subtracted next to the observer)
+        all_rows = np.arange(self.row_g.size)
+        seg_of_row = np.concatenate([np.full(self.r_count[i], i) for i in range(self.n_seg) if self._twins()[i] == i])
+        self.row_eps = np.zeros(all_rows.size)
+        self.row_eps = self._row_residual(all_rows, np.full(all_rows.size, self.uo), np.zeros(all_rows.size),
+                                          seg_of_row)
+
+    # ---- table lookups ----------------------------------------------------------------------------
+    def _evaluate(self, kind, rho, theta, want_j=False, theta_ref=None):
+        """u (and J, r_s/c) on orbits of kind codes ``kind`` and labels ``rho`` at angles ``theta`` from
+        their reference points, bicubic, continued linearly beyond a row's range. With ``theta_ref``
+        (the observer's phase): u(theta) - u(theta_ref) + uo and J(theta) - J(theta_ref), from the same
+        row stencil, so that the table's own small error cancels next to the observer."""
+        fl = self.flat
+        n_c = fl.n_cols
+        nr = fl.n_rows.take(kind)
+        g = np.clip((rho - fl.rho0.take(kind)) / fl.step, 0.0, nr - 1)
+        i0 = np.clip(np.floor(g).astype(np.int64) - 1, 0, nr - 4)
+        t = g - i0
+        wr = np.empty((4, g.size))
+        wr[0] = -(t - 1.0) * (t - 2.0) * (t - 3.0) / 6.0
+        wr[1] = t * (t - 2.0) * (t - 3.0) / 2.0
+        wr[2] = -t * (t - 1.0) * (t - 3.0) / 2.0
+        wr[3] = t * (t - 1.0) * (t - 2.0) / 6.0
+        i0 = i0 + fl.offset.take(kind)
+        b = _b_of(kind, rho)
+        sc = _scale(kind, b)
+        st = (wr[0] * fl.start.take(i0) + wr[1] * fl.start.take(i0 + 1) + wr[2] * fl.start.take(i0 + 2)
+              + wr[3] * fl.start.take(i0 + 3)) * sc
+        ln = (wr[0] * fl.length.take(i0) + wr[1] * fl.length.take(i0 + 1) + wr[2] * fl.length.take(i0 + 2)
+              + wr[3] * fl.length.take(i0 + 3)) * sc
+        u, j = self._columns(i0, wr, (theta - st) / ln * (n_c - 1), want_j)
+        if theta_ref is not None:
+            u0, j0 = self._columns(i0, wr, (theta_ref - st) / ln * (n_c - 1), want_j)
+            u = u - u0
+            j = None if j is None else j - j0
+        u = np.where(kind == 0, u / b, u)
+        if theta_ref is not None:
+            u = u + self.uo
+        return u, (None if j is None else j * ln * b)
+
+    def _columns(self, i0, wr, c, want_j):
+        fl = self.flat
+        n_c = fl.n_cols
+        cc = np.clip(c, 0.0, n_c - 1)
+        j0, wc = _cubic_stencil(cc, n_c)
+        base = i0 * n_c + j0
+        u = _gather(fl.u, base, wr, wc, n_c) + _linear_tail(fl.u, base, n_c, c, cc, wr)
+        if not want_j:
+            return u, None
+        return u, _gather(fl.j, base, wr, wc, n_c) + _linear_tail(fl.j, base, n_c, c, cc, wr)
+
+    def _residual(self, seg, d, u, sweep, want=False, near=None):
+        """f = u_ray - u on the rays d of segments ``seg`` for targets (u, sweep); ``near`` (mask):
+        targets next to the observer, whose f is formed as u_ray - u_ray(theta_o) + uo - u."""
+        far = self.s_far.take(seg)
+        with np.errstate(divide="ignore"):
+            z = np.log(d) - np.log(far - d)
+        kind = self.s_kind.take(seg)
+        rho = self._rho(seg, d)
+        th_o = self._nodes(seg, z, self.node_theta)
+        th = th_o + self.s_dir.take(seg) * sweep
+        turning = kind != 1
+        u_ray, j = self._evaluate(kind, rho, np.where(turning, np.abs(th), th), want)
+        if near is not None and near.any():
+            k = np.flatnonzero(near)
+            uk, jk = self._evaluate(kind[k], rho[k], np.where(turning[k], np.abs(th[k]), th[k]), want,
+                                    theta_ref=th_o[k])
+            u_ray[k] = uk
+            if want:
+                j[k] = np.nan  # marks the difference J(theta) - J(theta_o) (see _finish)
+                j_diff = np.full(u.size, np.nan)
+                j_diff[k] = jk
+        if want:
+            return u_ray - u, dict(z=z, rho=rho, theta=th, theta_o=th_o, j=j,
+                                   j_diff=j_diff if near is not None and near.any() else None)
+        return u_ray - u
+
+    def _row_residual(self, row, u, sweep, seg, near=None):
+        """f on the concatenated rows ``row`` (1-D cubic along each row); ``near``: targets next to the
+        observer, from whose f the table's error at the observer is subtracted."""
+        fl = self.flat
+        n_c = fl.n_cols
+        kind = self.s_kind.take(seg)
+        th = self.row_theta.take(row) + self.s_dir.take(seg) * sweep
+        th = np.where(kind != 1, np.abs(th), th)
+        c = (th - self.row_start.take(row)) / self.row_length.take(row) * (n_c - 1)
+        cc = np.clip(c, 0.0, n_c - 1)
+        j0, wc = _cubic_stencil(cc, n_c)
+        base = self.row_g.take(row) * n_c + j0
+        v = wc[0] * fl.u.take(base) + wc[1] * fl.u.take(base + 1) + wc[2] * fl.u.take(base + 2) + \
+            wc[3] * fl.u.take(base + 3)
+        v = v + _linear_tail(fl.u, base, n_c, c, cc, np.ones((1, c.size)))
+        f = np.where(kind == 0, v / self.row_b.take(row), v) - u
+        return f if near is None else f - np.where(near, self.row_eps.take(row), 0.0)
+
+    def _tangent_residual(self, u, sweep, direction):
+        """f on the ray tangent at the observer (1-D cubic along its interpolated row)."""
+        t = self.tan
+        n_c = self.flat.n_cols
+        th = np.abs(t["theta"] + direction * sweep)
+        c = (th - t["start"]) / t["length"] * (n_c - 1)
+        cc = np.clip(c, 0.0, n_c - 1)
+        j0, wc = _cubic_stencil(cc, n_c)
+        row = t["u"]
+        v = wc[0] * row.take(j0) + wc[1] * row.take(j0 + 1) + wc[2] * row.take(j0 + 2) + wc[3] * row.take(j0 + 3)
+        out = np.flatnonzero(c != cc)
+        if out.size:
+            dw = _derivative_weights(cc[out], n_c)
+            jo = j0[out]
+            v[out] += (dw[0] * row.take(jo) + dw[1] * row.take(jo + 1) + dw[2] * row.take(jo + 2)
+                       + dw[3] * row.take(jo + 3)) * (c[out] - cc[out])
+        return (v / t["b"] if t["kind"] == 0 else v) - u
+
+    # ---- the solve --------------------------------------------------------------------------------
+    @property
+    def parameters(self) -> dict:
+        return dict(kind="orbits", r_obs=self.r_obs, r_min=self.r_min, source=self.source,
+                    step=self.table.step, n_cols=self.table.n_cols)
+
+    def lookup(self, r, phi, order: int = 1, quantities=QUANTITIES) -> Lookup:
+        return self.lookup_orders(r, phi, (order,), quantities)[order]
+
+    def lookup_orders(self, r, phi, orders=(1, 2), quantities=QUANTITIES) -> dict:
+        """{order: Lookup} of the connecting rays to points (r, phi) (broadcast; r in r_s, r >= r_min
+        including infinity, phi in [0, pi]); NaN outside. As :meth:`lutgen.WideLUT.lookup_orders`."""
+        orders = tuple(orders)
+        for order in orders:
+            if order not in (1, 2):
+                raise ValueError(f"order must be 1 or 2, got {order!r}")
+        unknown = set(quantities) - set(QUANTITIES)
+        if unknown:
+            raise ValueError(f"unknown quantities {sorted(unknown)}; choose from {QUANTITIES}")
+        r, phi = np.broadcast_arrays(np.asarray(r, dtype=np.float64), np.asarray(phi, dtype=np.float64))
+        shape = r.shape
+        r, p = r.ravel(), phi.ravel()
+        with np.errstate(invalid="ignore"):
+            ok = (r >= self.r_min * (1.0 - 1e-12)) & (p >= 0.0) & (p <= math.pi) & ~np.isnan(r)
+        idx = np.flatnonzero(ok)
+        m = idx.size
+        rr = np.tile(r[idx], len(orders))
+        pp = np.tile(p[idx], len(orders))
+        oo = np.repeat(np.array(orders), m)
+        res = self.solve(rr, pp, oo)
+        out = {}
+        for i, order in enumerate(orders):
+            got = {}
+            for q in quantities:
+                v = np.full(r.size, np.nan)
+                v[idx] = res[q][i * m:(i + 1) * m]
+                got[q] = v.reshape(shape)
+            out[order] = Lookup(*(got.get(q) for q in QUANTITIES))
+        return out
+
+    def solve(self, r, phi, order) -> dict:
+        """{xi, dt, ux, uy} of the connecting rays of orders ``order`` (array of 1 and 2) to points
+        (r, phi) (1-D, valid). Every point goes through the same vectorised steps:
+
+        1. its segment: the first whose end towards larger xi has f >= 0 (f changes sign once along
+           the rays ordered by xi);
+        2. a binary search over the table's rows inside the segment (1-D lookups along each row)
+           brackets the root between neighbouring rows (or the last row and the far end, pi/2);
+        3. between two rows, the cubic through f on four rows gives a start, and secant steps with the
+           bicubic interpolation converge (d = |xi - crit| to TOL_D); in the end intervals, and where
+           the secant steps do not converge, the Anderson-Bjorck variant of regula falsi in d does."""
+        n = r.size
+        with np.errstate(divide="ignore"):
+            u = 1.0 / r
+        sweep = np.where(order == 1, phi, 2.0 * math.pi - phi)
+        with np.errstate(invalid="ignore"):
+            h = np.sin(0.5 * phi)
+            gap = np.hypot(r - self.r_obs, 2.0 * np.sqrt(r * self.r_obs) * h)  # distance from the observer
+        near = (gap < NEAR * self.r_obs) & (order == 1)
+        ns = self.n_seg
+        # 1. segments
+        seg = np.full(n, ns - 1)
+        undecided = np.ones(n, dtype=bool)
+        for i in range(ns - 1):
+            at = np.flatnonzero(undecided)
+            if not at.size:
+                break
+            s_at = np.full(at.size, i)
+            if self.s_side[i] < 0:
+                f = self._row_residual(np.full(at.size, self.r_first[i]), u[at], sweep[at], s_at, near[at])
+            else:
+                f = self._tangent_residual(u[at], sweep[at], self.s_dir[i])
+            hit = f >= 0.0
+            seg[at[hit]] = i
+            undecided[at[hit]] = False
+        # 2. binary search over the segment's rows (node count: its rows, then the far end)
+        first, count = self.r_first.take(seg), self.r_count.take(seg)
+        orient = self.s_side.take(seg)  # f grows along the nodes when side > 0
+        lo, hi = np.zeros(n, dtype=np.int64), count.copy()
+        f_lo = np.full(n, np.nan)  # node 0's value: computed below where the search never moved lo
+        f_hi = orient * np.inf
+        while True:
+            o = np.flatnonzero(hi - lo > 1)
+            if not o.size:
+                break
+            mid = (lo.take(o) + hi.take(o)) // 2
+            f = self._row_residual(first.take(o) + mid, u.take(o), sweep.take(o), seg.take(o), near.take(o))
+            below = orient.take(o) * f < 0.0
+            ob, oa = o[below], o[~below]
+            lo[ob], f_lo[ob] = mid[below], f[below]
+            hi[oa], f_hi[oa] = mid[~below], f[~below]
+        at0 = np.flatnonzero(lo == 0)
+        if at0.size:
+            f_lo[at0] = self._row_residual(first[at0], u[at0], sweep[at0], seg[at0], near[at0])
+        d = np.empty(n)
+        none = orient * f_lo >= 0.0  # a root at the critical end (within rounding)
+        d[none] = self.row_d.take(first[none])
+        # the end intervals: the far end (pi/2) and the two rows before it
+        turning = self.s_kind.take(seg) != 1
+        inner = ~none & ~(turning & (hi >= count - 2)) & (hi < count)
+        i = np.flatnonzero(inner)
+        if i.size:
+            k0 = np.clip(lo[i] - 1, 0, count[i] - 4)
+            fs = np.empty((4, i.size))
+            for j in range(4):  # the bracket's two rows are known from the search
+                known_lo, known_hi = k0 + j == lo[i], k0 + j == hi[i]
+                fs[j, known_lo], fs[j, known_hi] = f_lo[i[known_lo]], f_hi[i[known_hi]]
+                m = np.flatnonzero(~known_lo & ~known_hi)
+                if m.size:
+                    im = i[m]
+                    fs[j, m] = self._row_residual(first[im] + k0[m] + j, u[im], sweep[im], seg[im], near[im])
+            t = _cubic_root(fs, (lo[i] - k0).astype(float))
+            rho = self.flat.rho0.take(self.s_kind.take(seg[i])) + self.flat.step * (
+                self.row_g.take(first[i] + k0) - self.flat.offset.take(self.s_kind.take(seg[i])) + t)
+            d_a, d_b = self.row_d.take(first[i] + lo[i]), self.row_d.take(first[i] + hi[i])
+            d0 = np.clip(self._d_of_rho(seg[i], rho), np.minimum(d_a, d_b), np.maximum(d_a, d_b))
+            d[i], ok = self._secant(seg[i], u[i], sweep[i], d0, d_a, d_b, near[i])
+            inner[i[~ok]] = False
+        e = np.flatnonzero(~none & ~inner)
+        if e.size:
+            far_d = self.s_far.take(seg[e]) - FAR_GAP_T
+            d_a = self.row_d.take(first[e] + np.minimum(lo[e], count[e] - 1))
+            d_b = np.where(hi[e] >= count[e], far_d, self.row_d.take(first[e] + np.minimum(hi[e], count[e] - 1)))
+            f_a, f_b = f_lo[e], f_hi[e]
+            tan = np.flatnonzero((hi[e] >= count[e]) & (self.s_kind.take(seg[e]) != 1))
+            if tan.size and self.tan is not None:  # the far end is the ray tangent at the observer: its f
+                f_b[tan] = self._tangent_residual(u[e[tan]], sweep[e[tan]], self.s_dir.take(seg[e[tan]]))
+            # in these intervals f is smooth in d: regula falsi for a start, then secant steps
+            with np.errstate(divide="ignore", invalid="ignore"):
+                d0 = d_a - f_a * (d_b - d_a) / (f_b - f_a)
+            lo_d, hi_d = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
+            d0 = np.where(np.isfinite(d0) & (d0 > lo_d) & (d0 < hi_d), d0, 0.5 * (d_a + d_b))
+            d[e], ok = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6)
+            rest = np.flatnonzero(~ok)
+            if rest.size:
+                er = e[rest]
+                d[er] = self._regula_falsi(seg[er], u[er], sweep[er], d_a[rest], d_b[rest], f_a[rest], f_b[rest],
+                                           near[er])
+        return self._finish(seg, d, u, r, phi, sweep, order, near)
+
+    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4):
+        """Secant steps in d from d0 (inside the bracket [d_a, d_b], next to the root) with the bicubic
+        interpolation; returns (d, converged)."""
+        lo, hi = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
+        x_prev = d0 + 1e-7 * (hi - lo)
+        f_prev = self._residual(seg, x_prev, u, sweep, near=near)
+        x = d0
+        out = d0.copy()
+        ok = np.zeros(u.size, dtype=bool)
+        act = np.arange(u.size)
+        for _ in range(steps):
+            if not act.size:
+                break
+            f = self._residual(seg.take(act), x, u.take(act), sweep.take(act), near=near.take(act))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x_new = x - f * (x - x_prev) / (f - f_prev)
+            x_new = np.where(f == 0.0, x, x_new)
+            good = np.isfinite(x_new) & (x_new >= lo.take(act)) & (x_new <= hi.take(act))
+            # a step this short leaves an error of order its square: converged
+            done = good & (np.abs(x_new - x) <= SECANT_DONE * x)
+            out[act[done]] = x_new[done]
+            ok[act[done]] = True
+            keep = good & ~done
+            act, x_prev, f_prev, x = act[keep], x[keep], f[keep], x_new[keep]
+        return out, ok
+
+    def _regula_falsi(self, seg, u, sweep, a, b, f_a, f_b, near):
+        """d of the roots bracketed by [a, b] (f values f_a, f_b, possibly infinite): the
+        Anderson-Bjorck variant of regula falsi."""
+        out = np.empty(u.size)
+        act = np.arange(u.size)
+        for _ in range(100):
+            if not act.size:
+                break
+            with np.errstate(divide="ignore", invalid="ignore"):
+                c = b - f_b * (b - a) / (f_b - f_a)
+            lo_d, hi_d = np.minimum(a, b), np.maximum(a, b)
+            c = np.where(np.isfinite(c) & (c > lo_d) & (c < hi_d), c, 0.5 * (a + b))
+            f_c = self._residual(seg.take(act), c, u.take(act), sweep.take(act), near=near.take(act))
+            flip = (f_c < 0) != (f_b < 0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                mm = 1.0 - f_c / f_b
+            mm = np.where(mm > 0.0, mm, 0.5)
+            a, f_a = np.where(flip, b, a), np.where(flip, f_b, f_a * mm)
+            tol = TOL_D * c
+            done = (np.abs(c - b) <= tol) | (f_c == 0.0) | (np.abs(c - a) <= tol)
+            b, f_b = c, f_c
+            out[act[done]] = c[done]
+            keep = ~done
+            act, a, b, f_a, f_b = act[keep], a[keep], b[keep], f_a[keep], f_b[keep]
+        out[act] = b
+        return out
+
+    def _finish(self, seg, d, u, r, phi, sweep, order, near) -> dict:
+        """xi, dt, ux, uy of the rays d of segments ``seg``."""
+        k = self.k
+        kind = self.s_kind.take(seg)
+        xi = self.s_crit.take(seg) + self.s_side.take(seg) * d
+        _, got = self._residual(seg, d, u, sweep, want=True, near=near)
+        rho, th = got["rho"], got["theta"]
+        b = _b_of(kind, rho)
+        j_o = self._nodes(seg, got["z"], self.node_j)
+        turning = kind != 1
+        j_t = np.where(turning, np.sign(th), 1.0) * got["j"]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rs_o = self.r_obs + math.log(self.r_obs - 1.0)
+            rs_t = r + np.log(r - 1.0)
+            radial = np.abs(rs_t - rs_o)
+            tt = np.flatnonzero(turning & (th < 0.0))  # the ray passed its periapsis / apoapsis
+            if tt.size:
+                orb = _orbits("T", rho[tt]) if kind[tt[0]] == 0 else _orbits("I", rho[tt])
+                r_ref = 1.0 / np.where(kind[tt] == 0, orb.e2, orb.e3)
+                rs_ref = r_ref + np.log(r_ref - 1.0)
+                radial[tt] = np.abs(rs_t[tt] - rs_ref) + np.abs(rs_o - rs_ref)
+            dj = j_t - j_o
+            if got["j_diff"] is not None:  # next to the observer: J(theta) - J(theta_o) from one stencil
+                same = near & ((th >= 0.0) | ~turning)
+                dj = np.where(same, got["j_diff"], dj)
+            dt = radial + np.abs(dj)
+        direction = self.s_dir.take(seg)
+        outward = np.where(turning, (np.sign(th) * direction > 0) == (kind == 0), direction < 0)
+        s2 = np.maximum(1.0 - b * b * u * u * (1.0 - u), 0.0)
+        u_r = np.where(outward, 1.0, -1.0) * k * np.sqrt(s2)
+        dt = np.where(np.isinf(r), np.inf, dt)
+        r_u_phi = np.where(order == 1, 1.0, -1.0) * k * b * u
+        c, s = np.cos(phi), np.sin(phi)
+        return dict(xi=xi, dt=dt, ux=u_r * c - r_u_phi * s, uy=u_r * s + r_u_phi * c)
+
+
+def _cubic_root(fs, t0):
+    """Root in [t0, t0 + 1] of the cubic through (j, fs[j]), j = 0..3 (fs (4, N); f changes sign
+    between nodes t0 and t0 + 1): Newton on the cubic from the linear interpolation, kept inside."""
+    f0, f1, f2, f3 = fs
+    # Newton form of the interpolating cubic: p(t) = f0 + t (a + (t - 1) (c + (t - 2) e))
+    a = f1 - f0
+    c = 0.5 * (f2 - 2.0 * f1 + f0)
+    e = (f3 - 3.0 * f2 + 3.0 * f1 - f0) / 6.0
+    fa = np.where(t0 == 0, f0, np.where(t0 == 1, f1, f2))
+    fb = np.where(t0 == 0, f1, np.where(t0 == 1, f2, f3))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = t0 + np.where(fb != fa, fa / (fa - fb), 0.5)
+    for _ in range(5):
+        p = f0 + t * (a + (t - 1.0) * (c + (t - 2.0) * e))
+        dp = a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_new = t - p / dp
+        t = np.where(np.isfinite(t_new), np.clip(t_new, t0, t0 + 1.0), t)
+    return t
+
+
+# ------------------------------------------------------------------------------------------------
+# Exact connecting rays of an observer inside the photon sphere
+# ------------------------------------------------------------------------------------------------
+def connect_inside(r_obs, r, phi, order):
+    """Connecting rays of ``order`` for a static observer inside the photon sphere (R_OBS_MIN <= r_obs
+    <= 1.5 r_s) to points (r, phi) (1-D arrays, r > 1, phi in [0, pi]): dict of xi, dt, ux, uy, b, in
+    lutgen.solver's conventions, exact to rounding. The orbit table's ray (:class:`RayMap`) is the
+    start; secant steps in the orbit's label rho on the closed-form swept angle (Carlson's forms:
+    lutgen.orbit.sweep for the rays that cross the photon sphere, sweep_inner on the inner branch)
+    polish it; travel times are lutgen.orbit.travel_time and travel_time_inner."""
+    r_obs = float(r_obs)
+    r, phi = np.asarray(r, dtype=float), np.asarray(phi, dtype=float)
+    n = r.size
+    u = 1.0 / r
+    uo = 1.0 / r_obs
+    sweep = phi if order == 1 else 2.0 * math.pi - phi
+    m = RayMap(r_obs, r_min=min(float(r.min()), r_obs) * (1 - 1e-12) if n else 1.01)
+    xi0 = m.lookup(r, phi, order).xi
+    v_o = uo * uo * (1.0 - uo)
+    sin_c = B_C * math.sqrt(v_o)
+    outward = xi0 < 0.5 * math.pi
+    s = np.sin(xi0)
+    plunging = s < sin_c
+    kind = np.where(plunging, "P", "I")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # (b/b_c)^2 - 1 = (sin^2 xi - sin^2 xi_c) / sin^2 xi_c, (b_c/b)^2 - 1 = its negative over (b/b_c)^2
+        xi_c = math.asin(min(sin_c, 1.0))
+        x = np.where(outward, xi0, math.pi - xi0)
+        num = np.sin(x - xi_c) * np.sin(x + xi_c)
+        rho = np.where(plunging, np.log(-num / np.sin(x) ** 2), np.log(num / sin_c ** 2))
+    out = {k: np.full(n, np.nan) for k in ("xi", "dt", "ux", "uy", "b")}
+    radial = (s < 1e-12) | ~np.isfinite(rho)
+    for kname in ("P", "I"):
+        sel = np.flatnonzero((kind == kname) & ~radial & np.isfinite(xi0))
+        if not sel.size:
+            continue
+        ou, uu, sw = outward[sel], u[sel], sweep[sel]
+
+        def sweeps(rh):
+            orb = _orbits(kname, rh)
+            if kname == "P":
+                fo, fu = _orb.sweep(orb, np.full(rh.size, uo)), _orb.sweep(orb, uu)
+                return np.where(ou, fo - fu, fu - fo), orb, None
+            go, gu = _orb.sweep_inner(orb, np.full(rh.size, uo)), _orb.sweep_inner(orb, uu)
+            before, after = go - gu, go + gu
+            past = ou & (np.abs(after - sw) < np.abs(before - sw))  # past the apoapsis
+            return np.where(ou, np.where(past, after, before), gu - go), orb, past
+
+        x0 = rho[sel]
+        f0 = sweeps(x0)[0] - sw
+        x1 = x0 + 1e-7 * np.maximum(1.0, np.abs(x0))
+        f1 = sweeps(x1)[0] - sw
+        for _ in range(6):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x2 = x1 - f1 * (x1 - x0) / (f1 - f0)
+            x2 = np.where(np.isfinite(x2) & (f1 != f0), x2, x1)
+            x0, f0 = x1, f1
+            x1 = x2
+            f1 = sweeps(x1)[0] - sw
+            if np.all(np.abs(x1 - x0) <= 1e-14 * np.maximum(1.0, np.abs(x1))):
+                break
+        _, orb, past = sweeps(x1)
+        b = impact_parameter(kname, x1)
+        xi = np.arcsin(np.minimum(b * math.sqrt(v_o), 1.0))
+        xi = np.where(ou, xi, math.pi - xi)
+        if kname == "P":
+            dt = _orb.travel_time(orb, np.full(sel.size, uo), uu, r_a=np.full(sel.size, r_obs), r_b=r[sel])
+            going_out = ou
+        else:
+            to, tu = _orb.travel_time_inner(orb, np.full(sel.size, uo)), _orb.travel_time_inner(orb, uu)
+            dt = np.where(ou, np.where(past, to + tu, to - tu), tu - to)
+            going_out = ou & ~past
+        k = math.sqrt(1.0 - uo)
+        s2 = np.maximum(1.0 - b * b * uu * uu * (1.0 - uu), 0.0)
+        u_r = np.where(going_out, 1.0, -1.0) * k * np.sqrt(s2)
+        r_u_phi = (1.0 if order == 1 else -1.0) * k * b * uu
+        c, sn = np.cos(phi[sel]), np.sin(phi[sel])
+        out["xi"][sel], out["dt"][sel], out["b"][sel] = xi, dt, b
+        out["ux"][sel], out["uy"][sel] = u_r * c - r_u_phi * sn, u_r * sn + r_u_phi * c
+    rad = np.flatnonzero(radial & np.isfinite(xi0))
+    if rad.size:  # the radial rays (phi = 0 or pi on the axis)
+        inward = u[rad] > uo
+        out["xi"][rad] = np.where(inward, math.pi, 0.0)
+        out["dt"][rad] = _orb.radial_travel_time(uo, u[rad], r_a=r_obs, r_b=r[rad])
+        k = math.sqrt(1.0 - uo)
+        u_r = np.where(inward, -k, k)
+        out["ux"][rad], out["uy"][rad] = u_r * np.cos(phi[rad]), u_r * np.sin(phi[rad])
+        out["b"][rad] = 0.0
+    return out

@@ -1,0 +1,163 @@
+"""The orbit table (one table for every observer radius) and the connecting rays read from it
+(:mod:`lutgen.rays`), against the closed-form solver :func:`lutgen.connect` outside the photon sphere
+and the DOP853 integrator of the geodesic equations (:func:`lutgen.reference.shoot`) inside it.
+
+Units: r_s, radians, r_s/c.
+"""
+import math
+
+import numpy as np
+import pytest
+
+import lutgen
+import lutgen.wide_lut
+from lutgen import orbit as O
+from lutgen import rays, reference
+
+
+@pytest.fixture(scope="module")
+def table():
+    return rays.orbit_table()
+
+
+def test_table_nodes_against_closed_forms(table):
+    """u on each kind's orbits at the closed-form angle of random radii, by the table's interpolation."""
+    rng = np.random.default_rng(0)
+    for name, lo, hi in (("T", -24.0, rays.RHO_MAX_T), ("P", -24.0, rays.RHO_MAX_P), ("I", -24.0, rays.RHO_MAX_I)):
+        kind = table.kinds[name]
+        rho = rng.uniform(lo, hi, 3000)
+        orb = rays._orbits(name, rho)
+        if name == "T":
+            u = orb.e2 * rng.uniform(0, 1, rho.size)
+            th = O.sweep_from_turning_point(orb, u, np.sqrt(orb.e2 - u))
+            scale = orb.e2
+        elif name == "P":
+            u = rng.uniform(0, 1, rho.size)
+            th = O.sweep(orb, u) - O.sweep(orb, np.full(u.size, O.U_PHOTON))
+            scale = 1.0
+        else:
+            u = orb.e3 + (1 - orb.e3) * rng.uniform(0, 1, rho.size)
+            th = rays._sweep_inner(orb, u)
+            scale = 1.0
+        got, _ = kind.evaluate(rho, th)
+        assert np.max(np.abs(got - u) / scale) < 3e-7, name
+
+
+def _targets(rng, r_obs, n):
+    r = 10 ** rng.uniform(np.log10(1.06), 3, n)
+    p = rng.uniform(0, np.pi, n)
+    d = r_obs * 10 ** rng.uniform(-3, np.log10(0.5), n // 4)  # beside the camera
+    a = rng.uniform(0, np.pi, d.size)
+    x, y = r_obs + d * np.cos(a), d * np.sin(a)
+    return np.concatenate([r, np.hypot(x, y), [1e9, 1e6]]), np.concatenate([p, np.arctan2(y, x), [1.0, 2.0]])
+
+
+@pytest.mark.parametrize("r_obs", [1e4, 20.0, 6.0, 2.0, 1.6, 1.51])
+def test_connecting_rays_outside_photon_sphere(r_obs):
+    rng = np.random.default_rng(int(r_obs * 10))
+    r, p = _targets(rng, r_obs, 3000)
+    ok = r >= 1.05
+    r, p = r[ok], p[ok]
+    got = rays.RayMap(r_obs).lookup_orders(r, p)
+    for o in (1, 2):
+        ex = lutgen.connect(r_obs, r, p, o)
+        assert np.nanmax(np.abs(got[o].xi - ex.xi)) < 2e-6, o
+        assert np.nanmax(np.abs(got[o].dt / ex.dt - 1.0)) < 5e-6, o
+        assert np.nanmax(np.abs(got[o].ux - ex.ux)) < 1e-4, o
+        assert np.nanmax(np.abs(got[o].uy - ex.uy)) < 1e-4, o
+        assert not np.isnan(got[o].xi).any()
+
+
+@pytest.mark.parametrize("r_obs", [1.45, 1.2, 1.05, 1.01])
+def test_connecting_rays_inside_photon_sphere_against_dop853(r_obs):
+    """Shoot the table's ray (xi, on the target's side for order 1, the other for order 2) with the
+    DOP853 integrator until it has swept the target's angle: it is at the target's radius, after the
+    table's travel time."""
+    rng = np.random.default_rng(int(r_obs * 100))
+    n = 40
+    r = np.concatenate([10 ** rng.uniform(np.log10(1.05), 2, n), [r_obs * 1.02, r_obs * 0.999, 1e4]])
+    r = np.maximum(r, 1.01)
+    p = rng.uniform(0.02, np.pi - 0.02, r.size)
+    got = rays.RayMap(r_obs, r_min=1.01).lookup_orders(r, p)
+    for o in (1, 2):
+        for i in range(r.size):
+            xi, dt = got[o].xi[i], got[o].dt[i]
+            assert np.isfinite(xi) and np.isfinite(dt)
+            sweep = p[i] if o == 1 else 2 * np.pi - p[i]
+            shot = reference.shoot(r_obs, xi, side=1 if o == 1 else -1, phi_end=sweep, r_escape=1e6)
+            assert shot.status == "phi", (o, r[i], p[i], shot.status)
+            assert abs(1.0 / shot.r - 1.0 / r[i]) < 2e-6 * max(1.0, abs(shot.phi)), (o, r[i], p[i], shot.r)
+            # the shot ends where it has swept the angle, a hair from the target along the ray
+            slack = abs(lutgen.wide_lut.tortoise(shot.r) - lutgen.wide_lut.tortoise(r[i]))
+            assert abs(shot.dt - dt) < 2e-5 * dt + 1.01 * slack, (o, r[i], p[i], shot.dt, dt)
+
+
+def test_inside_photon_sphere_families():
+    """From inside the photon sphere: outward rays within the escape limit reach far targets; the
+    rays that turn back (apoapsis) reach targets below the observer at large angles; rays to targets
+    between the observer and the photon sphere exist for every angle."""
+    r_obs = 1.3
+    m = rays.RayMap(r_obs)
+    lim = lutgen.escape_limit(r_obs)
+    far = m.lookup(np.array([1e6]), np.array([0.5]), 1)
+    assert far.xi[0] < lim
+    assert abs(far.xi[0] - _escape_xi(r_obs, 0.5)) < 1e-6
+    below = m.lookup(np.array([1.1, 1.1]), np.array([2.5, 3.0]), 1)
+    assert np.all(below.xi < 0.5 * np.pi) and np.all(below.xi > lim)  # out, turn back, fall in
+    between = m.lookup(np.full(5, 1.45), np.linspace(0.1, 3.0, 5), 1)
+    assert np.all(np.isfinite(between.xi))
+
+
+def _escape_xi(r_obs, phi_inf):
+    """xi whose ray reaches infinity at phi_inf (lutgen.escape, inverted by bisection)."""
+    lo, hi = 0.0, lutgen.escape_limit(r_obs) * (1 - 1e-12)
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if lutgen.escape_angle(r_obs, mid) < phi_inf:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def test_batch_independence_and_determinism():
+    """A point's ray does not depend on the other points looked up with it, nor on what was looked up
+    or built before (the same RayMap radius gives bit-identical values)."""
+    rng = np.random.default_rng(5)
+    r, p = _targets(rng, 7.0, 2000)
+    a = rays.RayMap(7.0).lookup_orders(r, p)
+    rays.RayMap(3.3).lookup_orders(r, p)
+    sub = slice(100, 160)
+    b = rays.RayMap(7.0).lookup_orders(r[sub], p[sub])
+    for o in (1, 2):
+        for q in ("xi", "dt", "ux", "uy"):
+            assert np.array_equal(getattr(a[o], q)[sub], getattr(b[o], q)), (o, q)
+
+
+def test_observer_range():
+    with pytest.raises(ValueError):
+        rays.RayMap(1.0)
+    with pytest.raises(ValueError):
+        rays.RayMap(1.0005)
+    assert math.isfinite(rays.RayMap(1.001).lookup(np.array([2.0]), np.array([1.0])).xi[0])
+
+
+@pytest.mark.parametrize("r_obs", [1.45, 1.2, 1.05, 1.01])
+def test_exact_connect_inside_photon_sphere_against_dop853(r_obs):
+    """lutgen.connect inside the photon sphere (the table's ray polished on the closed-form swept angle):
+    the DOP853 integrator, shot at its xi, sweeps the target's angle at the target's radius after its
+    travel time, to the integrator's own accuracy; the table agrees to within its 1e-6 rad."""
+    rng = np.random.default_rng(int(r_obs * 1000))
+    r = np.concatenate([10 ** rng.uniform(np.log10(1.02), 2, 25), [r_obs * 1.01, r_obs * 0.995]])
+    p = rng.uniform(0.02, np.pi - 0.02, r.size)
+    for o in (1, 2):
+        c = lutgen.connect(r_obs, r, p, o)
+        assert not np.isnan(c.xi).any()
+        table = rays.RayMap(r_obs, r_min=1.001).lookup(r, p, o)
+        assert np.max(np.abs(table.xi - c.xi)) < 1e-6
+        for i in range(r.size):
+            sweep = p[i] if o == 1 else 2 * np.pi - p[i]
+            shot = reference.shoot(r_obs, c.xi[i], side=1 if o == 1 else -1, phi_end=sweep, r_escape=1e6)
+            assert shot.status == "phi"
+            assert abs(1.0 / shot.r - 1.0 / r[i]) < 1e-9
+            assert abs(shot.dt / c.dt[i] - 1.0) < 1e-8
