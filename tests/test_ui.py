@@ -63,7 +63,7 @@ def draw(panel, obj=None, header=False):
 
 ESSENTIALS = {"black_hole", "r_s", "observer", "lens_world", "tess_max_error", "tess_max_error_viewport"}
 KNOBS = {"lut_mode", "lut_r_min", "lut_r_max", "lut_n_r", "lut_n_phi", "max_tess_level", "tess_a", "tess_b",
-         "cull_ratio"}
+         "cull_ratio", "max_triangles"}
 
 
 def _scene():
