@@ -9,10 +9,10 @@ field of view 30 deg):
 * ``wall``: a rectangle in y = 4 BU beside the camera, x from -80 to 40 BU (it passes the camera),
   z from -20 to 20 BU, two triangles; ``wall 20x20``: the same as a grid.
 
-UVs run from 0 to 1 across each mesh; the texture measure draws a checker of CELLS x CELLS cells from
+UVs run from 0 to 1 across each mesh; the texture measure draws a checker of 50 x 50 cells from
 them (image_metrics.checker_torn). Per scene and resolution: build_images (both orders, the add-on's
 default settings and table; best of --repeat), the image triangles per order, what the refine step
-did (source triangles added, pieces beyond the budget after it), the reference (raytrace.trace), and
+did (pieces cut further, pieces beyond the budget after it), the reference (raytrace.trace), and
 the metrics of docs/accuracy.md (coverage mismatch, screen error of the texture, light travel time)
 plus the checker's wrong and torn pixels, the kept pieces' own errors measured inside
 (interior.measure over every kept piece, sampled or not: p99 and max in pixels and relative c*dt),
@@ -197,7 +197,7 @@ def main(argv=None):
              f"({platform.machine()}, {os.cpu_count()} CPUs; {code_version()}; load average {load0:.1f} at the start: "
              "on this shared machine times vary by tens of percent, compare within a run); do not edit by hand.", "",
              "| scene | resolution | core | build_images [ms] (best) | image triangles (order 1 / 2) | "
-             "source triangles added by the refine step | pieces beyond the budget after it (worst) | mismatch / covered | "
+             "pieces the refine step cut | pieces beyond the budget after it (worst) | mismatch / covered | "
              "screen err p50 / p99 / max [px] | c*dt rel. err p99 / max | checker pixels wrong / torn | "
              "pieces inside: screen p99 / max [px] | pieces inside: c*dt rel. p99 / max | "
              "GR irradiance interpolated, rel. err p99 / max | reference [s] |",
@@ -210,7 +210,7 @@ def main(argv=None):
             lines += run(name, meshes[name], cam, table, variants, args.repeat, light_table)
     if args.write:
         path = os.path.join(ROOT, "docs", "coarse.md")
-        head = ["# Coarse meshes against the per-pixel reference", "", __doc__.split("\n\n")[1], ""]
+        head = ["# Coarse meshes against the per-pixel reference", "", *__doc__.split("\n\n")[1:4], ""]
         with open(path, "w") as f:
             f.write("\n".join(head + lines) + "\n")
         print(f"wrote {path}")

@@ -309,7 +309,16 @@ def test_sources_are_hidden_from_renders_again_after_a_render(tmp_path):
     _subsurf_render(tmp_path, 0, 2, "after")
     block = bpy.data.objects["Block"]
     assert block.hide_render  # shown to the render's depsgraph only while it evaluated the sources
-    assert len(bpy.data.objects["Block.GR1"].data.polygons) > 0
+    img = bpy.data.objects["Block.GR1"]
+    scene = bpy.context.scene
+    scene.frame_set(1)
+    after = _positions(img)
+    block.modifiers[0].levels = 2  # the viewport follows the viewport levels, before and after renders
+    scene.frame_set(1)
+    assert _positions(img).shape != after.shape
+    block.modifiers[0].levels = 0
+    scene.frame_set(1)
+    np.testing.assert_array_equal(_positions(img), after)  # the render's levels left nothing behind
 
 
 # --- clear words for bad settings -------------------------------------------------------------------
