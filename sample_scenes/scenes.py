@@ -778,6 +778,26 @@ def _polar_floor(scene, name, r_s, depth, radius, cell, material, n_az=96, n_rin
     return _mesh_object(scene, name, verts, faces, uvs, [material])
 
 
+def _floor_and_sphere(scene, clip_start):
+    """The set-up the fly-in and the plunge share: the demo scene (hole, orbiting sphere, camera;
+    r_s = FLYIN_R_S BU) with an emissive checker on the sphere, the checkered polar floor, and the
+    camera fitted vertically with its near clip at ``clip_start`` BU. Automatic updates stay off until
+    everything is in place (_lens switches them on). Returns (r_s, scene.grlens, hole, sphere,
+    camera, floor)."""
+    r_s = FLYIN_R_S
+    bpy.ops.grlens.demo_scene(r_s=r_s)  # hole, orbiting sphere, camera; builds its images once
+    g = scene.grlens
+    g.auto_update = False
+    hole, sphere, cam = (bpy.data.objects[n] for n in ("BlackHole", "OrbitingSphere", "Camera"))
+    sphere.data.materials.clear()
+    sphere.data.materials.append(_emission_checker("SphereChecker", (0.9, 0.35, 0.03), (0.03, 0.2, 0.9), 6.0))
+    floor_mat = _emission_checker("FloorChecker", (0.62, 0.6, 0.52), (0.035, 0.04, 0.06), 1.0)
+    floor = _polar_floor(scene, "Floor", r_s, FLOOR_DEPTH, FLOOR_RADIUS, FLOOR_CELL, floor_mat)
+    cam.data.sensor_fit = "VERTICAL"
+    cam.data.clip_start, cam.data.clip_end = clip_start, 1.0e4
+    return r_s, g, hole, sphere, cam, floor
+
+
 def flyin(scene):
     """Issue 19: a fly-in, the camera from 80 r_s to 4.5 r_s, over a checkered floor that reaches the
     horizon, with the paper's sphere on its orbit. Units: r_s = 2 BU (as the demo); the hole at the
@@ -805,19 +825,9 @@ def flyin(scene):
       the Standard view transform, so that the emission colours show as they are.
 
     The camera is placed at frame 1; the images are built by the first frame change (render.py)."""
-    r_s = FLYIN_R_S
-    bpy.ops.grlens.demo_scene(r_s=r_s)  # hole, orbiting sphere, camera; builds its images once
-    g = scene.grlens
-    g.auto_update = False  # until everything is in place (_lens switches it on)
-    hole, sphere, cam = (bpy.data.objects[n] for n in ("BlackHole", "OrbitingSphere", "Camera"))
-    sphere.data.materials.clear()
-    sphere.data.materials.append(_emission_checker("SphereChecker", (0.9, 0.35, 0.03), (0.03, 0.2, 0.9), 6.0))
-    floor_mat = _emission_checker("FloorChecker", (0.62, 0.6, 0.52), (0.035, 0.04, 0.06), 1.0)
-    floor = _polar_floor(scene, "Floor", r_s, FLOOR_DEPTH, FLOOR_RADIUS, FLOOR_CELL, floor_mat)
+    r_s, g, hole, sphere, cam, floor = _floor_and_sphere(scene, clip_start=0.05)
     from mathutils import Vector
 
-    cam.data.sensor_fit = "VERTICAL"
-    cam.data.clip_start, cam.data.clip_end = 0.05, 1.0e4
     previous = None
     for f in range(1, FLYIN_FRAMES + 1):
         d, el, az, fov = flyin_camera(f)
@@ -885,19 +895,9 @@ def plunge(scene):
     * lut_mode ONE_TABLE: the orbit table serves every radius of the descent, so no frame waits for a
       table (lutgen.rays; lut_r_min 1.02 r_s).
     * The star field of the ``starfield`` scene as the world, lensed (scene.grlens.lens_world)."""
-    r_s = FLYIN_R_S
-    bpy.ops.grlens.demo_scene(r_s=r_s)
-    g = scene.grlens
-    g.auto_update = False
-    hole, sphere, cam = (bpy.data.objects[n] for n in ("BlackHole", "OrbitingSphere", "Camera"))
-    sphere.data.materials.clear()
-    sphere.data.materials.append(_emission_checker("SphereChecker", (0.9, 0.35, 0.03), (0.03, 0.2, 0.9), 6.0))
-    floor_mat = _emission_checker("FloorChecker", (0.62, 0.6, 0.52), (0.035, 0.04, 0.06), 1.0)
-    floor = _polar_floor(scene, "Floor", r_s, FLOOR_DEPTH, FLOOR_RADIUS, FLOOR_CELL, floor_mat)
+    r_s, g, hole, sphere, cam, floor = _floor_and_sphere(scene, clip_start=0.01)
     from mathutils import Vector
 
-    cam.data.sensor_fit = "VERTICAL"
-    cam.data.clip_start, cam.data.clip_end = 0.01, 1.0e4
     el, az = math.radians(PLUNGE_ELEVATION), math.radians(PLUNGE_AZIMUTH)
     radial = Vector((math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)))
     down = Vector((0.0, 0.0, -1.0))
