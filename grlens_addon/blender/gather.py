@@ -281,7 +281,7 @@ def combine(placed_parts, with_normals: bool) -> tuple[pipeline.SourceMesh, list
             lookup = np.array([slot_of(None)], dtype=np.int64)
         p, t, u, n = _placed(part, matrices, with_normals)
         pos.append(p)
-        tris.append(t + offset)
+        tris.append(t + offset if offset else t)
         offset += len(p)
         if any_uv:
             uv.append(u if u is not None else np.zeros((len(t), 3, 2)))
@@ -291,9 +291,15 @@ def combine(placed_parts, with_normals: bool) -> tuple[pipeline.SourceMesh, list
     if not tris:
         return pipeline.SourceMesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, np.zeros(0, np.int64),
                                    None), slots
-    mesh = pipeline.SourceMesh(np.concatenate(pos), np.concatenate(tris), np.concatenate(uv) if any_uv else None,
-                               np.concatenate(mat), np.concatenate(nrm) if with_normals else None)
+    mesh = pipeline.SourceMesh(_joined(pos), _joined(tris), _joined(uv) if any_uv else None, _joined(mat),
+                               _joined(nrm) if with_normals else None)
     return mesh, slots
+
+
+def _joined(arrays):
+    """The arrays one after another: the one array itself when there is one (a plain mesh without
+    instances: no copy of its million-triangle arrays)."""
+    return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
 
 
 def extract(obj_eval, with_normals: bool = True) -> pipeline.SourceMesh:

@@ -59,6 +59,23 @@ def _remember_topology(mesh, img) -> None:
     mesh["grlens_topology"] = token
 
 
+def _set_edges(mesh, img) -> None:
+    """The image's edges and corner edges (ImageMesh.edges: a dense source's own, kept per topology)
+    written as Blender stores them, so that ``mesh.update()`` need not find them (Blender's search
+    for the edges of a mesh without any is most of a large upload's time)."""
+    if not len(img.tris):
+        return
+    verts, corner_edge = img.edges()
+    mesh.edges.add(len(verts))
+    ev = mesh.attributes.get(".edge_verts")
+    if ev is not None and ev.data_type == "INT32_2D" and ev.domain == "EDGE":
+        ev.data.foreach_set("value", np.ascontiguousarray(verts, dtype=np.int32).ravel())
+    else:
+        mesh.edges.foreach_set("vertices", np.ascontiguousarray(verts, dtype=np.int32).ravel())
+    _attr(mesh, ".corner_edge", "INT", "CORNER").data.foreach_set(
+        "value", np.ascontiguousarray(corner_edge, dtype=np.int32).ravel())
+
+
 def upload(mesh, img, materials) -> None:
     """Write ``img`` (a core.pipeline.ImageMesh) into ``mesh``. If the topology is unchanged only the
     vertex positions and per-vertex/corner values are rewritten."""
@@ -74,8 +91,10 @@ def upload(mesh, img, materials) -> None:
         mesh.attributes[".corner_vert"].data.foreach_set(
             "value", np.ascontiguousarray(img.tris, dtype=np.int32).ravel())
         mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * n_f, 3, dtype=np.int32))
-        if n_f:
-            mesh.polygons.foreach_set("use_smooth", np.ones(n_f, dtype=bool))
+        _set_edges(mesh, img)
+        sharp = mesh.attributes.get("sharp_face")  # smooth faces: no sharp_face attribute (clear_geometry
+        if sharp is not None:  # drops it; polygons.foreach_set("use_smooth") would go face by face)
+            mesh.attributes.remove(sharp)
         _remember_topology(mesh, img)
         mesh.update()
     else:

@@ -51,6 +51,88 @@ class ImageMesh:
     disc_colour: np.ndarray | None = field(repr=False, default=None)
     corner_normal: np.ndarray | None = field(repr=False, default=None)
     redshift_gravity: np.ndarray | None = field(repr=False, default=None)
+    edge_basis: tuple | None = field(repr=False, default=None)
+    """(vertex_source (V,): each vertex's index among the prepared source's vertices, -1 for a new one;
+    face_source (F,): each face's prepared source triangle; the prepared source's tris (T, 3) and its
+    subdivision.Edges), from which :meth:`edges` takes the edges of whole source triangles; None: the
+    edges are found from the faces alone."""
+
+    def edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """(verts (E, 2), corner_edge (F, 3)): the mesh's unique undirected edges (vertex indices) and
+        for each face corner k the edge joining corners k and (k + 1) % 3, as Blender stores a mesh. A
+        dense source's faces are mostly whole source triangles, whose edges are the source's (kept
+        per topology): only the other faces' edges are sorted out (:func:`image_edges`)."""
+        if self.edge_basis is None:
+            e = subdivision.mesh_edges(self.tris) if len(self.tris) else subdivision.Edges(
+                np.zeros((0, 2), np.int64), np.zeros((0, 3), np.int64))
+            return e.verts, e.of_tri
+        return image_edges(self.tris, *self.edge_basis)
+
+
+def image_edges(tris, vertex_source, face_source, source_tris, source_edges) -> tuple[np.ndarray, np.ndarray]:
+    """(verts (E, 2), corner_edge (F, 3)) of the faces ``tris`` (F, 3) of a mesh whose vertices are
+    source vertices ``vertex_source`` (V,; -1: a new vertex) and whose faces lie in the source
+    triangles ``face_source`` (F,) of ``source_tris`` (T, 3) with edges ``source_edges``
+    (subdivision.Edges): a face that is its source triangle (the same corners in the same order) has
+    the source's edges; a side of another face joining two source vertices is a source edge if the
+    source has one there (found among the source's sorted edge keys); the rest are new edges, made
+    unique among themselves. The source edges used come first, in the source's order, then the new
+    ones. Indices only (no units)."""
+    tris = np.asarray(tris, dtype=np.int64)
+    n_f, n_v = len(tris), len(vertex_source)
+    if n_f == 0:
+        return np.zeros((0, 2), np.int64), np.zeros((0, 3), np.int64)
+    corner_src = vertex_source.take(tris)
+    whole = (corner_src == source_tris.take(face_source, axis=0)).all(axis=1)
+    edge_of = np.empty((n_f, 3), np.int64)  # >= 0: a source edge; < 0: -1 - (a new edge)
+    rest = np.flatnonzero(~whole)
+    if rest.size == 0:
+        edge_of = source_edges.of_tri.take(face_source, axis=0)
+    else:
+        w = np.flatnonzero(whole)
+        edge_of[w] = source_edges.of_tri.take(face_source.take(w), axis=0)
+        a = tris.take(rest, axis=0)
+        b = np.roll(a, -1, axis=1)
+        ka = corner_src.take(rest, axis=0)
+        kb = np.roll(ka, -1, axis=1)
+        found = np.full(a.shape, -1, np.int64)
+        both = (ka >= 0) & (kb >= 0)
+        if both.any():
+            keys = source_edge_keys(source_edges)
+            m = np.int64(source_edges.n_points)
+            q = np.minimum(ka[both], kb[both]) * m + np.maximum(ka[both], kb[both])
+            at = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
+            found[both] = np.where(keys.take(at) == q, at, -1)
+        new = found < 0
+        lo, hi = np.minimum(a[new], b[new]), np.maximum(a[new], b[new])
+        uniq, inv = np.unique(lo * n_v + hi, return_inverse=True)
+        found[new] = -1 - inv
+        edge_of[rest] = found
+    n_src = len(source_edges.verts)
+    is_src = edge_of >= 0
+    used = np.zeros(n_src, bool)
+    used[edge_of[is_src] if rest.size else edge_of.ravel()] = True
+    src_used = np.flatnonzero(used)
+    index = np.full(n_src, -1, np.int64)
+    index[src_used] = np.arange(src_used.size)
+    own = np.flatnonzero(vertex_source >= 0)
+    n_pts = max(int(source_edges.n_points), int(vertex_source.max(initial=-1)) + 1)
+    vertex_of = np.full(n_pts, -1, np.int64)  # source vertex -> this mesh's vertex
+    vertex_of[vertex_source.take(own)] = own
+    verts = vertex_of.take(source_edges.verts.take(src_used, axis=0))
+    if rest.size == 0:
+        return verts, index.take(edge_of)
+    corner_edge = np.where(is_src, index.take(np.maximum(edge_of, 0)), src_used.size - 1 - edge_of)
+    new_verts = np.stack([uniq // n_v, uniq % n_v], axis=1)
+    return np.concatenate([verts, new_verts]), corner_edge
+
+
+def source_edge_keys(edges) -> np.ndarray:
+    """(E,) the keys lo * n_points + hi of subdivision.Edges ``edges`` (ascending: mesh_edges sorts its
+    edges by them), made once per Edges (kept per topology with them)."""
+    if edges.keys is None:
+        edges.keys = edges.verts[:, 0] * np.int64(edges.n_points) + edges.verts[:, 1]
+    return edges.keys
 
 
 def empty_image(order, report: culling.CullReport) -> ImageMesh:
@@ -117,6 +199,11 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
         e, _ = illumination.irradiance(pts, n.reshape(-1, 3), light.position, scene.hole, scene.r_s,
                                        light.lut, light.intensity)
         irr = e.reshape(-1, 3)
+    # each vertex's source vertex (-1: a new one), for the image's edges (ImageMesh.edges)
+    key = sub.vertex_key.take(used)
+    vertex_source = np.where(key < len(source.positions), key, -1)
+    if parts is not None:
+        vertex_source = np.concatenate([vertex_source, np.full(len(v_pos) - used.size, -1, np.int64)])
     if patch_corners is not None:
         src_tri = np.concatenate([src_tri, p_src])
     redshift = colour = gravity = None
@@ -135,7 +222,8 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
     return ImageMesh(order=order, positions=v_pos, tris=image_tris, corner_uv=corner_uv,
                      material=mesh.material[src_tri], light_travel_time=v_dist, irradiance=irr, report=report,
                      source_tri=source.origin[src_tri], source_position=v_src, redshift=redshift,
-                     disc_colour=colour, corner_normal=n, redshift_gravity=gravity)
+                     disc_colour=colour, corner_normal=n, redshift_gravity=gravity,
+                     edge_basis=(vertex_source, src_tri, source.tris, source.edges))
 
 
 def image_redshift(scene, points, directions, disc: DiscEmitter | None = None) -> np.ndarray:

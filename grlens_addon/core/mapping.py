@@ -240,12 +240,10 @@ def leaving_direction(plane, scene: Scene, ux, uy) -> np.ndarray:
     to the tangent (ux, uy) of their connecting rays from the table (components along e1 and e2 of the
     plane, see lutgen): the way the light leaves the point towards the observer. NaN where the ray is
     undefined."""
-    e1 = scene.e1
-    c, s, f_r, r_uphi = _static_frame(plane, ux, uy)
-    e_r = c[:, None] * e1 + s[:, None] * plane.e2
-    e_phi = -s[:, None] * e1 + c[:, None] * plane.e2
+    a, b = leaving_in_plane(plane, ux, uy)  # (along e1 and e2: -(f_r e_r + r_uphi e_phi) in the plane)
     with np.errstate(invalid="ignore", divide="ignore"):
-        d = -(f_r[:, None] * e_r + r_uphi[:, None] * e_phi)
+        d = np.multiply.outer(a, scene.e1)
+        d += b[:, None] * plane.e2
         d /= row_norm(d)[:, None]
     return d
 

@@ -106,17 +106,20 @@ class Edges:
     verts: np.ndarray
     of_tri: np.ndarray
     closed: bool | None = None  # every edge used twice, once each way (visibility.is_closed_outward)
+    n_points: int = 0  # more than the largest vertex index (the edges' keys lo * n_points + hi)
+    keys: np.ndarray | None = None  # those keys (ascending), made when first needed (assemble.source_edge_keys)
 
 
 def mesh_edges(tris: np.ndarray) -> Edges:
     tris = np.asarray(tris, dtype=np.int64)
     pairs = np.stack([tris, np.roll(tris, -1, axis=1)], axis=2).reshape(-1, 2)
     lo, hi = pairs.min(axis=1), pairs.max(axis=1)
-    key = lo * (int(tris.max(initial=0)) + 1) + hi
+    n_points = int(tris.max(initial=0)) + 1
+    key = lo * n_points + hi
     uniq, inv = np.unique(key, return_inverse=True)
     verts = np.empty((uniq.size, 2), dtype=np.int64)
     verts[inv, 0], verts[inv, 1] = lo, hi
-    return Edges(verts=verts, of_tri=inv.reshape(-1, 3))
+    return Edges(verts=verts, of_tri=inv.reshape(-1, 3), n_points=n_points, keys=uniq)
 
 
 @lru_cache(maxsize=None)

@@ -28,6 +28,7 @@ class Sight:
         self._closed = None
         self._d = {}
         self._normals = None
+        self._raw = None
 
     def closed(self) -> bool:
         """True for a closed, outward-wound surface seen from outside (computed once)."""
@@ -36,9 +37,16 @@ class Sight:
             cam = self.frame.scene.camera
             lo, hi = src.positions.min(axis=0), src.positions.max(axis=0)
             outside_box = bool(np.any(cam < lo) or np.any(cam > hi))  # a closed surface winds 0 times there
-            self._closed = bool(is_closed_outward(src.positions, src.tris, src.edges)
+            self._closed = bool(is_closed_outward(src.positions, src.tris, src.edges, normals=self._raw_normals)
                                 and (outside_box or winding_number(src.positions, src.tris, cam) < 0.5))
         return self._closed
+
+    def _raw_normals(self) -> np.ndarray:
+        """(T, 3) the geometric normals (p1 - p0) x (p2 - p0) of every source triangle (BU^2, from the
+        winding; silhouette.normals), once: the closed surface's volume and the back faces share them."""
+        if self._raw is None:
+            self._raw = silhouette.normals(self.source.positions, self.source.tris)
+        return self._raw
 
     def leaving(self, vertices, order) -> np.ndarray:
         """(len(vertices), 3) the unit directions in which light leaves the source vertices ``vertices``
@@ -55,26 +63,36 @@ class Sight:
     def turned_away(self, tri_idx, orders) -> np.ndarray:
         """(len(tri_idx),) bool: the source triangles ``tri_idx`` turned away (BACK_FACE_MARGIN) along
         the rays of every order in ``orders`` (silhouette.turned_away, corner by corner: only the
-        triangles turned away at the corners before are looked at the next)."""
+        triangles turned away at the corners before are looked at the next; the normals and corners
+        of ``tri_idx`` are gathered once, none when ``tri_idx`` is every triangle in order)."""
         src = self.source
         if self._normals is None:  # unit geometric normals of every triangle, once
-            n = silhouette.normals(src.positions, src.tris)
+            n = self._raw_normals().copy()
             with np.errstate(invalid="ignore", divide="ignore"):
                 n /= mapping.row_norm(n)[:, None]
             self._normals = n
         tri_idx = np.asarray(tri_idx, dtype=np.int64)
-        rows = np.arange(len(tri_idx))
+        n_t = len(src.tris)
+        every = len(tri_idx) == n_t and (n_t == 0 or (tri_idx[0] == 0 and tri_idx[-1] == n_t - 1
+                                                       and bool(np.all(np.diff(tri_idx) == 1))))
+        normals = self._normals if every else self._normals.take(tri_idx, axis=0)
+        tris = src.tris if every else src.tris.take(tri_idx, axis=0)
+        rows = None  # (the rows of tri_idx still turned away; None: all of them)
         for o in orders:
             self.leaving(np.zeros(0, np.int64), o)  # (every vertex's, once per order)
             d = self._d[o]
             for k in range(3):
-                t = tri_idx.take(rows)
-                corner = src.tris[:, k].take(t)
+                if rows is None:
+                    n_k, corner = normals, tris[:, k]
+                else:
+                    n_k, corner = normals.take(rows, axis=0), tris[:, k].take(rows)
                 with np.errstate(invalid="ignore"):
-                    dots = np.einsum("fx,fx->f", self._normals.take(t, axis=0), d.take(corner, axis=0))
-                rows = rows[dots < -B.BACK_FACE_MARGIN]  # NaN (no ray): not turned away
+                    dots = np.einsum("fx,fx->f", n_k, d.take(corner, axis=0))
+                hit = np.flatnonzero(dots < -B.BACK_FACE_MARGIN)  # NaN (no ray): not turned away
+                rows = hit if rows is None else rows.take(hit)
         away = np.zeros(len(tri_idx), bool)
-        away[rows] = True
+        if rows is not None:
+            away[rows] = True
         return away
 
     def hidden(self, tri_idx, orders) -> np.ndarray:
@@ -176,10 +194,11 @@ def _below_pixel(img_v: mapping.Images, img_m: mapping.Images, pixel_angle) -> b
     return bool(np.max(subdivision.chord_angle(d, np.broadcast_to(centre, d.shape))) * 2.0 < pixel_angle)
 
 
-def is_closed_outward(points, tris, edges: subdivision.Edges | None = None) -> bool:
+def is_closed_outward(points, tris, edges: subdivision.Edges | None = None, normals=None) -> bool:
     """True if the triangles ``tris`` of ``points`` (BU) form closed surfaces with consistent winding
     (every edge used by exactly two triangles, once in each direction) that enclose a positive
-    volume (normals from the winding point outwards)."""
+    volume (normals from the winding point outwards). ``normals``: optionally a callable giving the
+    triangles' geometric normals (p1 - p0) x (p2 - p0) (T, 3), asked only for a closed topology."""
     tris = np.asarray(tris, dtype=np.int64)
     if len(tris) == 0:
         return False
@@ -192,12 +211,15 @@ def is_closed_outward(points, tris, edges: subdivision.Edges | None = None) -> b
         edges.closed = bool(np.all(uses == 2) and np.all(balance == 0))
     if not edges.closed:
         return False
+    # six times the volume: the sum over triangles of (p0 - q) . ((p1 - p0) x (p2 - p0)), about a
+    # vertex q (no cancellation far from the origin); (p0 - q) . ((p1 - p0) x (p2 - p0)) equals
+    # (p0 - q) . ((p1 - q) x (p2 - q)), the signed volume of the tetrahedron (q, p0, p1, p2)
     p = np.asarray(points, dtype=np.float64)
-    p = p - p[tris[0, 0]]  # volume about a vertex: no cancellation far from the origin
-    p0, p1, p2 = (p.take(tris[:, k], axis=0) for k in range(3))
-    cross = np.stack([p1[:, 1] * p2[:, 2] - p1[:, 2] * p2[:, 1], p1[:, 2] * p2[:, 0] - p1[:, 0] * p2[:, 2],
-                      p1[:, 0] * p2[:, 1] - p1[:, 1] * p2[:, 0]], axis=1)
-    return bool(np.einsum("ij,ij->", p0, cross) > 0)
+    n = normals() if normals is not None else silhouette.normals(p, tris)
+    q = p[tris[0, 0]]
+    p0 = p.take(tris[:, 0], axis=0)
+    p0 -= q
+    return bool(np.einsum("ij,ij->", p0, n) > 0)
 
 
 def winding_number(points, tris, query) -> float:
