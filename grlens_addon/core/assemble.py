@@ -146,6 +146,10 @@ def image_redshift(scene, points, directions, disc: DiscEmitter | None = None) -
     (thin_disc, its shift for the static observer, divided by the camera's Doppler factor). NaN where
     there is none (r <= 1 r_s; disc gas at r <= 1.5 r_s or on the disc axis)."""
     view = scene.view_beta
+    if disc is None and view is not None:  # the Doppler factor from the seen directions themselves
+        r = np.linalg.norm(points - scene.hole, axis=1) / scene.r_s
+        return 1.0 / (observer_view.frequency_ratio(r, scene.r_obs, None)
+                      * observer_view.doppler_factor_seen(directions, view))
     static = directions if view is None else observer_view.unaberrate(directions, view)
     if disc is not None:
         z1 = thin_disc.vertex_redshift_from_direction(points, scene.hole, scene.camera, scene.r_s, disc.axis, static,
