@@ -12,7 +12,14 @@ inwards ("in", radial part reversed).
 * 1 + z of the image vertices against the exact value (lutgen.connect's direction at the camera,
   the gravitational shift and the Doppler factor): relative error p99 and max.
 * Per-frame cost: pipeline.build_images, best of 9 runs (the three cameras in turn), moving over at
-  rest.
+  rest; and per image triangle and per covered pixel (the reference's pixels of both orders), so
+  that what a moving camera costs for being in motion shows apart from what it costs for showing
+  more (a magnified view has more pixels, so more pieces).
+* An exactness step for 1 + z (the direction solved exactly for the final image vertices): the cost
+  of lutgen.connect (the exact solver) on the moving camera's image vertices, and of one evaluation
+  of the closed-form swept angle for as many rays (lutgen.orbit.orbit_from_b and sweep at both ends),
+  against the frame: a Newton step on xi needs at least the branch test, the angle and its
+  derivative, i.e. three or more such evaluations.
 
 Usage: ./dev python benchmarks/bench_physical_time.py [output.md]   (default docs/physical_time.md)
 """
@@ -29,8 +36,10 @@ sys.path.insert(0, os.path.join(HERE, ".."))
 sys.path.insert(0, HERE)
 
 import bench_accuracy as BA  # noqa: E402
+from provenance import code_version  # noqa: E402
 from grlens_addon.core import frame_check, mapping, observer_view, pipeline, raytrace  # noqa: E402
 from lutgen import LUTFamily, connect  # noqa: E402
+from lutgen import orbit as lut_orbit  # noqa: E402
 
 R_OBS = 20.0
 CAM = raytrace.Camera.look_at([R_OBS, 0.0, 0.0], [0.0, 0.0, 0.0], math.radians(100), 480, 270)
@@ -64,18 +73,55 @@ def _redshift_error(images, scene):
     return float(np.nanpercentile(e, 99)), float(np.nanmax(e))
 
 
+def _best(fn, n=5):
+    """Best of ``n`` timings of ``fn()`` (s)."""
+    out = []
+    for _ in range(n):
+        t0 = time.perf_counter()
+        fn()
+        out.append(time.perf_counter() - t0)
+    return min(out)
+
+
+def _exactness_cost(images, scene):
+    """(vertices, s for lutgen.connect on the image vertices, s for one closed-form swept angle per
+    vertex's ray: orbit_from_b and the sweep at the observer's and the vertex's radius)."""
+    planes = {o: mapping.plane_coordinates(img.source_position, scene) for o, img in images.items()}
+    n = sum(len(p.r) for p in planes.values())
+    t_connect = _best(lambda: [connect(R_OBS, p.r, p.phi, o) for o, p in planes.items()], 3)
+    b = np.concatenate([connect(R_OBS, p.r, p.phi, o).b for o, p in planes.items()])
+    u = 1.0 / np.concatenate([p.r for p in planes.values()])
+    ok = np.isfinite(b) & (b > 0)
+    b, u = b[ok], u[ok]
+
+    def one_sweep():
+        orb = lut_orbit.orbit_from_b(b)
+        return lut_orbit.sweep(orb, u) - lut_orbit.sweep(orb, np.full(len(u), 1.0 / R_OBS))
+
+    return n, t_connect, _best(one_sweep) * n / max(len(b), 1)
+
+
+READING = "(set below)"
+SKY_BEGIN, SKY_END = "<!-- bench_physical_time_sky: begin -->", "<!-- bench_physical_time_sky: end -->"
+
+
 def main(out_path):
     warnings.simplefilter("ignore", RuntimeWarning)
     table = LUTFamily().at(R_OBS)
     settings = BA.make_settings(CAM)
-    rows, cost = [], []
+    rows, cost, exact = [], [], []
     for angle in (45, 170, 180):
         src = BA.sphere_scene(angle)[0]
         scenes = {name: mapping.Scene(CAM.position, np.zeros(3), BA.R_S, beta=beta) for name, beta in CAMERAS.items()}
+        tris, pixels = {}, {}
         for name, beta in CAMERAS.items():
             scene = scenes[name]
             chk = frame_check.check_frame([src], scene, table, settings, CAM)
             images = pipeline.build_images(src, scene, table, settings, None, CAM.frustum_planes())
+            tris[name] = sum(len(img.tris) for img in images.values())
+            pixels[name] = sum(chk.metrics["orders"][o]["covered_ref"] for o in (1, 2))
+            if name == "out":
+                out_images = images
             z99, zmax = _redshift_error(images, scene) if beta is not None else (float("nan"), float("nan"))
             cells = []
             for order in (1, 2):
@@ -91,11 +137,21 @@ def main(out_path):
                 pipeline.build_images(src, scene, table, settings, None, CAM.frustum_planes())
                 runs[name].append(time.perf_counter() - t0)
         times = {name: float(np.min(r)) for name, r in runs.items()}
+        per_tri = {n: times[n] / tris[n] for n in times}
+        per_px = {n: times[n] / pixels[n] for n in times}
         cost.append(f"| {angle} | {1e3 * times['at rest']:.1f} | {1e3 * times['out']:.1f} | {1e3 * times['in']:.1f} | "
-                    f"{max(times['out'], times['in']) / times['at rest']:.2f} |")
-        print(rows[-3:], cost[-1], flush=True)
+                    f"{max(times['out'], times['in']) / times['at rest']:.2f} | "
+                    f"{tris['at rest']} / {tris['out']} / {tris['in']} | "
+                    f"{max(per_tri['out'], per_tri['in']) / per_tri['at rest']:.2f} | "
+                    f"{pixels['at rest']} / {pixels['out']} / {pixels['in']} | "
+                    f"{max(per_px['out'], per_px['in']) / per_px['at rest']:.2f} |")
+        n, t_conn, t_sweep = _exactness_cost(out_images, scenes["out"])
+        exact.append(f"| {angle} | {n} | {1e3 * times['out']:.1f} | {1e3 * t_conn:.1f} ({t_conn / times['out']:.2f}x) | "
+                     f"{1e3 * t_sweep:.2f} ({t_sweep / times['out']:.2f}x) |")
+        print(rows[-3:], cost[-1], exact[-1], flush=True)
     text = "\n".join([
         "# A moving camera: accuracy and cost", "",
+        f"<!-- generated by benchmarks/bench_physical_time.py on {code_version()} -->", "",
         "From `benchmarks/bench_physical_time.py` (see its docstring): the paper's sphere seen from 20 r_s through a "
         "100 degree view (480x270), the camera at rest or moving at 0.4 c in its local static frame (radial "
         "and tangential parts; `out`: away from the hole, `in`: towards it). Images against the reference ray "
@@ -104,22 +160,25 @@ def main(out_path):
         "| orbit angle (deg) | camera | o1 covered | o1 mismatch | o1 screen p99 | o1 screen max | o2 covered | "
         "o2 mismatch | o2 screen p99 | o2 screen max | 1+z p99 | 1+z max |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|", *rows, "",
-        "Per-frame cost of the core (`pipeline.build_images`, best of 9 taken in turn, ms) and the larger moving "
-        "one over the camera at rest (the moving images are larger or smaller on screen: `out` sees the hole's "
-        "side magnified, `in` shrunk):", "",
-        "| orbit angle (deg) | at rest | out | in | ratio |", "|---|---|---|---|---|", *cost, "",
-        "Reading. The moving camera's images are as accurate as the resting camera's: the same coverage "
-        "mismatch (a few pixels) and screen errors of the same size, against a reference that traces the moving "
-        "camera's own pixel rays. 1 + z is within about 1e-7 of the exact value: the table's direction error "
-        "(about 1.6e-7 rad here) times beta; given a direction, the formula is exact to rounding "
-        "(tests/test_moving_observer.py). The cost follows the images' size on screen: the camera moving away "
-        "from the hole's side (`out`) sees that side magnified (about 1.75 times the pixels at 180 degrees, "
-        "the Einstein ring wider), so its images have more pieces and its axis patch more azimuths; moving "
-        "towards it (`in`) the images shrink. The error budget measures the moving camera's own view (the "
-        "ring radius about the axis in the static frame times the aberration's local magnification): measured "
-        "about the unaberrated hole direction instead, the same frames cost 1.3 to 2.5 times as much.", ""])
+        "Per-frame cost of the core (`pipeline.build_images`, best of 9 taken in turn, ms), the larger moving "
+        "one over the camera at rest per frame, and per image triangle and per covered pixel (triangles of both "
+        "image meshes and the reference's pixels of both orders, at rest / out / in; the ratio of the moving "
+        "camera with the larger cost per triangle, or per pixel, over the camera at rest):", "",
+        "| orbit angle (deg) | at rest | out | in | ratio per frame | image triangles | ratio per triangle | "
+        "covered pixels | ratio per pixel |", "|---|---|---|---|---|---|---|---|---|", *cost, "",
+        "An exactness step for 1 + z, for the `out` camera's image vertices (ms, and over its frame): the exact "
+        "solver `lutgen.connect`, and one evaluation of the closed-form swept angle per vertex's ray (a Newton "
+        "step on xi needs the branch test, the angle and its derivative: three or more of these):", "",
+        "| orbit angle (deg) | image vertices | frame (ms) | lutgen.connect | one swept angle |",
+        "|---|---|---|---|---|", *exact, "",
+        READING, ""])
+    sky = ""
+    if os.path.exists(out_path):  # the lensed world's section (bench_physical_time_sky.py) stays
+        old = open(out_path).read()
+        if SKY_BEGIN in old and SKY_END in old:
+            sky = old[old.index(SKY_BEGIN):old.index(SKY_END) + len(SKY_END)] + "\n"
     with open(out_path, "w") as f:
-        f.write(text)
+        f.write(text + ("\n" + sky if sky else ""))
     print(text)
 
 
