@@ -172,6 +172,8 @@ def test_the_doppler_factor_and_hole_angle_from_the_moving_view_need_no_static_d
     p = np.column_stack([np.ones(len(d)), -d]) @ L.T
     seen = -_unit(p[:, 1:])
     np.testing.assert_allclose(observer_view.doppler_factor_seen(seen, beta), p[:, 0], rtol=1e-12)
+    np.testing.assert_allclose(observer_view.magnification(seen, beta), 1.0 / p[:, 0], rtol=1e-12)
+    np.testing.assert_array_equal(observer_view.magnification(seen, None), 1.0)
     camera, hole = SCENE.camera, SCENE.hole
     towards = (hole - camera) / np.linalg.norm(hole - camera)
     want = np.arccos(np.clip(d @ towards, -1, 1)) / p[:, 0]

@@ -152,6 +152,18 @@ def hole_angle(directions, camera, hole, beta=None) -> np.ndarray:
     return np.arccos(np.clip(cos_static, -1.0, 1.0)) * (gamma * (1.0 - k))
 
 
+def magnification(directions, beta) -> np.ndarray:
+    """(N,) the aberration's local angular scale at the moving observer's unit ``directions`` (N, 3):
+    small angles seen there by the observer moving with ``beta`` (3,; units of c) over the same angles
+    seen by the static observer, gamma (1 - beta . d') = 1 / (gamma (1 + beta . d_static)) (aberration
+    is conformal); ones for ``beta`` None. The reciprocal of :func:`doppler_factor_seen`."""
+    d = np.asarray(directions, dtype=np.float64)
+    if beta is None:
+        return np.ones(d.shape[:-1])
+    beta = np.asarray(beta, dtype=np.float64).reshape(3)
+    return lorentz_gamma(beta) * (1.0 - d @ beta)
+
+
 def doppler_factor_seen(directions, beta) -> np.ndarray:
     """:func:`doppler_factor` (nu_moving / nu_static, (N,)) from the *moving* observer's unit apparent
     ``directions`` (N, 3) (e.g. aberrated image directions) instead of the static ones:
