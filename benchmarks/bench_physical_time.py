@@ -37,7 +37,7 @@ sys.path.insert(0, HERE)
 
 import bench_accuracy as BA  # noqa: E402
 from provenance import code_version  # noqa: E402
-from grlens_addon.core import budget, frame_check, mapping, observer_view, pipeline, raytrace  # noqa: E402
+from grlens_addon.core import budget, frame_check, mapping, observer_view, pipeline, raytrace, spectrum  # noqa: E402
 from lutgen import LUTFamily, connect  # noqa: E402
 from lutgen import orbit as lut_orbit  # noqa: E402
 
@@ -110,6 +110,25 @@ ANGLES = (45, 170, 179, 180)
 
 
 TIGHT_BAND = 0.25
+SATURATED = {"red (1, 0, 0)": (1.0, 0.0, 0.0), "green (0, 1, 0)": (0.0, 1.0, 0.0), "blue (0, 0, 1)": (0.0, 0.0, 1.0),
+             "orange (1, 0.4, 0.05)": (1.0, 0.4, 0.05), "grey (0.5, 0.5, 0.5)": (0.5, 0.5, 0.5)}
+LUMA = np.array([0.2126, 0.7152, 0.0722])  # linear Rec.709 luminance weights
+
+
+def _clipping():
+    """Rows: saturated colours shifted by g (core.spectrum.shift_matrix, as "grlens Shift by g" draws
+    them), their most negative channel before the clip (relative to the shifted colour's largest
+    channel), and the luminance the clip adds (relative to the emitted colour's)."""
+    rows = []
+    for name, rgb in SATURATED.items():
+        cells = []
+        for g in (0.8, 1.25):
+            out = spectrum.shift_matrix(g) @ np.array(rgb)
+            low = min(0.0, float(out.min())) / float(out.max())
+            added = float(LUMA @ (np.maximum(out, 0.0) - out)) / float(LUMA @ np.array(rgb))
+            cells += [f"{low:.3f}", f"{added:.3f}"]
+        rows.append(f"| {name} | " + " | ".join(cells) + " |")
+    return rows
 
 
 def _tighter_band(table, settings):
@@ -261,7 +280,20 @@ def main(out_path):
         f"The same next to the ring with the band four times tighter (budget.PATCH_BAND_FACTOR = "
         f"{TIGHT_BAND:g} instead of {budget.PATCH_BAND_FACTOR:g}, for every camera; not the add-on's setting): "
         "largest screen error of both orders (px) and per-frame cost (best of 5 in turn, ms), at rest / out / in:", "",
-        "| orbit angle (deg) | screen max | frame (ms) | ratio per frame |", "|---|---|---|---|", *band, ""])
+        "| orbit angle (deg) | screen max | frame (ms) | ratio per frame |", "|---|---|---|---|", *band, "",
+        "## Saturated colours", "",
+        "A shifted colour is M(g) rgb (core.spectrum): the colour of the smoothest spectrum of rgb, shifted. A "
+        "saturated colour's smoothest spectrum dips below zero, so its shift can leave the gamut: a channel "
+        "becomes negative. \"grlens Shift by g\" (surfaces and the sky) clips negative channels to 0 and leaves "
+        "the others as they are; channels above 1 are kept (scene-linear light, for the view transform). The "
+        "choice: a renderer cannot emit negative light, and clipping one channel keeps the hue of the others, "
+        "where pulling the colour towards grey at equal luminance would wash every channel out; the price is "
+        "light added: little for most colours, but a pure primary's smoothest spectrum has deep negative lobes, "
+        "so a shifted pure green is mostly clipped (blue-shifted, the clip adds several times its luminance): "
+        "such colours are better kept a little inside the gamut when physical time colours them. The most negative channel (over the largest) and the luminance the clip adds (over "
+        "the emitted colour's), at g = 0.8 (red-shifted) and 1.25 (blue-shifted):", "",
+        "| colour | g = 0.8: negative | luminance added | g = 1.25: negative | luminance added |",
+        "|---|---|---|---|---|", *_clipping(), ""])
     sky = ""
     if os.path.exists(out_path):  # the lensed world's section (bench_physical_time_sky.py) stays
         old = open(out_path).read()
