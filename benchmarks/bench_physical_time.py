@@ -11,7 +11,7 @@ inwards ("in", radial part reversed).
   mismatch and screen error of the surface points (pixels, p99 and max).
 * 1 + z of the image vertices against the exact value (lutgen.connect's direction at the camera,
   the gravitational shift and the Doppler factor): relative error p99 and max.
-* Per-frame cost: pipeline.build_images, best of 9 runs (the three cameras in turn), moving over at
+* Per-frame cost: pipeline.build_images, best of REPEATS runs (the three cameras in turn), moving over at
   rest; and per image triangle and per covered pixel (the reference's pixels of both orders), so
   that what a moving camera costs for being in motion shows apart from what it costs for showing
   more (a magnified view has more pixels, so more pieces).
@@ -107,6 +107,7 @@ def _exactness_cost(images, scene):
 
 
 ANGLES = (45, 170, 179, 180)
+REPEATS = 15  # timings per camera, best taken (the machine is shared: a busy moment slows one run)
 
 
 TIGHT_BAND = 0.25
@@ -229,7 +230,7 @@ def main(out_path):
                           f"{sp.get('max', float('nan')):.3f}"]
             rows.append(f"| {angle} | {name} | " + " | ".join(cells) + f" | {z99:.1e} | {zmax:.1e} | {zring:.1e} |")
         runs = {name: [] for name in CAMERAS}
-        for _ in range(9):  # the three cameras in turn, so that a busy moment of the machine hits all
+        for _ in range(REPEATS):  # the three cameras in turn, so that a busy moment of the machine hits all
             for name, scene in scenes.items():
                 t0 = time.perf_counter()
                 pipeline.build_images(src, scene, table, settings, None, CAM.frustum_planes())
@@ -265,7 +266,7 @@ def main(out_path):
         "| orbit angle (deg) | camera | o1 covered | o1 mismatch | o1 screen p99 | o1 screen max | o2 covered | "
         "o2 mismatch | o2 screen p99 | o2 screen max | 1+z p99 | 1+z max | 1+z max on the ring |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|", *rows, "",
-        "Per-frame cost of the core (`pipeline.build_images`, best of 9 taken in turn, ms), the larger moving "
+        f"Per-frame cost of the core (`pipeline.build_images`, best of {REPEATS} taken in turn, ms), the larger moving "
         "one over the camera at rest per frame, and per image triangle and per covered pixel (triangles of both "
         "image meshes and the reference's pixels of both orders, at rest / out / in; each moving camera's cost per "
         "triangle, or per pixel, over the camera at rest's, out / in):", "",
@@ -290,7 +291,8 @@ def main(out_path):
         "where pulling the colour towards grey at equal luminance would wash every channel out; the price is "
         "light added: little for most colours, but a pure primary's smoothest spectrum has deep negative lobes, "
         "so a shifted pure green is mostly clipped (blue-shifted, the clip adds several times its luminance): "
-        "such colours are better kept a little inside the gamut when physical time colours them. The most negative channel (over the largest) and the luminance the clip adds (over "
+        "such colours are better kept a little inside the gamut when physical time colours them. The most "
+        "negative channel (over the largest) and the luminance the clip adds (over "
         "the emitted colour's), at g = 0.8 (red-shifted) and 1.25 (blue-shifted):", "",
         "| colour | g = 0.8: negative | luminance added | g = 1.25: negative | luminance added |",
         "|---|---|---|---|---|", *_clipping(), ""])
