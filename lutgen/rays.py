@@ -375,6 +375,15 @@ square times the curvature: below 1e-11 relative)."""
 TOL_D = 1e-12
 """Iterations stop when their step in d = |xi - crit| is below this relative to d."""
 
+INDEX_SWEEPS = 33
+"""Angles of the seed index (uniform over [0, 2 pi], see :meth:`RayMap._setup_index`)."""
+
+INDEX_ROW_STEP = 8
+"""The seed index holds every this-many-th row of a segment (and its last)."""
+
+INDEX_MARGIN = 0
+"""Rows on either side of the index's row that the first bracket tried spans."""
+
 _KINDS = ("T", "P", "I")
 
 
@@ -481,6 +490,7 @@ class RayMap:
         self.c2, self.sin2c = 2.0 * xi_c, sin_c * sin_c
         self._setup_nodes()
         self._setup_rows()
+        self._setup_index()
 
     # ---- per segment 1-D arrays -------------------------------------------------------------------
     def _rho(self, seg, d):
@@ -646,6 +656,71 @@ class RayMap:
         self.row_eps = np.zeros(all_rows.size)
         self.row_eps = self._row_residual(all_rows, np.full(all_rows.size, self.uo), np.zeros(all_rows.size),
                                           seg_of_row)
+
+    def _setup_index(self):
+        """The seed index: per segment, the table's u along every INDEX_ROW_STEP-th of its rows at
+        INDEX_SWEEPS angles uniform over [0, 2 pi] (the swept angle of either order), times the
+        segment's side (so growing along the rows; made monotone). :meth:`solve` reads a point's
+        fractional row from it (binary search over the coarse rows at the point's angle, linear in
+        between) and tries the table's rows around it as the bracket; where they do not bracket the
+        root it searches all rows. The index only chooses where the search starts: the bracket it
+        yields is the one the full search finds (f changes sign once along a segment's rows), so
+        the rays are the same as without it. About INDEX_SWEEPS * (rows / INDEX_ROW_STEP) 1-D
+        lookups per segment."""
+        ns, n_s = self.n_seg, INDEX_SWEEPS
+        pos, vals, q0, qn = [], [], np.zeros(ns, dtype=np.int64), np.zeros(ns, dtype=np.int64)
+        v0 = np.zeros(ns, dtype=np.int64)
+        sweeps = np.linspace(0.0, 2.0 * math.pi, n_s)
+        n_pos = n_val = 0
+        for i in range(ns):
+            count = int(self.r_count[i])
+            p = np.arange(0, count, INDEX_ROW_STEP)
+            if p[-1] != count - 1:
+                p = np.append(p, count - 1)
+            q = p.size
+            rows = np.repeat(self.r_first[i] + p, n_s)  # (q, n_s) row-major
+            sw = np.tile(sweeps, q)
+            f = self._row_residual(rows, np.zeros(rows.size), sw, np.full(rows.size, i))
+            f = np.nan_to_num(self.s_side[i] * f.reshape(q, n_s), nan=0.0)
+            f = np.maximum.accumulate(f, axis=0).T  # (n_s, q): one angle's coarse rows contiguous
+            pos.append(p)
+            vals.append(f.reshape(-1))
+            q0[i], qn[i], v0[i] = n_pos, q, n_val
+            n_pos += q
+            n_val += f.size
+        self.ix_pos = np.concatenate(pos).astype(float)
+        self.ix_val = np.concatenate(vals)
+        self.ix_q0, self.ix_qn, self.ix_v0 = q0, qn, v0
+        self.ix_steps = int(math.ceil(math.log2(max(int(qn.max()) - 1, 1))))
+
+    def _index_rows(self, seg, u, sweep):
+        """Fractional local rows (0 .. count - 1) of the points' roots in their segments, from the seed
+        index (see :meth:`_setup_index`)."""
+        n_s = INDEX_SWEEPS
+        x = sweep * ((n_s - 1) / (2.0 * math.pi))
+        j = np.clip(np.floor(x).astype(np.int64), 0, n_s - 2)
+        w = x - j
+        qn = self.ix_qn.take(seg)
+        c0 = self.ix_v0.take(seg) + j * qn
+        c1 = c0 + qn
+        y = self.s_side.take(seg) * u
+        lo = np.zeros(seg.size, dtype=np.int64)
+        hi = qn - 1
+        w0 = 1.0 - w
+        val = self.ix_val
+        for _ in range(self.ix_steps):
+            mid = (lo + hi) >> 1
+            below = w0 * val.take(c0 + mid) + w * val.take(c1 + mid) < y
+            lo = np.where(below, mid, lo)
+            hi = np.where(below, hi, mid)
+        v_lo = w0 * val.take(c0 + lo) + w * val.take(c1 + lo)
+        v_hi = w0 * val.take(c0 + hi) + w * val.take(c1 + hi)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.clip((y - v_lo) / (v_hi - v_lo), 0.0, 1.0)
+        t = np.where(np.isfinite(t), t, 0.5)
+        q0 = self.ix_q0.take(seg)
+        p_lo, p_hi = self.ix_pos.take(q0 + lo), self.ix_pos.take(q0 + hi)
+        return p_lo + t * (p_hi - p_lo)
 
     # ---- table lookups ----------------------------------------------------------------------------
     def _evaluate(self, kind, rho, theta, want_j=False, theta_ref=None):
@@ -829,12 +904,31 @@ class RayMap:
             hit = f >= 0.0
             seg[at[hit]] = i
             undecided[at[hit]] = False
-        # 2. binary search over the segment's rows (node count: its rows, then the far end)
+        # 2. the seed index's window of four rows about the root: where f changes sign inside it, the
+        # bracket and the cubic's four values are known; elsewhere a binary search over the segment's
+        # rows (node count: its rows, then the far end) starts from what the window showed
         first, count = self.r_first.take(seg), self.r_count.take(seg)
         orient = self.s_side.take(seg)  # f grows along the nodes when side > 0
+        k0 = np.clip(np.floor(self._index_rows(seg, u, sweep)).astype(np.int64) - 1, 0, count - 4)
+        fw = self._row_residual(np.concatenate([first + k0 + j for j in range(4)]), np.tile(u, 4),
+                                np.tile(sweep, 4), np.tile(seg, 4), np.tile(near, 4)).reshape(4, n)
+        bw = orient * fw < 0.0
         lo, hi = np.zeros(n, dtype=np.int64), count.copy()
         f_lo = np.full(n, np.nan)  # node 0's value: computed below where the search never moved lo
         f_hi = orient * np.inf
+        window = np.zeros(n, dtype=bool)
+        for j in (2, 1, 0):  # f changes sign between rows k0 + j and k0 + j + 1
+            at = bw[j] & ~bw[j + 1]
+            lo[at], hi[at], f_lo[at], f_hi[at] = k0[at] + j, k0[at] + j + 1, fw[j, at], fw[j + 1, at]
+            window |= at
+        rest = ~window
+        last = rest & bw[3]  # below on all four: the root is beyond them
+        lo[last], f_lo[last] = k0[last] + 3, fw[3, last]
+        start = rest & ~bw[0]  # above on all four: before them (at the critical end if k0 = 0)
+        hi[start], f_hi[start] = k0[start], fw[0, start]
+        at_first = start & (k0 == 0)
+        hi[at_first], f_lo[at_first] = 1, fw[0, at_first]
+        f_hi[at_first] = fw[1, at_first]
         while True:
             o = np.flatnonzero(hi - lo > 1)
             if not o.size:
@@ -845,7 +939,7 @@ class RayMap:
             ob, oa = o[below], o[~below]
             lo[ob], f_lo[ob] = mid[below], f[below]
             hi[oa], f_hi[oa] = mid[~below], f[~below]
-        at0 = np.flatnonzero(lo == 0)
+        at0 = np.flatnonzero((lo == 0) & np.isnan(f_lo))
         if at0.size:
             f_lo[at0] = self._row_residual(first[at0], u[at0], sweep[at0], seg[at0], near[at0])
         d = np.empty(n)
@@ -856,21 +950,27 @@ class RayMap:
         inner = ~none & ~(turning & (hi >= count - 2)) & (hi < count)
         i = np.flatnonzero(inner)
         if i.size:
-            k0 = np.clip(lo[i] - 1, 0, count[i] - 4)
-            fs = np.empty((4, i.size))
-            for j in range(4):  # the bracket's two rows are known from the search
-                known_lo, known_hi = k0 + j == lo[i], k0 + j == hi[i]
-                fs[j, known_lo], fs[j, known_hi] = f_lo[i[known_lo]], f_hi[i[known_hi]]
-                m = np.flatnonzero(~known_lo & ~known_hi)
+            wi = window[i]
+            kc = np.where(wi, k0[i], np.clip(lo[i] - 1, 0, count[i] - 4))
+            fs = np.where(wi, fw[:, i], np.nan)
+            m_all = np.flatnonzero(~wi)
+            for j in range(4):  # outside the window: the bracket's two rows are known from the search
+                im = i[m_all]
+                kj = kc[m_all] + j
+                known_lo, known_hi = kj == lo[im], kj == hi[im]
+                fs[j, m_all[known_lo]], fs[j, m_all[known_hi]] = f_lo[im[known_lo]], f_hi[im[known_hi]]
+                m = m_all[~known_lo & ~known_hi]
                 if m.size:
                     im = i[m]
-                    fs[j, m] = self._row_residual(first[im] + k0[m] + j, u[im], sweep[im], seg[im], near[im])
-            t = _cubic_root(fs, (lo[i] - k0).astype(float))
-            rho = self.flat.rho0.take(self.s_kind.take(seg[i])) + self.flat.step * (
-                self.row_g.take(first[i] + k0) - self.flat.offset.take(self.s_kind.take(seg[i])) + t)
+                    fs[j, m] = self._row_residual(first[im] + kc[m] + j, u[im], sweep[im], seg[im], near[im])
+            t = _cubic_root(fs, (lo[i] - kc).astype(float))
+            si = seg[i]
+            kind_i = self.s_kind.take(si)
+            rho = self.flat.rho0.take(kind_i) + self.flat.step * (
+                self.row_g.take(first[i] + kc) - self.flat.offset.take(kind_i) + t)
             d_a, d_b = self.row_d.take(first[i] + lo[i]), self.row_d.take(first[i] + hi[i])
-            d0 = np.clip(self._d_of_rho(seg[i], rho), np.minimum(d_a, d_b), np.maximum(d_a, d_b))
-            d[i], ok = self._secant(seg[i], u[i], sweep[i], d0, d_a, d_b, near[i])
+            d0 = np.clip(self._d_of_rho(si, rho), np.minimum(d_a, d_b), np.maximum(d_a, d_b))
+            d[i], ok = self._secant(si, u[i], sweep[i], d0, d_a, d_b, near[i])
             inner[i[~ok]] = False
         e = np.flatnonzero(~none & ~inner)
         if e.size:
