@@ -372,10 +372,14 @@ SECANT_DONE = 1e-6
 """A secant step shorter than this relative to d ends the iteration (the error left is of order its
 square times the curvature: below 1e-11 relative)."""
 
+NEWTON_DONE = 1e-7
+"""A first (Newton) step, with the slope of the cubic through four rows, shorter than this relative to d
+ends the iteration (that slope is good to about 1e-3: the error left is below 1e-10 relative)."""
+
 TOL_D = 1e-12
 """Iterations stop when their step in d = |xi - crit| is below this relative to d."""
 
-INDEX_SWEEPS = 33
+INDEX_SWEEPS = 65
 """Angles of the seed index (uniform over [0, 2 pi], see :meth:`RayMap._setup_index`)."""
 
 INDEX_ROW_STEP = 8
@@ -505,24 +509,39 @@ class RayMap:
             den = np.where(turning, self.sin2c, np.sin(0.5 * c2 - d) ** 2)
             return np.log(np.sin(d) * s2 / den)
 
-    def _d_of_rho(self, seg, rho):
-        """Inverse of :meth:`_rho`."""
+    def _drho_dd(self, seg, d):
+        """d rho / d d of :meth:`_rho` (closed form)."""
         kind = self.s_kind.take(seg)
+        c2 = self.c2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cot_d = 1.0 / np.tan(d)
+            return np.where(kind != 1, cot_d + 1.0 / np.tan(c2 + d),
+                            cot_d - 1.0 / np.tan(c2 - d) + 2.0 / np.tan(0.5 * c2 - d))
+
+    def _d_of_rho(self, seg, rho):
+        """Inverse of :meth:`_rho` (each kind's closed form on its own points only)."""
+        kind = self.s_kind.take(seg)
+        rho = np.asarray(rho, dtype=float)
+        out = np.empty(rho.shape)
         c = self.xi_c
-        x = np.exp(rho)
+        p = kind == 1
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            # P: sin d = sin c e^rho / ((sqrt(cos^2 c + e^rho) + cos c) sqrt(1 + e^rho))
-            sd = math.sin(c) * x / ((np.sqrt(math.cos(c) ** 2 + x) + math.cos(c)) * np.sqrt(1.0 + x))
-            d_p = np.arcsin(np.minimum(sd, 1.0))
-            # T, I: cos(2c + 2d) = cos 2c - 2 X, X = e^rho sin^2 c (Newton next to the critical angle)
-            xx = x * self.sin2c
-            d_t = np.where(xx > 1e-6, 0.5 * (np.arccos(np.clip(math.cos(self.c2) - 2.0 * xx, -1.0, 1.0)) - self.c2),
-                           xx / math.sin(self.c2))
-            for _ in range(3):
-                g = np.sin(d_t) * np.sin(self.c2 + d_t) - xx
-                dg = np.cos(d_t) * np.sin(self.c2 + d_t) + np.sin(d_t) * np.cos(self.c2 + d_t)
-                d_t = d_t - g / dg
-        return np.where(kind == 1, d_p, d_t)
+            if p.any():
+                # P: sin d = sin c e^rho / ((sqrt(cos^2 c + e^rho) + cos c) sqrt(1 + e^rho))
+                x = np.exp(rho[p])
+                sd = math.sin(c) * x / ((np.sqrt(math.cos(c) ** 2 + x) + math.cos(c)) * np.sqrt(1.0 + x))
+                out[p] = np.arcsin(np.minimum(sd, 1.0))
+            if not p.all():
+                # T, I: cos(2c + 2d) = cos 2c - 2 X, X = e^rho sin^2 c (Newton next to the critical angle)
+                xx = np.exp(rho[~p]) * self.sin2c
+                d_t = np.where(xx > 1e-6,
+                               0.5 * (np.arccos(np.clip(math.cos(self.c2) - 2.0 * xx, -1.0, 1.0)) - self.c2),
+                               xx / math.sin(self.c2))
+                for _ in range(3):
+                    s_d, s_cd = np.sin(d_t), np.sin(self.c2 + d_t)
+                    d_t = d_t - (s_d * s_cd - xx) / (np.cos(d_t) * s_cd + s_d * np.cos(self.c2 + d_t))
+                out[~p] = d_t
+        return out
 
     def _twins(self):
         """For each segment, the first segment of the same rays (same kind and d-range; the outward and
@@ -671,6 +690,7 @@ class RayMap:
         pos, vals, q0, qn = [], [], np.zeros(ns, dtype=np.int64), np.zeros(ns, dtype=np.int64)
         v0 = np.zeros(ns, dtype=np.int64)
         sweeps = np.linspace(0.0, 2.0 * math.pi, n_s)
+        n_c, u_flat = self.flat.n_cols, self.flat.u
         n_pos = n_val = 0
         for i in range(ns):
             count = int(self.r_count[i])
@@ -678,10 +698,19 @@ class RayMap:
             if p[-1] != count - 1:
                 p = np.append(p, count - 1)
             q = p.size
-            rows = np.repeat(self.r_first[i] + p, n_s)  # (q, n_s) row-major
-            sw = np.tile(sweeps, q)
-            f = self._row_residual(rows, np.zeros(rows.size), sw, np.full(rows.size, i))
-            f = np.nan_to_num(self.s_side[i] * f.reshape(q, n_s), nan=0.0)
+            rows = self.r_first[i] + p
+            # u along each row, linear between its columns (and beyond them): a seed needs no more
+            th = self.row_theta[rows, None] + self.s_dir[i] * sweeps[None, :]
+            if self.s_kind[i] != 1:
+                th = np.abs(th)
+            c = (th - self.row_start[rows, None]) * ((n_c - 1) / self.row_length[rows, None])
+            j = np.clip(np.floor(c).astype(np.int64), 0, n_c - 2)
+            t = c - j
+            base = self.row_g[rows, None] * n_c + j
+            f = u_flat.take(base) * (1.0 - t) + u_flat.take(base + 1) * t
+            if self.s_kind[i] == 0:
+                f = f / self.row_b[rows, None]
+            f = np.nan_to_num(self.s_side[i] * f, nan=0.0)
             f = np.maximum.accumulate(f, axis=0).T  # (n_s, q): one angle's coarse rows contiguous
             pos.append(p)
             vals.append(f.reshape(-1))
@@ -963,14 +992,21 @@ class RayMap:
                 if m.size:
                     im = i[m]
                     fs[j, m] = self._row_residual(first[im] + kc[m] + j, u[im], sweep[im], seg[im], near[im])
-            t = _cubic_root(fs, (lo[i] - kc).astype(float))
+            t, dp = _cubic_root(fs, (lo[i] - kc).astype(float), slope=True)
             si = seg[i]
-            kind_i = self.s_kind.take(si)
-            rho = self.flat.rho0.take(kind_i) + self.flat.step * (
-                self.row_g.take(first[i] + kc) - self.flat.offset.take(kind_i) + t)
+            # the ray at t: ln d is smooth in the row index (rows uniform in rho, ln d ~ rho next to
+            # the critical angle), so the cubic through the four rows' ln d gives d and dd/dt
+            r0 = first[i] + kc
+            ld = np.log(np.stack([self.row_d.take(r0 + j) for j in range(4)]))
+            _, wt = _cubic_stencil(t, 4)
+            d0 = np.exp((wt * ld).sum(0))
+            dd_dt = d0 * (_derivative_weights(t, 4) * ld).sum(0)
             d_a, d_b = self.row_d.take(first[i] + lo[i]), self.row_d.take(first[i] + hi[i])
-            d0 = np.clip(self._d_of_rho(si, rho), np.minimum(d_a, d_b), np.maximum(d_a, d_b))
-            d[i], ok = self._secant(si, u[i], sweep[i], d0, d_a, d_b, near[i])
+            d0 = np.clip(d0, np.minimum(d_a, d_b), np.maximum(d_a, d_b))
+            # the cubic's slope as df/dd: the first step is Newton's with it
+            with np.errstate(divide="ignore", invalid="ignore"):
+                slope = dp / dd_dt
+            d[i], ok = self._secant(si, u[i], sweep[i], d0, d_a, d_b, near[i], slope=slope)
             inner[i[~ok]] = False
         e = np.flatnonzero(~none & ~inner)
         if e.size:
@@ -994,16 +1030,31 @@ class RayMap:
                                            near[er])
         return self._finish(seg, d, u, r, phi, sweep, order, near)
 
-    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4):
+    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4, slope=None):
         """Secant steps in d from d0 (inside the bracket [d_a, d_b], next to the root) with the bicubic
-        interpolation; returns (d, converged)."""
+        interpolation; returns (d, converged). With ``slope`` (an estimate of df/dd at d0) the second
+        point is Newton's step from d0 with it (where it falls inside the bracket), else d0 plus 1e-7 of
+        the bracket."""
         lo, hi = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
-        x_prev = d0 + 1e-7 * (hi - lo)
-        f_prev = self._residual(seg, x_prev, u, sweep, near=near)
-        x = d0
+        if slope is None:
+            x_prev = d0 + 1e-7 * (hi - lo)
+            f_prev = self._residual(seg, x_prev, u, sweep, near=near)
+            x = d0
+        else:
+            x_prev = d0
+            f_prev = self._residual(seg, d0, u, sweep, near=near)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x = d0 - f_prev / slope
+            newton = np.isfinite(x) & (x >= lo) & (x <= hi) & (x != d0)
+            x = np.where(newton, x, d0 + 1e-7 * (hi - lo))
         out = d0.copy()
         ok = np.zeros(u.size, dtype=bool)
         act = np.arange(u.size)
+        if slope is not None:  # a Newton step this short leaves its length times the slope's error
+            done = newton & (np.abs(x - d0) <= NEWTON_DONE * x)
+            out[done], ok[done] = x[done], True
+            keep = ~done
+            act, x_prev, f_prev, x = act[keep], x_prev[keep], f_prev[keep], x[keep]
         for _ in range(steps):
             if not act.size:
                 break
@@ -1083,7 +1134,7 @@ class RayMap:
         return dict(xi=xi, dt=dt, ux=u_r * c - r_u_phi * s, uy=u_r * s + r_u_phi * c)
 
 
-def _cubic_root(fs, t0):
+def _cubic_root(fs, t0, slope=False):
     """Root in [t0, t0 + 1] of the cubic through (j, fs[j]), j = 0..3 (fs (4, N); f changes sign
     between nodes t0 and t0 + 1): Newton on the cubic from the linear interpolation, kept inside."""
     f0, f1, f2, f3 = fs
@@ -1101,6 +1152,8 @@ def _cubic_root(fs, t0):
         with np.errstate(divide="ignore", invalid="ignore"):
             t_new = t - p / dp
         t = np.where(np.isfinite(t_new), np.clip(t_new, t0, t0 + 1.0), t)
+    if slope:  # and the cubic's derivative there
+        return t, a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e
     return t
 
 
