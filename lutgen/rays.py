@@ -193,6 +193,29 @@ def _range_scale(kind, b):
     return b if kind == "P" else 1.0 / b
 
 
+def _stencil(g, n):
+    """As :func:`lutgen.lut._cubic_stencil` (first node (N,), cubic Lagrange weights (4, N) for fractional
+    grid coordinates g in [0, n - 1]), with fewer array passes (shared products)."""
+    i0 = np.minimum(np.maximum(g.astype(np.int64) - 1, 0), n - 4)  # g >= 0: truncation is floor
+    t = g - i0
+    t1, t2, t3 = t - 1.0, t - 2.0, t - 3.0
+    a, c = t1 * t2, t * t3
+    w = np.empty((4, g.size))
+    np.multiply(a, t3, out=w[0])
+    w[0] *= -1.0 / 6.0
+    np.multiply(c, t2, out=w[1])
+    w[1] *= 0.5
+    np.multiply(c, t1, out=w[2])
+    w[2] *= -0.5
+    np.multiply(a, t, out=w[3])
+    w[3] *= 1.0 / 6.0
+    return i0, w
+
+
+def _clip(x, lo, hi):
+    return np.minimum(np.maximum(x, lo), hi)
+
+
 def _derivative_weights(g, n):
     """d/dg of the cubic Lagrange weights of :func:`lutgen.lut._cubic_stencil` (4, N)."""
     i0 = np.clip(np.floor(g).astype(np.int64) - 1, 0, n - 4)
@@ -602,8 +625,8 @@ class RayMap:
 
     def _nodes(self, seg, z, values, derivative=False):
         n = self.n_z
-        g = np.clip((z - self.s_zlo.take(seg)) / self.s_dz.take(seg), 0.0, n - 1)
-        i0, w = _cubic_stencil(g, n)
+        g = _clip((z - self.s_zlo.take(seg)) / self.s_dz.take(seg), 0.0, n - 1)
+        i0, w = _stencil(g, n)
         base = i0 + seg * n
         return w[0] * values.take(base) + w[1] * values.take(base + 1) + w[2] * values.take(base + 2) + \
             w[3] * values.take(base + 3)
@@ -648,6 +671,11 @@ class RayMap:
             total += k.size
         self.row_g, self.row_d, self.row_theta = np.concatenate(rows), np.concatenate(ds), np.concatenate(ths)
         self.row_b, self.row_start, self.row_length = np.concatenate(bs), np.concatenate(sts), np.concatenate(lns)
+        # per row: columns per radian, and the factor from the stored u (u b for T) to u
+        self.row_cscale = (fl.n_cols - 1) / self.row_length
+        row_kind = np.concatenate([np.full(self.r_count[i], self.s_kind[i]) for i in range(self.n_seg)
+                                   if twin[i] == i])
+        self.row_uscale = np.where(row_kind == 0, 1.0 / self.row_b, 1.0)
         # the ray tangent at the observer (pi/2, the far end of the turning segments) as a row
         self.tan = None
         if self.n_seg == 4:
@@ -760,14 +788,8 @@ class RayMap:
         fl = self.flat
         n_c = fl.n_cols
         nr = fl.n_rows.take(kind)
-        g = np.clip((rho - fl.rho0.take(kind)) / fl.step, 0.0, nr - 1)
-        i0 = np.clip(np.floor(g).astype(np.int64) - 1, 0, nr - 4)
-        t = g - i0
-        wr = np.empty((4, g.size))
-        wr[0] = -(t - 1.0) * (t - 2.0) * (t - 3.0) / 6.0
-        wr[1] = t * (t - 2.0) * (t - 3.0) / 2.0
-        wr[2] = -t * (t - 1.0) * (t - 3.0) / 2.0
-        wr[3] = t * (t - 1.0) * (t - 2.0) / 6.0
+        g = _clip((rho - fl.rho0.take(kind)) * (1.0 / fl.step), 0.0, nr - 1)
+        i0, wr = _stencil(g, nr)
         i0 = i0 + fl.offset.take(kind)
         b = _b_of(kind, rho)
         sc = _scale(kind, b)
@@ -788,8 +810,8 @@ class RayMap:
     def _columns(self, i0, wr, c, want_j):
         fl = self.flat
         n_c = fl.n_cols
-        cc = np.clip(c, 0.0, n_c - 1)
-        j0, wc = _cubic_stencil(cc, n_c)
+        cc = _clip(c, 0.0, n_c - 1)
+        j0, wc = _stencil(cc, n_c)
         base = i0 * n_c + j0
         u = _gather(fl.u, base, wr, wc, n_c) + _linear_tail(fl.u, base, n_c, c, cc, wr)
         if not want_j:
@@ -827,17 +849,17 @@ class RayMap:
         observer, from whose f the table's error at the observer is subtracted."""
         fl = self.flat
         n_c = fl.n_cols
-        kind = self.s_kind.take(seg)
         th = self.row_theta.take(row) + self.s_dir.take(seg) * sweep
-        th = np.where(kind != 1, np.abs(th), th)
-        c = (th - self.row_start.take(row)) / self.row_length.take(row) * (n_c - 1)
-        cc = np.clip(c, 0.0, n_c - 1)
-        j0, wc = _cubic_stencil(cc, n_c)
+        if self.n_seg > 2:  # turning rays: the angle from the periapsis / apoapsis
+            th = np.where(self.s_kind.take(seg) != 1, np.abs(th), th)
+        c = (th - self.row_start.take(row)) * self.row_cscale.take(row)
+        cc = _clip(c, 0.0, n_c - 1)
+        j0, wc = _stencil(cc, n_c)
         base = self.row_g.take(row) * n_c + j0
         v = wc[0] * fl.u.take(base) + wc[1] * fl.u.take(base + 1) + wc[2] * fl.u.take(base + 2) + \
             wc[3] * fl.u.take(base + 3)
         v = v + _linear_tail(fl.u, base, n_c, c, cc, np.ones((1, c.size)))
-        f = np.where(kind == 0, v / self.row_b.take(row), v) - u
+        f = v * self.row_uscale.take(row) - u
         return f if near is None else f - np.where(near, self.row_eps.take(row), 0.0)
 
     def _tangent_residual(self, u, sweep, direction):
