@@ -409,9 +409,6 @@ INDEX_SWEEPS = 65
 INDEX_ROW_STEP = 8
 """The seed index holds every this-many-th row of a segment (and its last)."""
 
-INDEX_MARGIN = 0
-"""Rows on either side of the index's row that the first bracket tried spans."""
-
 _KINDS = ("T", "P", "I")
 
 
@@ -532,15 +529,6 @@ class RayMap:
             s2 = np.sin(np.where(turning, c2 + d, c2 - d))
             den = np.where(turning, self.sin2c, np.sin(0.5 * c2 - d) ** 2)
             return np.log(np.sin(d) * s2 / den)
-
-    def _drho_dd(self, seg, d):
-        """d rho / d d of :meth:`_rho` (closed form)."""
-        kind = self.s_kind.take(seg)
-        c2 = self.c2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cot_d = 1.0 / np.tan(d)
-            return np.where(kind != 1, cot_d + 1.0 / np.tan(c2 + d),
-                            cot_d - 1.0 / np.tan(c2 - d) + 2.0 / np.tan(0.5 * c2 - d))
 
     def _d_of_rho(self, seg, rho):
         """Inverse of :meth:`_rho` (each kind's closed form on its own points only)."""
