@@ -727,7 +727,8 @@ class RayMap:
             f = u_flat.take(base) * (1.0 - t) + u_flat.take(base + 1) * t
             if self.s_kind[i] == 0:
                 f = f / self.row_b[rows, None]
-            f = np.nan_to_num(self.s_side[i] * f, nan=0.0)
+            f = self.s_side[i] * f
+            f[np.isnan(f)] = 0.0
             f = np.maximum.accumulate(f, axis=0).T  # (n_s, q): one angle's coarse rows contiguous
             pos.append(p)
             vals.append(f.reshape(-1))
