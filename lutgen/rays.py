@@ -35,10 +35,11 @@ inward turning rays, inward rays that cross it; the turning rays are of kind ``T
 outside the photon sphere and ``I`` inside it), the radius a ray has reached after sweeping the
 target's angle, less the target's radius, changes sign exactly once: at the connecting ray (rays
 that escaped before count as below, rays that fell in as above). A point's segment is found from the
-signs at the segments' ends, its ray bracketed between two of the table's rows by a binary search
-(1-D lookups along rows) and found by secant steps in d = |xi - crit| with the bicubic interpolation
-(:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius costs a few 1-D
-arrays (its own phase on each ray), not a table build. docs/inside.md describes it with its figures.
+signs at the segments' ends, its ray bracketed between two of the table's rows (1-D lookups along
+rows: four rows about the ray chosen by a per-radius seed index, a binary search where they do not
+bracket it) and found by a Newton step with the slope of the rows' cubic, then secant steps where
+needed, in d = |xi - crit| with the bicubic interpolation (:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius costs a few 1-D
+arrays (its own phase on each ray, the seed index), not a table build. docs/inside.md describes it with its figures.
 """
 from __future__ import annotations
 
@@ -916,11 +917,14 @@ class RayMap:
 
         1. its segment: the first whose end towards larger xi has f >= 0 (f changes sign once along
            the rays ordered by xi);
-        2. a binary search over the table's rows inside the segment (1-D lookups along each row)
-           brackets the root between neighbouring rows (or the last row and the far end, pi/2);
-        3. between two rows, the cubic through f on four rows gives a start, and secant steps with the
-           bicubic interpolation converge (d = |xi - crit| to TOL_D); in the end intervals, and where
-           the secant steps do not converge, the Anderson-Bjorck variant of regula falsi in d does."""
+        2. the four rows about the root that the seed index gives (:meth:`_index_rows`; 1-D lookups
+           along each row) bracket it between neighbouring rows where f changes sign among them;
+           elsewhere a binary search over the segment's rows does (or the last row and the far end,
+           pi/2);
+        3. between two rows, the cubic through f on four rows gives a start and a slope; a Newton step
+           with them and the bicubic interpolation ends where it is shorter than NEWTON_DONE, else
+           secant steps converge (d = |xi - crit| to TOL_D); in the end intervals, and where the
+           secant steps do not converge, the Anderson-Bjorck variant of regula falsi in d does."""
         n = r.size
         with np.errstate(divide="ignore"):
             u = 1.0 / r
