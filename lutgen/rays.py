@@ -603,7 +603,7 @@ class RayMap:
                     else:
                         theta = _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
             kind = np.full(n, self.s_kind[i])
-            j = self._evaluate(kind, rho, theta, want_j=True)[1]
+            j = self._evaluate(kind, rho, theta, want_j=True, want_u=False)[1]
             z_all.append(z)
             th_all.append(theta)
             j_all.append(j)
@@ -771,11 +771,12 @@ class RayMap:
         return p_lo + t * (p_hi - p_lo)
 
     # ---- table lookups ----------------------------------------------------------------------------
-    def _evaluate(self, kind, rho, theta, want_j=False, theta_ref=None):
+    def _evaluate(self, kind, rho, theta, want_j=False, theta_ref=None, want_u=True):
         """u (and J, r_s/c) on orbits of kind codes ``kind`` and labels ``rho`` at angles ``theta`` from
         their reference points, bicubic, continued linearly beyond a row's range. With ``theta_ref``
         (the observer's phase): u(theta) - u(theta_ref) + uo and J(theta) - J(theta_ref), from the same
-        row stencil, so that the table's own small error cancels next to the observer."""
+        row stencil, so that the table's own small error cancels next to the observer. Without
+        ``want_u`` (J only) u is None."""
         fl = self.flat
         n_c = fl.n_cols
         nr = fl.n_rows.take(kind)
@@ -788,30 +789,32 @@ class RayMap:
               + wr[3] * fl.start.take(i0 + 3)) * sc
         ln = (wr[0] * fl.length.take(i0) + wr[1] * fl.length.take(i0 + 1) + wr[2] * fl.length.take(i0 + 2)
               + wr[3] * fl.length.take(i0 + 3)) * sc
-        u, j = self._columns(i0, wr, (theta - st) / ln * (n_c - 1), want_j)
+        u, j = self._columns(i0, wr, (theta - st) / ln * (n_c - 1), want_j, want_u)
         if theta_ref is not None:
-            u0, j0 = self._columns(i0, wr, (theta_ref - st) / ln * (n_c - 1), want_j)
-            u = u - u0
+            u0, j0 = self._columns(i0, wr, (theta_ref - st) / ln * (n_c - 1), want_j, want_u)
+            u = None if u is None else u - u0
             j = None if j is None else j - j0
-        u = np.where(kind == 0, u / b, u)
-        if theta_ref is not None:
-            u = u + self.uo
+        if u is not None:
+            u = np.where(kind == 0, u / b, u)
+            if theta_ref is not None:
+                u = u + self.uo
         return u, (None if j is None else j * ln * b)
 
-    def _columns(self, i0, wr, c, want_j):
+    def _columns(self, i0, wr, c, want_j, want_u=True):
         fl = self.flat
         n_c = fl.n_cols
         cc = _clip(c, 0.0, n_c - 1)
         j0, wc = _stencil(cc, n_c)
         base = i0 * n_c + j0
-        u = _gather(fl.u, base, wr, wc, n_c) + _linear_tail(fl.u, base, n_c, c, cc, wr)
+        u = _gather(fl.u, base, wr, wc, n_c) + _linear_tail(fl.u, base, n_c, c, cc, wr) if want_u else None
         if not want_j:
             return u, None
         return u, _gather(fl.j, base, wr, wc, n_c) + _linear_tail(fl.j, base, n_c, c, cc, wr)
 
-    def _residual(self, seg, d, u, sweep, want=False, near=None):
+    def _residual(self, seg, d, u, sweep, want=False, near=None, want_f=True):
         """f = u_ray - u on the rays d of segments ``seg`` for targets (u, sweep); ``near`` (mask):
-        targets next to the observer, whose f is formed as u_ray - u_ray(theta_o) + uo - u."""
+        targets next to the observer, whose f is formed as u_ray - u_ray(theta_o) + uo - u. With
+        ``want``: (f, the rays' values for :meth:`_finish`); without ``want_f`` f is None."""
         far = self.s_far.take(seg)
         with np.errstate(divide="ignore"):
             z = np.log(d) - np.log(far - d)
@@ -820,18 +823,19 @@ class RayMap:
         th_o = self._nodes(seg, z, self.node_theta)
         th = th_o + self.s_dir.take(seg) * sweep
         turning = kind != 1
-        u_ray, j = self._evaluate(kind, rho, np.where(turning, np.abs(th), th), want)
+        u_ray, j = self._evaluate(kind, rho, np.where(turning, np.abs(th), th), want, want_u=want_f)
         if near is not None and near.any():
             k = np.flatnonzero(near)
             uk, jk = self._evaluate(kind[k], rho[k], np.where(turning[k], np.abs(th[k]), th[k]), want,
-                                    theta_ref=th_o[k])
-            u_ray[k] = uk
+                                    theta_ref=th_o[k], want_u=want_f)
+            if want_f:
+                u_ray[k] = uk
             if want:
                 j[k] = np.nan  # marks the difference J(theta) - J(theta_o) (see _finish)
                 j_diff = np.full(u.size, np.nan)
                 j_diff[k] = jk
         if want:
-            return u_ray - u, dict(z=z, rho=rho, theta=th, theta_o=th_o, j=j,
+            return (u_ray - u if want_f else None), dict(z=z, rho=rho, theta=th, theta_o=th_o, j=j,
                                    j_diff=j_diff if near is not None and near.any() else None)
         return u_ray - u
 
@@ -1119,7 +1123,7 @@ class RayMap:
         k = self.k
         kind = self.s_kind.take(seg)
         xi = self.s_crit.take(seg) + self.s_side.take(seg) * d
-        _, got = self._residual(seg, d, u, sweep, want=True, near=near)
+        _, got = self._residual(seg, d, u, sweep, want=True, near=near, want_f=False)
         rho, th = got["rho"], got["theta"]
         b = _b_of(kind, rho)
         j_o = self._nodes(seg, got["z"], self.node_j)
