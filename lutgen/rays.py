@@ -823,17 +823,23 @@ class RayMap:
         th_o = self._nodes(seg, z, self.node_theta)
         th = th_o + self.s_dir.take(seg) * sweep
         turning = kind != 1
-        u_ray, j = self._evaluate(kind, rho, np.where(turning, np.abs(th), th), want, want_u=want_f)
-        if near is not None and near.any():
-            k = np.flatnonzero(near)
-            uk, jk = self._evaluate(kind[k], rho[k], np.where(turning[k], np.abs(th[k]), th[k]), want,
-                                    theta_ref=th_o[k], want_u=want_f)
+        th_row = np.where(turning, np.abs(th), th)
+        if near is not None and near.any():  # each point evaluated once: plainly, or next to the observer
+            k, f = np.flatnonzero(near), np.flatnonzero(~near)
+            uf, jf = self._evaluate(kind[f], rho[f], th_row[f], want, want_u=want_f)
+            uk, jk = self._evaluate(kind[k], rho[k], th_row[k], want, theta_ref=th_o[k], want_u=want_f)
+            u_ray = j = None
             if want_f:
-                u_ray[k] = uk
+                u_ray = np.empty(u.size)
+                u_ray[f], u_ray[k] = uf, uk
             if want:
+                j = np.empty(u.size)
+                j[f] = jf
                 j[k] = np.nan  # marks the difference J(theta) - J(theta_o) (see _finish)
                 j_diff = np.full(u.size, np.nan)
                 j_diff[k] = jk
+        else:
+            u_ray, j = self._evaluate(kind, rho, th_row, want, want_u=want_f)
         if want:
             return (u_ray - u if want_f else None), dict(z=z, rho=rho, theta=th, theta_o=th_o, j=j,
                                    j_diff=j_diff if near is not None and near.any() else None)
