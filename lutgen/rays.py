@@ -944,21 +944,18 @@ class RayMap:
             gap = np.hypot(r - self.r_obs, 2.0 * np.sqrt(r * self.r_obs) * h)  # distance from the observer
         near = (gap < NEAR * self.r_obs) & (order == 1)
         ns = self.n_seg
-        # 1. segments
+        # 1. segments: the first whose end towards larger xi has f >= 0
         seg = np.full(n, ns - 1)
-        undecided = np.ones(n, dtype=bool)
-        for i in range(ns - 1):
-            at = np.flatnonzero(undecided)
-            if not at.size:
-                break
-            s_at = np.full(at.size, i)
-            if self.s_side[i] < 0:
-                f = self._row_residual(np.full(at.size, self.r_first[i]), u[at], sweep[at], s_at, near[at])
-            else:
-                f = self._tangent_residual(u[at], sweep[at], self.s_dir[i])
-            hit = f >= 0.0
-            seg[at[hit]] = i
-            undecided[at[hit]] = False
+        if ns == 4:  # the ray tangent at the observer first, then one end on its side: two tests
+            low = self._tangent_residual(u, sweep, self.s_dir[1]) >= 0.0
+            for i, side in ((0, low), (2, ~low)):
+                at = np.flatnonzero(side)
+                f = self._row_residual(np.full(at.size, self.r_first[i]), u[at], sweep[at], np.full(at.size, i),
+                                       near[at])
+                seg[at] = np.where(f >= 0.0, i, i + 1)
+        else:  # two segments (an observer next to the photon sphere): the first's end
+            f = self._row_residual(np.full(n, self.r_first[0]), u, sweep, np.zeros(n, dtype=np.int64), near)
+            seg[f >= 0.0] = 0
         # 2. the seed index's window of four rows about the root: where f changes sign inside it, the
         # bracket and the cubic's four values are known; elsewhere a binary search over the segment's
         # rows (node count: its rows, then the far end) starts from what the window showed
