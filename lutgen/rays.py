@@ -396,6 +396,9 @@ SECANT_DONE = 1e-6
 """A secant step shorter than this relative to d ends the iteration (the error left is of order its
 square times the curvature: below 1e-11 relative)."""
 
+CUBIC_STEPS = 3
+"""Newton steps on the cubic through four rows (from the linear interpolation: converged after three)."""
+
 NEWTON_DONE = 1e-6
 """A first (Newton) step, with the slope of the cubic through four rows, shorter than this relative to d
 ends the iteration: the error left is the step times the slope's relative error (below 1e-9 relative;
@@ -1169,7 +1172,7 @@ def _cubic_root(fs, t0, slope=False):
     fb = np.where(t0 == 0, f1, np.where(t0 == 1, f2, f3))
     with np.errstate(divide="ignore", invalid="ignore"):
         t = t0 + np.where(fb != fa, fa / (fa - fb), 0.5)
-    for _ in range(5):
+    for _ in range(CUBIC_STEPS):
         p = f0 + t * (a + (t - 1.0) * (c + (t - 2.0) * e))
         dp = a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e
         with np.errstate(divide="ignore", invalid="ignore"):
