@@ -71,8 +71,9 @@ class Job:
     def __init__(self, plan, previous_thread=None):
         self.plan = plan
         self.progress = pipeline.Progress()
-        self.total = max(sum(it.triangles for it in plan.pending), 1)
-        self.name = plan.pending[0].name if plan.pending else ""
+        self.items = plan.pending  # (the objects to build, in the order compute() builds them)
+        self.total = max(sum(it.triangles for it in self.items), 1)
+        self.name = self.items[0].name if self.items else ""
         self.done = False
         self.cancelled = False
         self.error = None
@@ -81,7 +82,7 @@ class Job:
         self.thread = threading.Thread(target=self._run, name="grlens-build", daemon=True)
 
     def _hook(self, index, stage, fraction):
-        pending = self.plan.pending
+        pending = self.items
         before = sum(it.triangles for it in pending[:index])
         self.name = pending[index].name
         self.progress(stage, (before + fraction * pending[index].triangles) / self.total)
