@@ -90,7 +90,9 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         row = col.row(align=True)
         row.operator("grlens.lens_selected", icon="CHECKMARK")
         row.operator("grlens.unlens_selected", icon="PANEL_CLOSE")
-        col.prop(g, "auto_update")
+        row = col.row(align=True)
+        row.prop(g, "auto_update")
+        row.prop(g, "build_in_background", text="In Background")
         row = col.row(align=True)
         row.operator("grlens.rebuild", text="Rebuild", icon="FILE_REFRESH")
         row.operator("grlens.clear", icon="X")
@@ -200,7 +202,6 @@ class VIEW3D_PT_grlens_advanced(_Sub, bpy.types.Panel):
         col.prop(g, "tess_b")
         col.prop(g, "cull_ratio")
         col.prop(g, "max_triangles")
-        col.prop(g, "build_in_background")
 
 
 class OBJECT_PT_grlens(bpy.types.Panel):
