@@ -394,3 +394,31 @@ def test_the_prediction_learns_seconds_per_triangle(forced, monkeypatch):
     n = sum(it.triangles for it in plan.pending)
     assert n == 96 * 48 * 2 - 2 * 96  # (the sphere's triangles)
     assert background.predicted_seconds(plan) == pytest.approx(rate * n)
+
+
+def test_the_progress_operator_cancels_on_esc_and_passes_other_events_on(forced):
+    """The modal operator's event handling (Blender cannot invoke operators headless: its methods are
+    called with stand-ins for the operator, context and events)."""
+    from types import SimpleNamespace
+
+    from grlens_addon.blender.operators import GRLENS_OT_build_progress as Op
+
+    scene, sphere = _dense_scene()
+    old = _images()
+    _move(sphere, 6.5)
+    _lens(scene)
+    ended, reports = [], []
+    op = SimpleNamespace(_end=lambda ctx: ended.append(1), report=lambda kind, text: reports.append(text))
+    ctx = SimpleNamespace(window_manager=bpy.context.window_manager)
+    for kind, value in (("TIMER", "NOTHING"), ("MOUSEMOVE", "NOTHING"), ("ESC", "RELEASE"), ("A", "PRESS")):
+        assert Op.modal(op, ctx, SimpleNamespace(type=kind, value=value)) == {"PASS_THROUGH"}
+        assert background.running() and not ended
+    assert Op.modal(op, ctx, SimpleNamespace(type="ESC", value="PRESS")) == {"CANCELLED"}
+    assert not background.running() and ended and "cancelled" in reports[0]
+    assert scene.grlens.report_lines.startswith("rebuild cancelled (Esc)")
+    for n, p in _images().items():
+        np.testing.assert_array_equal(p, old[n])
+    # the build finished (or gone): the operator ends
+    assert Op.modal(op, ctx, SimpleNamespace(type="TIMER", value="NOTHING")) == {"FINISHED"}
+    background._start_watch()  # (headless: no window can run it; nothing breaks)
+    assert bpy.ops.grlens.build_progress() == {"CANCELLED"}  # (from a script: nothing to watch)
