@@ -422,3 +422,27 @@ def test_the_progress_operator_cancels_on_esc_and_passes_other_events_on(forced)
     assert Op.modal(op, ctx, SimpleNamespace(type="TIMER", value="NOTHING")) == {"FINISHED"}
     background._start_watch()  # (headless: no window can run it; nothing breaks)
     assert bpy.ops.grlens.build_progress() == {"CANCELLED"}  # (from a script: nothing to watch)
+
+
+def test_several_objects_progress_over_all_of_them(forced):
+    scene, sphere = _dense_scene(64, 32)
+    other = sphere.copy()
+    other.data = sphere.data.copy()
+    other.name = "Second"
+    scene.collection.objects.link(other)
+    other.location = (0.0, -6.0, 0.04)
+    _move(sphere, 6.5)
+    _lens(scene)
+    job = background.current()
+    assert [it.name for it in job.items] == ["OrbitingSphere", "Second"]
+    seen = []
+    job.progress.callback = lambda stage, f: seen.append((job.index, f))
+    assert "(1 of 2)" in job.text() or "(2 of 2)" in job.text()
+    _finish_in_timer()
+    fractions = [f for _, f in seen]
+    assert all(b >= a for a, b in zip(fractions, fractions[1:])) and fractions[-1] == 1.0
+    if seen and seen[0][0] == 0:  # (the callback was set before the first object was done)
+        assert {i for i, _ in seen} == {0, 1}
+        assert max(f for i, f in seen if i == 0) <= min(f for i, f in seen if i == 1) + 1e-12
+    assert scene.grlens.status.startswith("2 object(s) lensed")
+    assert {"Second.GR1", "OrbitingSphere.GR1"} <= set(bpy.data.objects.keys())

@@ -74,6 +74,7 @@ class Job:
         self.items = plan.pending  # (the objects to build, in the order compute() builds them)
         self.total = max(sum(it.triangles for it in self.items), 1)
         self.name = self.items[0].name if self.items else ""
+        self.index = 0
         self.done = False
         self.cancelled = False
         self.error = None
@@ -84,7 +85,7 @@ class Job:
     def _hook(self, index, stage, fraction):
         pending = self.items
         before = sum(it.triangles for it in pending[:index])
-        self.name = pending[index].name
+        self.name, self.index = pending[index].name, index
         self.progress(stage, (before + fraction * pending[index].triangles) / self.total)
 
     def _run(self):
@@ -103,8 +104,10 @@ class Job:
             self.done = True
 
     def text(self) -> str:
-        """The status line while it runs, e.g. "grlens: lensing 'Scan' 40 % (Esc cancels)"."""
-        return f"grlens: lensing '{self.name}' {100 * self.progress.fraction:.0f} % (Esc cancels)"
+        """The status line while it runs, e.g. "grlens: lensing 'Scan' 40 % (Esc cancels)" (with several
+        objects to build: "lensing 'Scan' (2 of 3) 70 %", the percentage over all of them)."""
+        of = f" ({self.index + 1} of {len(self.items)})" if len(self.items) > 1 else ""
+        return f"grlens: lensing '{self.name}'{of} {100 * self.progress.fraction:.0f} % (Esc cancels)"
 
 
 def allowed(scene) -> bool:
@@ -204,8 +207,7 @@ def start(plan) -> dict:
         bpy.app.timers.register(tick, first_interval=POLL_SECONDS)
     if not bpy.app.background and not _state["watching"] and not bpy.app.timers.is_registered(_start_watch):
         bpy.app.timers.register(_start_watch, first_interval=0.0)
-    _show(job)
-    return provisional_report(plan)
+    return provisional_report(plan)  # (the timer shows the progress: nothing drawn from a handler)
 
 
 def cancel(quiet: bool = False, reason: str = "") -> bool:
