@@ -446,3 +446,17 @@ def test_several_objects_progress_over_all_of_them(forced):
         assert max(f for i, f in seen if i == 0) <= min(f for i, f in seen if i == 1) + 1e-12
     assert scene.grlens.status.startswith("2 object(s) lensed")
     assert {"Second.GR1", "OrbitingSphere.GR1"} <= set(bpy.data.objects.keys())
+
+
+def test_undo_cancels_the_build_before_the_data_changes(forced):
+    scene, sphere = _dense_scene(64, 32)
+    _move(sphere, 6.5)
+    _lens(scene)
+    job = background.current()
+    assert handlers.on_undo_pre in bpy.app.handlers.undo_pre and handlers.on_undo_pre in bpy.app.handlers.redo_pre
+    handlers.on_undo_pre()  # (what Blender calls before it steps back)
+    assert not background.running() and not job.thread.is_alive() and job.progress.cancelled
+    assert background.tick() is None
+    # nothing is remembered of it: the same build starts again on the next request
+    assert _lens(scene)["status"] == "lensing in the background"
+    _finish_in_timer()
