@@ -35,10 +35,11 @@ inward turning rays, inward rays that cross it; the turning rays are of kind ``T
 outside the photon sphere and ``I`` inside it), the radius a ray has reached after sweeping the
 target's angle, less the target's radius, changes sign exactly once: at the connecting ray (rays
 that escaped before count as below, rays that fell in as above). A point's segment is found from the
-signs at the segments' ends, its ray bracketed between two of the table's rows by a binary search
-(1-D lookups along rows) and found by secant steps in d = |xi - crit| with the bicubic interpolation
-(:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius costs a few 1-D
-arrays (its own phase on each ray), not a table build. docs/inside.md describes it with its figures.
+signs at the segments' ends, its ray bracketed between two of the table's rows (1-D lookups along
+rows: four rows about the ray chosen by a per-radius seed index, a binary search where they do not
+bracket it) and found by a Newton step with the slope of the rows' cubic, then secant steps where
+needed, in d = |xi - crit| with the bicubic interpolation (:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius costs a few 1-D
+arrays (its own phase on each ray, the seed index), not a table build. docs/inside.md describes it with its figures.
 """
 from __future__ import annotations
 
@@ -191,6 +192,29 @@ def _range_scale(kind, b):
     if kind == "T":
         return np.ones_like(b)
     return b if kind == "P" else 1.0 / b
+
+
+def _stencil(g, n):
+    """As :func:`lutgen.lut._cubic_stencil` (first node (N,), cubic Lagrange weights (4, N) for fractional
+    grid coordinates g in [0, n - 1]), with fewer array passes (shared products)."""
+    i0 = np.minimum(np.maximum(g.astype(np.int64) - 1, 0), n - 4)  # g >= 0: truncation is floor
+    t = g - i0
+    t1, t2, t3 = t - 1.0, t - 2.0, t - 3.0
+    a, c = t1 * t2, t * t3
+    w = np.empty((4, g.size))
+    np.multiply(a, t3, out=w[0])
+    w[0] *= -1.0 / 6.0
+    np.multiply(c, t2, out=w[1])
+    w[1] *= 0.5
+    np.multiply(c, t1, out=w[2])
+    w[2] *= -0.5
+    np.multiply(a, t, out=w[3])
+    w[3] *= 1.0 / 6.0
+    return i0, w
+
+
+def _clip(x, lo, hi):
+    return np.minimum(np.maximum(x, lo), hi)
 
 
 def _derivative_weights(g, n):
@@ -372,8 +396,22 @@ SECANT_DONE = 1e-6
 """A secant step shorter than this relative to d ends the iteration (the error left is of order its
 square times the curvature: below 1e-11 relative)."""
 
+CUBIC_STEPS = 3
+"""Newton steps on the cubic through four rows (from the linear interpolation: converged after three)."""
+
+NEWTON_DONE = 1e-6
+"""A first (Newton) step, with the slope of the cubic through four rows, shorter than this relative to d
+ends the iteration: the error left is the step times the slope's relative error (below 1e-9 relative;
+the figures of tests/test_rays.py and docs/tables.md are those of the full secant iteration)."""
+
 TOL_D = 1e-12
 """Iterations stop when their step in d = |xi - crit| is below this relative to d."""
+
+INDEX_SWEEPS = 65
+"""Angles of the seed index (uniform over [0, 2 pi], see :meth:`RayMap._setup_index`)."""
+
+INDEX_ROW_STEP = 8
+"""The seed index holds every this-many-th row of a segment (and its last)."""
 
 _KINDS = ("T", "P", "I")
 
@@ -481,6 +519,7 @@ class RayMap:
         self.c2, self.sin2c = 2.0 * xi_c, sin_c * sin_c
         self._setup_nodes()
         self._setup_rows()
+        self._setup_index()
 
     # ---- per segment 1-D arrays -------------------------------------------------------------------
     def _rho(self, seg, d):
@@ -496,23 +535,29 @@ class RayMap:
             return np.log(np.sin(d) * s2 / den)
 
     def _d_of_rho(self, seg, rho):
-        """Inverse of :meth:`_rho`."""
+        """Inverse of :meth:`_rho` (each kind's closed form on its own points only)."""
         kind = self.s_kind.take(seg)
+        rho = np.asarray(rho, dtype=float)
+        out = np.empty(rho.shape)
         c = self.xi_c
-        x = np.exp(rho)
+        p = kind == 1
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            # P: sin d = sin c e^rho / ((sqrt(cos^2 c + e^rho) + cos c) sqrt(1 + e^rho))
-            sd = math.sin(c) * x / ((np.sqrt(math.cos(c) ** 2 + x) + math.cos(c)) * np.sqrt(1.0 + x))
-            d_p = np.arcsin(np.minimum(sd, 1.0))
-            # T, I: cos(2c + 2d) = cos 2c - 2 X, X = e^rho sin^2 c (Newton next to the critical angle)
-            xx = x * self.sin2c
-            d_t = np.where(xx > 1e-6, 0.5 * (np.arccos(np.clip(math.cos(self.c2) - 2.0 * xx, -1.0, 1.0)) - self.c2),
-                           xx / math.sin(self.c2))
-            for _ in range(3):
-                g = np.sin(d_t) * np.sin(self.c2 + d_t) - xx
-                dg = np.cos(d_t) * np.sin(self.c2 + d_t) + np.sin(d_t) * np.cos(self.c2 + d_t)
-                d_t = d_t - g / dg
-        return np.where(kind == 1, d_p, d_t)
+            if p.any():
+                # P: sin d = sin c e^rho / ((sqrt(cos^2 c + e^rho) + cos c) sqrt(1 + e^rho))
+                x = np.exp(rho[p])
+                sd = math.sin(c) * x / ((np.sqrt(math.cos(c) ** 2 + x) + math.cos(c)) * np.sqrt(1.0 + x))
+                out[p] = np.arcsin(np.minimum(sd, 1.0))
+            if not p.all():
+                # T, I: cos(2c + 2d) = cos 2c - 2 X, X = e^rho sin^2 c (Newton next to the critical angle)
+                xx = np.exp(rho[~p]) * self.sin2c
+                d_t = np.where(xx > 1e-6,
+                               0.5 * (np.arccos(np.clip(math.cos(self.c2) - 2.0 * xx, -1.0, 1.0)) - self.c2),
+                               xx / math.sin(self.c2))
+                for _ in range(3):
+                    s_d, s_cd = np.sin(d_t), np.sin(self.c2 + d_t)
+                    d_t = d_t - (s_d * s_cd - xx) / (np.cos(d_t) * s_cd + s_d * np.cos(self.c2 + d_t))
+                out[~p] = d_t
+        return out
 
     def _twins(self):
         """For each segment, the first segment of the same rays (same kind and d-range; the outward and
@@ -561,7 +606,7 @@ class RayMap:
                     else:
                         theta = _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
             kind = np.full(n, self.s_kind[i])
-            j = self._evaluate(kind, rho, theta, want_j=True)[1]
+            j = self._evaluate(kind, rho, theta, want_j=True, want_u=False)[1]
             z_all.append(z)
             th_all.append(theta)
             j_all.append(j)
@@ -573,8 +618,8 @@ class RayMap:
 
     def _nodes(self, seg, z, values, derivative=False):
         n = self.n_z
-        g = np.clip((z - self.s_zlo.take(seg)) / self.s_dz.take(seg), 0.0, n - 1)
-        i0, w = _cubic_stencil(g, n)
+        g = _clip((z - self.s_zlo.take(seg)) / self.s_dz.take(seg), 0.0, n - 1)
+        i0, w = _stencil(g, n)
         base = i0 + seg * n
         return w[0] * values.take(base) + w[1] * values.take(base + 1) + w[2] * values.take(base + 2) + \
             w[3] * values.take(base + 3)
@@ -619,6 +664,11 @@ class RayMap:
             total += k.size
         self.row_g, self.row_d, self.row_theta = np.concatenate(rows), np.concatenate(ds), np.concatenate(ths)
         self.row_b, self.row_start, self.row_length = np.concatenate(bs), np.concatenate(sts), np.concatenate(lns)
+        # per row: columns per radian, and the factor from the stored u (u b for T) to u
+        self.row_cscale = (fl.n_cols - 1) / self.row_length
+        row_kind = np.concatenate([np.full(self.r_count[i], self.s_kind[i]) for i in range(self.n_seg)
+                                   if twin[i] == i])
+        self.row_uscale = np.where(row_kind == 0, 1.0 / self.row_b, 1.0)
         # the ray tangent at the observer (pi/2, the far end of the turning segments) as a row
         self.tan = None
         if self.n_seg == 4:
@@ -647,23 +697,94 @@ class RayMap:
         self.row_eps = self._row_residual(all_rows, np.full(all_rows.size, self.uo), np.zeros(all_rows.size),
                                           seg_of_row)
 
+    def _setup_index(self):
+        """The seed index: per segment, the table's u along every INDEX_ROW_STEP-th of its rows at
+        INDEX_SWEEPS angles uniform over [0, 2 pi] (the swept angle of either order), times the
+        segment's side (so growing along the rows; made monotone). :meth:`solve` reads a point's
+        fractional row from it (binary search over the coarse rows at the point's angle, linear in
+        between) and tries the table's rows around it as the bracket; where they do not bracket the
+        root it searches all rows. The index only chooses where the search starts: the bracket it
+        yields is the one the full search finds (f changes sign once along a segment's rows), so
+        the rays are the same as without it. About INDEX_SWEEPS * (rows / INDEX_ROW_STEP) 1-D
+        lookups per segment."""
+        ns, n_s = self.n_seg, INDEX_SWEEPS
+        pos, vals, q0, qn = [], [], np.zeros(ns, dtype=np.int64), np.zeros(ns, dtype=np.int64)
+        v0 = np.zeros(ns, dtype=np.int64)
+        sweeps = np.linspace(0.0, 2.0 * math.pi, n_s)
+        n_c, u_flat = self.flat.n_cols, self.flat.u
+        n_pos = n_val = 0
+        for i in range(ns):
+            count = int(self.r_count[i])
+            p = np.arange(0, count, INDEX_ROW_STEP)
+            if p[-1] != count - 1:
+                p = np.append(p, count - 1)
+            q = p.size
+            rows = self.r_first[i] + p
+            # u along each row, linear between its columns (and beyond them): a seed needs no more
+            th = self.row_theta[rows, None] + self.s_dir[i] * sweeps[None, :]
+            if self.s_kind[i] != 1:
+                th = np.abs(th)
+            c = (th - self.row_start[rows, None]) * ((n_c - 1) / self.row_length[rows, None])
+            j = np.clip(np.floor(c).astype(np.int64), 0, n_c - 2)
+            t = c - j
+            base = self.row_g[rows, None] * n_c + j
+            f = u_flat.take(base) * (1.0 - t) + u_flat.take(base + 1) * t
+            if self.s_kind[i] == 0:
+                f = f / self.row_b[rows, None]
+            f = self.s_side[i] * f
+            f[np.isnan(f)] = 0.0
+            f = np.maximum.accumulate(f, axis=0).T  # (n_s, q): one angle's coarse rows contiguous
+            pos.append(p)
+            vals.append(f.reshape(-1))
+            q0[i], qn[i], v0[i] = n_pos, q, n_val
+            n_pos += q
+            n_val += f.size
+        self.ix_pos = np.concatenate(pos).astype(float)
+        self.ix_val = np.concatenate(vals)
+        self.ix_q0, self.ix_qn, self.ix_v0 = q0, qn, v0
+        self.ix_steps = int(math.ceil(math.log2(max(int(qn.max()) - 1, 1))))
+
+    def _index_rows(self, seg, u, sweep):
+        """Fractional local rows (0 .. count - 1) of the points' roots in their segments, from the seed
+        index (see :meth:`_setup_index`)."""
+        n_s = INDEX_SWEEPS
+        x = sweep * ((n_s - 1) / (2.0 * math.pi))
+        j = np.clip(np.floor(x).astype(np.int64), 0, n_s - 2)
+        w = x - j
+        qn = self.ix_qn.take(seg)
+        c0 = self.ix_v0.take(seg) + j * qn
+        c1 = c0 + qn
+        y = self.s_side.take(seg) * u
+        lo = np.zeros(seg.size, dtype=np.int64)
+        hi = qn - 1
+        w0 = 1.0 - w
+        val = self.ix_val
+        for _ in range(self.ix_steps):
+            mid = (lo + hi) >> 1
+            below = w0 * val.take(c0 + mid) + w * val.take(c1 + mid) < y
+            lo = np.where(below, mid, lo)
+            hi = np.where(below, hi, mid)
+        v_lo = w0 * val.take(c0 + lo) + w * val.take(c1 + lo)
+        v_hi = w0 * val.take(c0 + hi) + w * val.take(c1 + hi)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.clip((y - v_lo) / (v_hi - v_lo), 0.0, 1.0)
+        t = np.where(np.isfinite(t), t, 0.5)
+        q0 = self.ix_q0.take(seg)
+        p_lo, p_hi = self.ix_pos.take(q0 + lo), self.ix_pos.take(q0 + hi)
+        return p_lo + t * (p_hi - p_lo)
+
     # ---- table lookups ----------------------------------------------------------------------------
-    def _evaluate(self, kind, rho, theta, want_j=False, theta_ref=None):
+    def _evaluate(self, kind, rho, theta, want_j=False, theta_ref=None, want_u=True):
         """u (and J, r_s/c) on orbits of kind codes ``kind`` and labels ``rho`` at angles ``theta`` from
         their reference points, bicubic, continued linearly beyond a row's range. With ``theta_ref``
         (the observer's phase): u(theta) - u(theta_ref) + uo and J(theta) - J(theta_ref), from the same
-        row stencil, so that the table's own small error cancels next to the observer."""
+        row stencil, so that the table's own small error cancels next to the observer. Without
+        ``want_u`` (J only) u is None."""
         fl = self.flat
         n_c = fl.n_cols
         nr = fl.n_rows.take(kind)
-        g = np.clip((rho - fl.rho0.take(kind)) / fl.step, 0.0, nr - 1)
-        i0 = np.clip(np.floor(g).astype(np.int64) - 1, 0, nr - 4)
-        t = g - i0
-        wr = np.empty((4, g.size))
-        wr[0] = -(t - 1.0) * (t - 2.0) * (t - 3.0) / 6.0
-        wr[1] = t * (t - 2.0) * (t - 3.0) / 2.0
-        wr[2] = -t * (t - 1.0) * (t - 3.0) / 2.0
-        wr[3] = t * (t - 1.0) * (t - 2.0) / 6.0
+        g = _clip((rho - fl.rho0.take(kind)) * (1.0 / fl.step), 0.0, nr - 1)
+        i0, wr = _stencil(g, nr)
         i0 = i0 + fl.offset.take(kind)
         b = _b_of(kind, rho)
         sc = _scale(kind, b)
@@ -671,30 +792,32 @@ class RayMap:
               + wr[3] * fl.start.take(i0 + 3)) * sc
         ln = (wr[0] * fl.length.take(i0) + wr[1] * fl.length.take(i0 + 1) + wr[2] * fl.length.take(i0 + 2)
               + wr[3] * fl.length.take(i0 + 3)) * sc
-        u, j = self._columns(i0, wr, (theta - st) / ln * (n_c - 1), want_j)
+        u, j = self._columns(i0, wr, (theta - st) / ln * (n_c - 1), want_j, want_u)
         if theta_ref is not None:
-            u0, j0 = self._columns(i0, wr, (theta_ref - st) / ln * (n_c - 1), want_j)
-            u = u - u0
+            u0, j0 = self._columns(i0, wr, (theta_ref - st) / ln * (n_c - 1), want_j, want_u)
+            u = None if u is None else u - u0
             j = None if j is None else j - j0
-        u = np.where(kind == 0, u / b, u)
-        if theta_ref is not None:
-            u = u + self.uo
+        if u is not None:
+            u = np.where(kind == 0, u / b, u)
+            if theta_ref is not None:
+                u = u + self.uo
         return u, (None if j is None else j * ln * b)
 
-    def _columns(self, i0, wr, c, want_j):
+    def _columns(self, i0, wr, c, want_j, want_u=True):
         fl = self.flat
         n_c = fl.n_cols
-        cc = np.clip(c, 0.0, n_c - 1)
-        j0, wc = _cubic_stencil(cc, n_c)
+        cc = _clip(c, 0.0, n_c - 1)
+        j0, wc = _stencil(cc, n_c)
         base = i0 * n_c + j0
-        u = _gather(fl.u, base, wr, wc, n_c) + _linear_tail(fl.u, base, n_c, c, cc, wr)
+        u = _gather(fl.u, base, wr, wc, n_c) + _linear_tail(fl.u, base, n_c, c, cc, wr) if want_u else None
         if not want_j:
             return u, None
         return u, _gather(fl.j, base, wr, wc, n_c) + _linear_tail(fl.j, base, n_c, c, cc, wr)
 
-    def _residual(self, seg, d, u, sweep, want=False, near=None):
+    def _residual(self, seg, d, u, sweep, want=False, near=None, want_f=True):
         """f = u_ray - u on the rays d of segments ``seg`` for targets (u, sweep); ``near`` (mask):
-        targets next to the observer, whose f is formed as u_ray - u_ray(theta_o) + uo - u."""
+        targets next to the observer, whose f is formed as u_ray - u_ray(theta_o) + uo - u. With
+        ``want``: (f, the rays' values for :meth:`_finish`); without ``want_f`` f is None."""
         far = self.s_far.take(seg)
         with np.errstate(divide="ignore"):
             z = np.log(d) - np.log(far - d)
@@ -703,18 +826,25 @@ class RayMap:
         th_o = self._nodes(seg, z, self.node_theta)
         th = th_o + self.s_dir.take(seg) * sweep
         turning = kind != 1
-        u_ray, j = self._evaluate(kind, rho, np.where(turning, np.abs(th), th), want)
-        if near is not None and near.any():
-            k = np.flatnonzero(near)
-            uk, jk = self._evaluate(kind[k], rho[k], np.where(turning[k], np.abs(th[k]), th[k]), want,
-                                    theta_ref=th_o[k])
-            u_ray[k] = uk
+        th_row = np.where(turning, np.abs(th), th)
+        if near is not None and near.any():  # each point evaluated once: plainly, or next to the observer
+            k, f = np.flatnonzero(near), np.flatnonzero(~near)
+            uf, jf = self._evaluate(kind[f], rho[f], th_row[f], want, want_u=want_f)
+            uk, jk = self._evaluate(kind[k], rho[k], th_row[k], want, theta_ref=th_o[k], want_u=want_f)
+            u_ray = j = None
+            if want_f:
+                u_ray = np.empty(u.size)
+                u_ray[f], u_ray[k] = uf, uk
             if want:
+                j = np.empty(u.size)
+                j[f] = jf
                 j[k] = np.nan  # marks the difference J(theta) - J(theta_o) (see _finish)
                 j_diff = np.full(u.size, np.nan)
                 j_diff[k] = jk
+        else:
+            u_ray, j = self._evaluate(kind, rho, th_row, want, want_u=want_f)
         if want:
-            return u_ray - u, dict(z=z, rho=rho, theta=th, theta_o=th_o, j=j,
+            return (u_ray - u if want_f else None), dict(z=z, rho=rho, theta=th, theta_o=th_o, j=j,
                                    j_diff=j_diff if near is not None and near.any() else None)
         return u_ray - u
 
@@ -723,17 +853,17 @@ class RayMap:
         observer, from whose f the table's error at the observer is subtracted."""
         fl = self.flat
         n_c = fl.n_cols
-        kind = self.s_kind.take(seg)
         th = self.row_theta.take(row) + self.s_dir.take(seg) * sweep
-        th = np.where(kind != 1, np.abs(th), th)
-        c = (th - self.row_start.take(row)) / self.row_length.take(row) * (n_c - 1)
-        cc = np.clip(c, 0.0, n_c - 1)
-        j0, wc = _cubic_stencil(cc, n_c)
+        if self.n_seg > 2:  # turning rays: the angle from the periapsis / apoapsis
+            th = np.where(self.s_kind.take(seg) != 1, np.abs(th), th)
+        c = (th - self.row_start.take(row)) * self.row_cscale.take(row)
+        cc = _clip(c, 0.0, n_c - 1)
+        j0, wc = _stencil(cc, n_c)
         base = self.row_g.take(row) * n_c + j0
         v = wc[0] * fl.u.take(base) + wc[1] * fl.u.take(base + 1) + wc[2] * fl.u.take(base + 2) + \
             wc[3] * fl.u.take(base + 3)
         v = v + _linear_tail(fl.u, base, n_c, c, cc, np.ones((1, c.size)))
-        f = np.where(kind == 0, v / self.row_b.take(row), v) - u
+        f = v * self.row_uscale.take(row) - u
         return f if near is None else f - np.where(near, self.row_eps.take(row), 0.0)
 
     def _tangent_residual(self, u, sweep, direction):
@@ -800,11 +930,14 @@ class RayMap:
 
         1. its segment: the first whose end towards larger xi has f >= 0 (f changes sign once along
            the rays ordered by xi);
-        2. a binary search over the table's rows inside the segment (1-D lookups along each row)
-           brackets the root between neighbouring rows (or the last row and the far end, pi/2);
-        3. between two rows, the cubic through f on four rows gives a start, and secant steps with the
-           bicubic interpolation converge (d = |xi - crit| to TOL_D); in the end intervals, and where
-           the secant steps do not converge, the Anderson-Bjorck variant of regula falsi in d does."""
+        2. the four rows about the root that the seed index gives (:meth:`_index_rows`; 1-D lookups
+           along each row) bracket it between neighbouring rows where f changes sign among them;
+           elsewhere a binary search over the segment's rows does (or the last row and the far end,
+           pi/2);
+        3. between two rows, the cubic through f on four rows gives a start and a slope; a Newton step
+           with them and the bicubic interpolation ends where it is shorter than NEWTON_DONE, else
+           secant steps converge (d = |xi - crit| to TOL_D); in the end intervals, and where the
+           secant steps do not converge, the Anderson-Bjorck variant of regula falsi in d does."""
         n = r.size
         with np.errstate(divide="ignore"):
             u = 1.0 / r
@@ -814,27 +947,43 @@ class RayMap:
             gap = np.hypot(r - self.r_obs, 2.0 * np.sqrt(r * self.r_obs) * h)  # distance from the observer
         near = (gap < NEAR * self.r_obs) & (order == 1)
         ns = self.n_seg
-        # 1. segments
+        # 1. segments: the first whose end towards larger xi has f >= 0
         seg = np.full(n, ns - 1)
-        undecided = np.ones(n, dtype=bool)
-        for i in range(ns - 1):
-            at = np.flatnonzero(undecided)
-            if not at.size:
-                break
-            s_at = np.full(at.size, i)
-            if self.s_side[i] < 0:
-                f = self._row_residual(np.full(at.size, self.r_first[i]), u[at], sweep[at], s_at, near[at])
-            else:
-                f = self._tangent_residual(u[at], sweep[at], self.s_dir[i])
-            hit = f >= 0.0
-            seg[at[hit]] = i
-            undecided[at[hit]] = False
-        # 2. binary search over the segment's rows (node count: its rows, then the far end)
+        if ns == 4:  # the ray tangent at the observer first, then one end on its side: two tests
+            low = self._tangent_residual(u, sweep, self.s_dir[1]) >= 0.0
+            for i, side in ((0, low), (2, ~low)):
+                at = np.flatnonzero(side)
+                f = self._row_residual(np.full(at.size, self.r_first[i]), u[at], sweep[at], np.full(at.size, i),
+                                       near[at])
+                seg[at] = np.where(f >= 0.0, i, i + 1)
+        else:  # two segments (an observer next to the photon sphere): the first's end
+            f = self._row_residual(np.full(n, self.r_first[0]), u, sweep, np.zeros(n, dtype=np.int64), near)
+            seg[f >= 0.0] = 0
+        # 2. the seed index's window of four rows about the root: where f changes sign inside it, the
+        # bracket and the cubic's four values are known; elsewhere a binary search over the segment's
+        # rows (node count: its rows, then the far end) starts from what the window showed
         first, count = self.r_first.take(seg), self.r_count.take(seg)
         orient = self.s_side.take(seg)  # f grows along the nodes when side > 0
+        k0 = np.clip(np.floor(self._index_rows(seg, u, sweep)).astype(np.int64) - 1, 0, count - 4)
+        fw = self._row_residual(np.concatenate([first + k0 + j for j in range(4)]), np.tile(u, 4),
+                                np.tile(sweep, 4), np.tile(seg, 4), np.tile(near, 4)).reshape(4, n)
+        bw = orient * fw < 0.0
         lo, hi = np.zeros(n, dtype=np.int64), count.copy()
         f_lo = np.full(n, np.nan)  # node 0's value: computed below where the search never moved lo
         f_hi = orient * np.inf
+        window = np.zeros(n, dtype=bool)
+        for j in (2, 1, 0):  # f changes sign between rows k0 + j and k0 + j + 1
+            at = bw[j] & ~bw[j + 1]
+            lo[at], hi[at], f_lo[at], f_hi[at] = k0[at] + j, k0[at] + j + 1, fw[j, at], fw[j + 1, at]
+            window |= at
+        rest = ~window
+        last = rest & bw[3]  # below on all four: the root is beyond them
+        lo[last], f_lo[last] = k0[last] + 3, fw[3, last]
+        start = rest & ~bw[0]  # above on all four: before them (at the critical end if k0 = 0)
+        hi[start], f_hi[start] = k0[start], fw[0, start]
+        at_first = start & (k0 == 0)
+        hi[at_first], f_lo[at_first] = 1, fw[0, at_first]
+        f_hi[at_first] = fw[1, at_first]
         while True:
             o = np.flatnonzero(hi - lo > 1)
             if not o.size:
@@ -845,7 +994,7 @@ class RayMap:
             ob, oa = o[below], o[~below]
             lo[ob], f_lo[ob] = mid[below], f[below]
             hi[oa], f_hi[oa] = mid[~below], f[~below]
-        at0 = np.flatnonzero(lo == 0)
+        at0 = np.flatnonzero((lo == 0) & np.isnan(f_lo))
         if at0.size:
             f_lo[at0] = self._row_residual(first[at0], u[at0], sweep[at0], seg[at0], near[at0])
         d = np.empty(n)
@@ -856,21 +1005,34 @@ class RayMap:
         inner = ~none & ~(turning & (hi >= count - 2)) & (hi < count)
         i = np.flatnonzero(inner)
         if i.size:
-            k0 = np.clip(lo[i] - 1, 0, count[i] - 4)
-            fs = np.empty((4, i.size))
-            for j in range(4):  # the bracket's two rows are known from the search
-                known_lo, known_hi = k0 + j == lo[i], k0 + j == hi[i]
-                fs[j, known_lo], fs[j, known_hi] = f_lo[i[known_lo]], f_hi[i[known_hi]]
-                m = np.flatnonzero(~known_lo & ~known_hi)
+            wi = window[i]
+            kc = np.where(wi, k0[i], np.clip(lo[i] - 1, 0, count[i] - 4))
+            fs = np.where(wi, fw[:, i], np.nan)
+            m_all = np.flatnonzero(~wi)
+            for j in range(4):  # outside the window: the bracket's two rows are known from the search
+                im = i[m_all]
+                kj = kc[m_all] + j
+                known_lo, known_hi = kj == lo[im], kj == hi[im]
+                fs[j, m_all[known_lo]], fs[j, m_all[known_hi]] = f_lo[im[known_lo]], f_hi[im[known_hi]]
+                m = m_all[~known_lo & ~known_hi]
                 if m.size:
                     im = i[m]
-                    fs[j, m] = self._row_residual(first[im] + k0[m] + j, u[im], sweep[im], seg[im], near[im])
-            t = _cubic_root(fs, (lo[i] - k0).astype(float))
-            rho = self.flat.rho0.take(self.s_kind.take(seg[i])) + self.flat.step * (
-                self.row_g.take(first[i] + k0) - self.flat.offset.take(self.s_kind.take(seg[i])) + t)
+                    fs[j, m] = self._row_residual(first[im] + kc[m] + j, u[im], sweep[im], seg[im], near[im])
+            t, dp = _cubic_root(fs, (lo[i] - kc).astype(float), slope=True)
+            si = seg[i]
+            # the ray at t: ln d is smooth in the row index (rows uniform in rho, ln d ~ rho next to
+            # the critical angle), so the cubic through the four rows' ln d gives d and dd/dt
+            r0 = first[i] + kc
+            ld = np.log(np.stack([self.row_d.take(r0 + j) for j in range(4)]))
+            _, wt = _cubic_stencil(t, 4)
+            d0 = np.exp((wt * ld).sum(0))
+            dd_dt = d0 * (_derivative_weights(t, 4) * ld).sum(0)
             d_a, d_b = self.row_d.take(first[i] + lo[i]), self.row_d.take(first[i] + hi[i])
-            d0 = np.clip(self._d_of_rho(seg[i], rho), np.minimum(d_a, d_b), np.maximum(d_a, d_b))
-            d[i], ok = self._secant(seg[i], u[i], sweep[i], d0, d_a, d_b, near[i])
+            d0 = np.clip(d0, np.minimum(d_a, d_b), np.maximum(d_a, d_b))
+            # the cubic's slope as df/dd: the first step is Newton's with it
+            with np.errstate(divide="ignore", invalid="ignore"):
+                slope = dp / dd_dt
+            d[i], ok = self._secant(si, u[i], sweep[i], d0, d_a, d_b, near[i], slope=slope)
             inner[i[~ok]] = False
         e = np.flatnonzero(~none & ~inner)
         if e.size:
@@ -894,16 +1056,31 @@ class RayMap:
                                            near[er])
         return self._finish(seg, d, u, r, phi, sweep, order, near)
 
-    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4):
+    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4, slope=None):
         """Secant steps in d from d0 (inside the bracket [d_a, d_b], next to the root) with the bicubic
-        interpolation; returns (d, converged)."""
+        interpolation; returns (d, converged). With ``slope`` (an estimate of df/dd at d0) the second
+        point is Newton's step from d0 with it (where it falls inside the bracket), else d0 plus 1e-7 of
+        the bracket."""
         lo, hi = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
-        x_prev = d0 + 1e-7 * (hi - lo)
-        f_prev = self._residual(seg, x_prev, u, sweep, near=near)
-        x = d0
+        if slope is None:
+            x_prev = d0 + 1e-7 * (hi - lo)
+            f_prev = self._residual(seg, x_prev, u, sweep, near=near)
+            x = d0
+        else:
+            x_prev = d0
+            f_prev = self._residual(seg, d0, u, sweep, near=near)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x = d0 - f_prev / slope
+            newton = np.isfinite(x) & (x >= lo) & (x <= hi) & (x != d0)
+            x = np.where(newton, x, d0 + 1e-7 * (hi - lo))
         out = d0.copy()
         ok = np.zeros(u.size, dtype=bool)
         act = np.arange(u.size)
+        if slope is not None:  # a Newton step this short leaves its length times the slope's error
+            done = newton & (np.abs(x - d0) <= NEWTON_DONE * x)
+            out[done], ok[done] = x[done], True
+            keep = ~done
+            act, x_prev, f_prev, x = act[keep], x_prev[keep], f_prev[keep], x[keep]
         for _ in range(steps):
             if not act.size:
                 break
@@ -952,7 +1129,7 @@ class RayMap:
         k = self.k
         kind = self.s_kind.take(seg)
         xi = self.s_crit.take(seg) + self.s_side.take(seg) * d
-        _, got = self._residual(seg, d, u, sweep, want=True, near=near)
+        _, got = self._residual(seg, d, u, sweep, want=True, near=near, want_f=False)
         rho, th = got["rho"], got["theta"]
         b = _b_of(kind, rho)
         j_o = self._nodes(seg, got["z"], self.node_j)
@@ -983,7 +1160,7 @@ class RayMap:
         return dict(xi=xi, dt=dt, ux=u_r * c - r_u_phi * s, uy=u_r * s + r_u_phi * c)
 
 
-def _cubic_root(fs, t0):
+def _cubic_root(fs, t0, slope=False):
     """Root in [t0, t0 + 1] of the cubic through (j, fs[j]), j = 0..3 (fs (4, N); f changes sign
     between nodes t0 and t0 + 1): Newton on the cubic from the linear interpolation, kept inside."""
     f0, f1, f2, f3 = fs
@@ -995,12 +1172,14 @@ def _cubic_root(fs, t0):
     fb = np.where(t0 == 0, f1, np.where(t0 == 1, f2, f3))
     with np.errstate(divide="ignore", invalid="ignore"):
         t = t0 + np.where(fb != fa, fa / (fa - fb), 0.5)
-    for _ in range(5):
+    for _ in range(CUBIC_STEPS):
         p = f0 + t * (a + (t - 1.0) * (c + (t - 2.0) * e))
         dp = a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e
         with np.errstate(divide="ignore", invalid="ignore"):
             t_new = t - p / dp
         t = np.where(np.isfinite(t_new), np.clip(t_new, t0, t0 + 1.0), t)
+    if slope:  # and the cubic's derivative there
+        return t, a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e
     return t
 
 

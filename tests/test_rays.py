@@ -134,6 +134,49 @@ def test_batch_independence_and_determinism():
             assert np.array_equal(getattr(a[o], q)[sub], getattr(b[o], q)), (o, q)
 
 
+@pytest.mark.parametrize("r_obs", [1e4, 20.0, 2.0, 1.2])
+def test_seed_index_chooses_only_where_the_search_starts(r_obs, monkeypatch):
+    """The per-radius seed index puts most points' roots inside its window of four rows (so the rows
+    looked up per point stay few), and the rays are those of the full binary search over the rows
+    (index disabled: the window at the segment's first rows, which brackets almost nothing)."""
+    rng = np.random.default_rng(int(r_obs) + 3)
+    r, p = _targets(rng, r_obs, 4000)
+    ok = r >= 1.05
+    r, p = r[ok], p[ok]
+    evaluated = []
+    real = rays.RayMap._row_residual
+
+    def counting(self, row, *a, **k):
+        evaluated.append(np.size(row))
+        return real(self, row, *a, **k)
+
+    monkeypatch.setattr(rays.RayMap, "_row_residual", counting)
+    m = rays.RayMap(r_obs)
+    evaluated.clear()
+    got = m.lookup_orders(r, p)
+    with_index = sum(evaluated) / (2 * r.size)
+    monkeypatch.setattr(rays.RayMap, "_index_rows", lambda self, seg, u, sweep: np.zeros(seg.size))
+    evaluated.clear()
+    full = m.lookup_orders(r, p)
+    without = sum(evaluated) / (2 * r.size)
+    assert with_index < 8.0 < without  # segments (up to 3) and the window (4); a search costs about 10
+    for o in (1, 2):
+        assert np.nanmax(np.abs(got[o].xi - full[o].xi)) < 1e-8, o
+        assert np.nanmax(np.abs(got[o].dt / full[o].dt - 1.0)) < 1e-8, o
+        assert np.array_equal(np.isnan(got[o].xi), np.isnan(full[o].xi))
+
+
+def test_stencil_weights():
+    """rays._stencil (shared products) against lutgen.lut._cubic_stencil."""
+    from lutgen.lut import _cubic_stencil
+    g = np.concatenate([np.linspace(0.0, 576.0, 5001), [0.0, 1.0, 575.0, 576.0]])
+    i_a, w_a = rays._stencil(g, 577)
+    i_b, w_b = _cubic_stencil(g, 577)
+    assert np.array_equal(i_a, i_b)
+    assert np.max(np.abs(w_a - w_b)) < 1e-12
+    assert np.allclose(w_a.sum(0), 1.0, atol=1e-12)
+
+
 def test_observer_range():
     with pytest.raises(ValueError):
         rays.RayMap(1.0)
