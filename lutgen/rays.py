@@ -407,6 +407,15 @@ the figures of tests/test_rays.py and docs/tables.md are those of the full secan
 TOL_D = 1e-12
 """Iterations stop when their step in d = |xi - crit| is below this relative to d."""
 
+SEARCH_BUDGET = 4096
+"""The search over a segment's rows (points the seed index's window does not bracket) evaluates up to
+this many rows per pass over all its points: K = SEARCH_BUDGET / points rows each (at most
+SEARCH_MAX_K, at least 1: bisection), so that a few points take two or three passes instead of ten
+(each pass costs a fixed numpy overhead); the bracket found is the same (f changes sign once)."""
+
+SEARCH_MAX_K = 63
+"""The most rows per point in one pass of that search."""
+
 INDEX_SWEEPS = 65
 """Angles of the seed index (uniform over [0, 2 pi], see :meth:`RayMap._setup_index`)."""
 
@@ -984,16 +993,24 @@ class RayMap:
         at_first = start & (k0 == 0)
         hi[at_first], f_lo[at_first] = 1, fw[0, at_first]
         f_hi[at_first] = fw[1, at_first]
-        while True:
+        while True:  # a K-section search: K rows per point and pass, as many as SEARCH_BUDGET allows
             o = np.flatnonzero(hi - lo > 1)
             if not o.size:
                 break
-            mid = (lo.take(o) + hi.take(o)) // 2
-            f = self._row_residual(first.take(o) + mid, u.take(o), sweep.take(o), seg.take(o), near.take(o))
-            below = orient.take(o) * f < 0.0
-            ob, oa = o[below], o[~below]
-            lo[ob], f_lo[ob] = mid[below], f[below]
-            hi[oa], f_hi[oa] = mid[~below], f[~below]
+            n_k = int(min(max(SEARCH_BUDGET // o.size, 1), SEARCH_MAX_K))
+            lo_o, hi_o = lo.take(o), hi.take(o)
+            # rows lo + (hi - lo) j / (K + 1), j = 1..K, inside (lo, hi) (bisection for K = 1)
+            mid = lo_o + ((hi_o - lo_o)[None, :] * np.arange(1, n_k + 1)[:, None]) // (n_k + 1)
+            mid = np.minimum(np.maximum(mid, lo_o + 1), hi_o - 1)
+            f = self._row_residual((first.take(o) + mid).reshape(-1), np.tile(u.take(o), n_k),
+                                   np.tile(sweep.take(o), n_k), np.tile(seg.take(o), n_k),
+                                   np.tile(near.take(o), n_k)).reshape(n_k, o.size)
+            below = orient.take(o) * f < 0.0  # true on a prefix of the K rows (f changes sign once)
+            n_below = below.sum(0)
+            ob = np.flatnonzero(n_below > 0)  # the last row below: the new lo
+            lo[o[ob]], f_lo[o[ob]] = mid[n_below[ob] - 1, ob], f[n_below[ob] - 1, ob]
+            oa = np.flatnonzero(n_below < n_k)  # the first row above: the new hi
+            hi[o[oa]], f_hi[o[oa]] = mid[n_below[oa], oa], f[n_below[oa], oa]
         at0 = np.flatnonzero((lo == 0) & np.isnan(f_lo))
         if at0.size:
             f_lo[at0] = self._row_residual(first[at0], u[at0], sweep[at0], seg[at0], near[at0])
