@@ -919,10 +919,13 @@ class RayMap:
             ok = (r >= self.r_min * (1.0 - 1e-12)) & (p >= 0.0) & (p <= math.pi) & ~np.isnan(r)
         idx = np.flatnonzero(ok)
         m = idx.size
-        rr = np.tile(r[idx], len(orders))
-        pp = np.tile(p[idx], len(orders))
-        oo = np.repeat(np.array(orders), m)
-        res = self.solve(rr, pp, oo)
+        if m:
+            rr = np.tile(r[idx], len(orders))
+            pp = np.tile(p[idx], len(orders))
+            oo = np.repeat(np.array(orders), m)
+            res = self.solve(rr, pp, oo)
+        else:  # nothing to solve (no valid point): the solve's fixed cost saved
+            res = {q: np.empty(0) for q in QUANTITIES}
         out = {}
         for i, order in enumerate(orders):
             got = {}
