@@ -579,7 +579,7 @@ class RayMap:
         """Per segment, nodes uniform in z = logit(d / far) from the label RHO_MIN + 0.5 to the far end,
         and the observer's phase theta_o and J there (closed forms)."""
         n = SEGMENT_NODES
-        z_all, th_all, j_all = [], [], []
+        z_all, th_all, rho_all, kind_all = [], [], [], []
         self.s_zlo, self.s_zhi = np.empty(self.n_seg), np.empty(self.n_seg)
         uo = self.uo
         twin = self._twins()
@@ -588,7 +588,6 @@ class RayMap:
                 j = twin[i]
                 z_all.append(z_all[j])
                 th_all.append(th_all[j])
-                j_all.append(j_all[j])
                 self.s_zlo[i], self.s_zhi[i] = self.s_zlo[j], self.s_zhi[j]
                 continue
             seg = np.array([i])
@@ -606,7 +605,9 @@ class RayMap:
             x = self.s_crit[i] + self.s_side[i] * d
             with np.errstate(invalid="ignore", divide="ignore"):
                 if name == "P":
-                    theta = _orb.sweep(orb, np.full(n, uo)) - _orb.sweep(orb, np.full(n, _orb.U_PHOTON))
+                    # the swept angle from the photon sphere to the observer: both ends in one call
+                    f_ends = _orb.sweep(orb, np.array([[uo], [_orb.U_PHOTON]]) * np.ones(n))
+                    theta = f_ends[0] - f_ends[1]
                 else:
                     p_uo = uo * uo * (1.0 - uo) * (np.cos(x) / np.sin(x)) ** 2  # P(uo), no cancellation
                     if name == "T":
@@ -614,15 +615,19 @@ class RayMap:
                             orb, uo, np.sqrt(p_uo / ((uo - orb.e1) * (orb.e3 - uo))))
                     else:
                         theta = _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
-            kind = np.full(n, self.s_kind[i])
-            j = self._evaluate(kind, rho, theta, want_j=True, want_u=False)[1]
             z_all.append(z)
             th_all.append(theta)
-            j_all.append(j)
+            rho_all.append(rho)
+            kind_all.append(np.full(n, self.s_kind[i]))
             self.s_zlo[i], self.s_zhi[i] = z[0], z[-1]
         self.n_z = n
         self.node_theta = np.concatenate(th_all)
-        self.node_j = np.concatenate(j_all)
+        # J on the nodes of every segment in one lookup (a twin repeats its first segment's)
+        uniq = [i for i in range(self.n_seg) if twin[i] == i]
+        j_u = self._evaluate(np.concatenate(kind_all), np.concatenate(rho_all),
+                             np.concatenate([th_all[i] for i in uniq]), want_j=True, want_u=False)[1]
+        pieces = dict(zip(uniq, np.split(j_u, len(uniq))))
+        self.node_j = np.concatenate([pieces[twin[i]] for i in range(self.n_seg)])
         self.s_dz = (self.s_zhi - self.s_zlo) / (n - 1)
 
     def _nodes(self, seg, z, values, derivative=False):
