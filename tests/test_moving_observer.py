@@ -148,3 +148,32 @@ def test_with_aberration_off_a_moving_camera_sees_the_static_directions_and_shif
         np.testing.assert_allclose(off[order].redshift, grav / e_moving, rtol=1e-12)
         np.testing.assert_allclose(off[order].redshift_gravity, grav, rtol=1e-14)
         assert still[order].redshift_gravity is None
+
+
+def test_a_moving_cameras_axis_patch_is_sized_by_the_ring_it_sees(table):
+    """The sphere right behind the hole (180 degrees): the axis patch's grid follows the Einstein ring as
+    the moving camera sees it, the static radius times the aberration's local scale (which varies
+    about the ring), not one azimuth's value: a camera moving towards the hole's side sees the ring
+    shrunk (scale below 1) and needs no more patch faces than at rest, one moving away at most
+    scale^2 times as many (the scale at the hole's direction, with 20 % for its variation about the
+    ring); with a negligible speed, the same patch as at rest. Every patch vertex's image is still
+    the exactly aberrated static one."""
+    src = BA.sphere_scene(180)[0]
+    settings = BA.make_settings(CAM)
+    hole_dir = -np.asarray(CAM.position) / np.linalg.norm(CAM.position)
+
+    def faces(beta):
+        scene = mapping.Scene(CAM.position, np.zeros(3), 1.0, beta=beta)
+        fr = pipeline.frame_context(scene, table, settings, None, CAM.frustum_planes())
+        st = pipeline.run_stages(fr, src)
+        return sum(len(p.tris) for p in st.patches)
+
+    rest = faces(None)
+    assert rest > 100
+    assert faces(1e-9 * BETA / np.linalg.norm(BETA)) == rest
+    for sign in (1.0, -1.0):
+        beta = BETA * np.array([sign, 1.0, 1.0])
+        scale = observer_view.magnification(observer_view.aberrate(hole_dir[None], beta), beta)[0]
+        n = faces(beta)
+        assert (scale < 1) == (sign < 0)
+        assert n <= rest * max(1.0, 1.2 * scale) ** 2, (sign, n, rest, scale)

@@ -162,6 +162,28 @@ def test_aberration_and_doppler_are_a_boost_of_the_photons_four_momentum(beta):
 
 
 @pytest.mark.parametrize("beta", BETAS)
+def test_the_doppler_factor_and_hole_angle_from_the_moving_view_need_no_static_directions(beta):
+    """doppler_factor_seen(d', beta), from the moving observer's directions d' = aberrate(d), is the
+    boosted photon's energy of the static direction d; hole_angle with beta (two dot products of d')
+    is the static angle from the hole times the aberration's local magnification, the reciprocal of
+    that energy: 1 / (gamma (1 + beta . d))."""
+    L = _boost(beta)
+    d = _unit(np.random.default_rng(8).normal(size=(2000, 3)))
+    p = np.column_stack([np.ones(len(d)), -d]) @ L.T
+    seen = -_unit(p[:, 1:])
+    np.testing.assert_allclose(observer_view.doppler_factor_seen(seen, beta), p[:, 0], rtol=1e-12)
+    np.testing.assert_allclose(observer_view.magnification(seen, beta), 1.0 / p[:, 0], rtol=1e-12)
+    np.testing.assert_array_equal(observer_view.magnification(seen, None), 1.0)
+    camera, hole = SCENE.camera, SCENE.hole
+    towards = (hole - camera) / np.linalg.norm(hole - camera)
+    want = np.arccos(np.clip(d @ towards, -1, 1)) / p[:, 0]
+    got = observer_view.hole_angle(seen, camera, hole, beta)
+    far = np.abs(d @ towards) < 1 - 1e-6  # (arccos near 0 and pi magnifies rounding)
+    np.testing.assert_allclose(got[far], want[far], rtol=1e-10)
+    np.testing.assert_allclose(got, want, atol=1e-7)
+
+
+@pytest.mark.parametrize("beta", BETAS)
 def test_unaberrate_undoes_aberrate(beta):
     d = _unit(np.random.default_rng(6).normal(size=(2000, 3)))
     np.testing.assert_allclose(observer_view.unaberrate(observer_view.aberrate(d, beta), beta), d, atol=2e-13)

@@ -291,6 +291,106 @@ def test_the_geodesic_operator_warns_inside_the_isco_and_refuses_what_it_cannot_
     assert "Camera" == cam.name and bpy.ops.grlens.camera_geodesic.idname() == "GRLENS_OT_camera_geodesic"
 
 
+class _Op:
+    """Stands in for an operator's self: its properties, and the reports it makes."""
+
+    def __init__(self, **props):
+        self.__dict__.update(props)
+        self.reports = []
+
+    def report(self, kind, text):
+        self.reports.append((set(kind), text))
+
+
+def test_the_two_geodesic_operators_have_only_their_own_options():
+    ops = bpy.ops.grlens
+    fall = {p.identifier for p in ops.camera_fall.get_rna_type().properties} - {"rna_type"}
+    orbit = {p.identifier for p in ops.camera_orbit.get_rna_type().properties} - {"rna_type"}
+    assert fall == {"release_radius", "look", "frame_start", "frame_end"}, fall
+    assert orbit == {"axis", "look", "frame_start", "frame_end"}, orbit
+
+
+@pytest.mark.parametrize("look", ["HOLE", "MOTION"])
+def test_camera_orbit_keys_the_circular_orbit_looking_where_asked(look):
+    """bpy.ops.grlens.camera_orbit: keys on core.camera_geodesics.orbit_path (one frame = 1 r_s/c here),
+    about the given axis; looking at the hole, or along the velocity (the orbit's tangent)."""
+    from grlens_addon.core import camera_geodesics
+
+    scene, cam, sphere = _demo()
+    scene.grlens.speed_of_light = 2.0
+    start = np.array(cam.matrix_world.translation)
+    axis = np.array([0.0, 0.3, 1.0])
+    assert bpy.ops.grlens.camera_orbit(axis=axis, look=look, frame_start=1, frame_end=30) == {"FINISHED"}
+    expect = camera_geodesics.orbit_path(np.arange(30.0), start, np.zeros(3), R_S, axis)
+    assert expect.stable
+    for f in (1, 12, 30):
+        pos, view = _cam_at(scene, cam, f)
+        np.testing.assert_allclose(pos, expect.position[f - 1], atol=2e-5)
+        want = -pos if look == "HOLE" else expect.velocity[f - 1]
+        np.testing.assert_allclose(view, want / np.linalg.norm(want), atol=1e-5)
+    if look == "MOTION":  # along the motion is across the line of sight to the hole on a circle
+        assert abs(float(view @ pos)) < 1e-4 * np.linalg.norm(pos)
+
+
+def test_camera_orbit_warns_inside_the_isco_and_not_outside():
+    """The operator's execute: inside 3 r_s a WARNING naming the innermost stable orbit (and the keys
+    still made), outside an INFO with the period; without a speed of light an ERROR, nothing keyed."""
+    from grlens_addon.blender import geodesic_camera
+
+    scene, cam, sphere = _demo()
+    op = _Op(axis=(0.0, 0.0, 1.0), look="HOLE", frame_start=1, frame_end=5)
+    assert geodesic_camera.GRLENS_OT_camera_orbit.execute(op, bpy.context) == {"CANCELLED"}
+    assert op.reports[-1][0] == {"ERROR"} and cam.animation_data is None
+    scene.grlens.speed_of_light = 1.0
+    for r, kind in ((2.5, "WARNING"), (3.2, "INFO")):
+        cam.animation_data_clear()
+        cam.location = (r * R_S, 0.0, 0.0)
+        scene.frame_set(1)
+        assert geodesic_camera.GRLENS_OT_camera_orbit.execute(op, bpy.context) == {"FINISHED"}
+        got, text = op.reports[-1]
+        assert got == {kind}, text
+        assert ("innermost stable" in text) == (kind == "WARNING"), text
+        assert text.startswith("keyed 5 frames")
+        np.testing.assert_allclose(_cam_at(scene, cam, 5)[0], _kepler_orbit(r, 4.0 * 1.0 / R_S),
+                                   atol=2e-5)
+
+
+def _kepler_orbit(r, t):
+    """The circular orbit at r (r_s) through (r R_S, 0, 0) about +z at coordinate time t (r_s/c), by
+    Kepler's law in coordinate time (Omega = sqrt(1 / (2 r^3)) c / r_s): an independent closed form."""
+    w = math.sqrt(1.0 / (2.0 * r ** 3))
+    return np.array([r * R_S * math.cos(w * t), r * R_S * math.sin(w * t), 0.0])
+
+
+@pytest.mark.parametrize("release", [0.0, 30.0])
+def test_camera_fall_keys_the_radial_fall_from_rest_where_asked(release):
+    """bpy.ops.grlens.camera_fall from rest at infinity or at 30 r_s (the camera at 20 r_s): keys on
+    core.camera_geodesics.fall_path; the speed read back by the rebuild is the fall's local speed
+    sqrt((1/r - 1/r0) / (1 - 1/r0)) c (seed 002); looking at the hole (the default)."""
+    from grlens_addon.core import camera_geodesics
+
+    scene, cam, sphere = _demo()
+    g = scene.grlens
+    g.speed_of_light = 4.0  # one frame is 2 r_s / c
+    start = np.array(cam.matrix_world.translation)
+    assert bpy.ops.grlens.camera_fall(release_radius=release, frame_start=1, frame_end=20) == {"FINISHED"}
+    r0 = math.inf if release == 0 else release
+    expect = camera_geodesics.fall_path(np.arange(20.0) * 2.0, start, np.zeros(3), R_S, r0)
+    for f in (1, 10, 20):
+        pos, view = _cam_at(scene, cam, f)
+        np.testing.assert_allclose(pos, expect.position[f - 1], atol=2e-5)
+        np.testing.assert_allclose(view, -pos / np.linalg.norm(pos), atol=1e-5)
+    scene.frame_set(10)
+    rebuild.rebuild_scene(scene)
+    beta = rebuild.observer_beta(scene, cam, cam, g.black_hole, g.black_hole, mapping.Scene(
+        np.array(cam.matrix_world.translation), np.zeros(3), R_S))
+    r = expect.r[9]
+    local = math.sqrt((1 / r - 1 / r0) / (1 - 1 / r0))
+    np.testing.assert_allclose(np.linalg.norm(beta), local, rtol=2e-3)
+    with pytest.raises(RuntimeError, match="release radius"):  # inside the camera's 20 r_s: its error report
+        bpy.ops.grlens.camera_fall(release_radius=10.0)
+
+
 def test_the_speed_of_light_from_a_crossing_time_or_a_real_hole():
     """set_speed_of_light: r_s/c = 10 frames gives c = r_s / 10; Sagittarius A* (4.3 million suns,
     r_s = 1.27e7 km, r_s/c = 42.4 s) at 24 frames per second, 1017 frames; bad input is refused."""
@@ -338,7 +438,7 @@ def test_the_panel_draws_physical_time():
         ops = [a[0] for kind, a, k in drawn if kind == "operator"]
         labels = [k.get("text", a[0] if a else "") for kind, a, k in drawn if kind == "label"]
         assert "grlens.set_speed_of_light" in ops
-        assert "grlens.camera_geodesic" in ops
+        assert "grlens.camera_fall" in ops and "grlens.camera_orbit" in ops
         assert any("r_s/c = 4 frames" in t for t in labels) == (c > 0), labels
 
 

@@ -93,7 +93,8 @@ def test_essentials_are_open_and_the_knobs_in_the_closed_advanced_panel():
                             (panels.VIEW3D_PT_grlens_illumination, {"light", "light_intensity"}, ()),
                             (panels.VIEW3D_PT_grlens_physical_time,
                              {"speed_of_light", "use_aberration", "use_doppler_colour", "use_beaming",
-                              "use_gravitational_shift"}, ("grlens.set_speed_of_light", "grlens.camera_geodesic")),
+                              "use_gravitational_shift"}, ("grlens.set_speed_of_light", "grlens.camera_fall",
+                                                              "grlens.camera_orbit")),
                             (panels.VIEW3D_PT_grlens_check, set(), ("grlens.check_frame",))):
         assert sub.bl_parent_id == "VIEW3D_PT_grlens" and "DEFAULT_CLOSED" in sub.bl_options, sub
         got = draw(sub)

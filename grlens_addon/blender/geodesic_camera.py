@@ -1,7 +1,9 @@
-"""Operators of physical time: ``bpy.ops.grlens.camera_geodesic()`` puts the observer camera on a
-timelike geodesic of the black hole, a radial free fall or a circular orbit through its position,
-keyed every frame in Schwarzschild coordinate time (core.camera_geodesics), looking at the hole or
-along its motion; ``bpy.ops.grlens.set_speed_of_light()`` chooses the speed of light from the light
+"""Operators of physical time: two put the observer camera on a timelike geodesic of the black hole
+through its position, keyed every frame in Schwarzschild coordinate time (core.camera_geodesics),
+looking at the hole or along its motion: ``bpy.ops.grlens.camera_fall()`` a radial free fall (from
+rest at a chosen radius or at infinity), ``bpy.ops.grlens.camera_orbit()`` a circular orbit (a
+warning inside the innermost stable one); ``bpy.ops.grlens.camera_geodesic()`` is either, by its
+``path`` (the first form, kept for scripts); ``bpy.ops.grlens.set_speed_of_light()`` chooses the speed of light from the light
 crossing time r_s/c in frames, or from the hole's size (or mass) and the frame rate.
 
 Units: scene units (BU); r_s = ``scene.grlens.r_s``; frames measure coordinate time with
@@ -23,7 +25,8 @@ from . import motion
 
 class GRLENS_OT_camera_geodesic(bpy.types.Operator):
     """Put the observer camera on a geodesic of the black hole through its position, keyed every frame
-    in coordinate time (needs a speed of light): a radial free fall or a circular orbit"""
+    in coordinate time (needs a speed of light): a radial free fall or a circular orbit (the panel
+    offers the two as Camera Falls and Camera Orbits)"""
 
     bl_idname = "grlens.camera_geodesic"
     bl_label = "Camera on a Geodesic"
@@ -53,15 +56,71 @@ class GRLENS_OT_camera_geodesic(bpy.types.Operator):
                                      description="The last frame keyed; -1: the scene's last frame")
 
     def execute(self, context):
-        scene = context.scene
-        try:
-            n, note = key_geodesic(scene, self.path, self.release_radius, tuple(self.axis), self.look,
-                                   self.frame_start, self.frame_end)
-        except ValueError as exc:
-            self.report({"ERROR"}, f"grlens: {exc}")
-            return {"CANCELLED"}
-        self.report({"WARNING"} if note.startswith("warning") else {"INFO"}, f"keyed {n} frames; {note}")
-        return {"FINISHED"}
+        return _run(self, context, self.path, self.release_radius, self.axis)
+
+
+_LOOK_ITEMS = [("HOLE", "At the Hole", "The camera looks at the hole, its up axis towards world +Z"),
+               ("MOTION", "Along the Motion", "The camera looks where it goes, its up axis towards world +Z")]
+
+
+def _run(op, context, path, release_radius=0.0, axis=(0.0, 0.0, 1.0)):
+    """Key the camera (key_geodesic) for an operator and report: the path's figures, its warning, or
+    why not (CANCELLED)."""
+    try:
+        n, note = key_geodesic(context.scene, path, release_radius, tuple(axis), op.look, op.frame_start,
+                               op.frame_end)
+    except ValueError as exc:
+        op.report({"ERROR"}, f"grlens: {exc}")
+        return {"CANCELLED"}
+    op.report({"WARNING"} if note.startswith("warning") else {"INFO"}, f"keyed {n} frames; {note}")
+    return {"FINISHED"}
+
+
+class GRLENS_OT_camera_fall(bpy.types.Operator):
+    """Put the observer camera on a radial free fall towards the hole through its position, from rest at
+    a chosen radius or at infinity, keyed every frame in coordinate time (needs a speed of light)"""
+
+    bl_idname = "grlens.camera_fall"
+    bl_label = "Camera Falls"
+    bl_options = {"REGISTER", "UNDO"}
+
+    release_radius: bpy.props.FloatProperty(
+        name="Released at (r_s)", default=0.0, min=0.0,
+        description="The radius (units of r_s) where the camera was at rest, at least its distance now; 0: at "
+                    "rest at infinity (it passes at the escape speed)")
+    look: bpy.props.EnumProperty(name="Look", default="HOLE", items=_LOOK_ITEMS)
+    frame_start: bpy.props.IntProperty(name="First Frame", default=-1,
+                                       description="Where the fall passes the camera's position; -1: the scene's "
+                                                   "first frame")
+    frame_end: bpy.props.IntProperty(name="Last Frame", default=-1,
+                                     description="The last frame keyed (fewer if the camera reaches the innermost "
+                                                 "radius imaged first); -1: the scene's last frame")
+
+    def execute(self, context):
+        return _run(self, context, "FALL", release_radius=self.release_radius)
+
+
+class GRLENS_OT_camera_orbit(bpy.types.Operator):
+    """Put the observer camera on the circular orbit at its distance from the hole, keyed every frame in
+    coordinate time (needs a speed of light); inside 3 r_s (the innermost stable orbit) it warns"""
+
+    bl_idname = "grlens.camera_orbit"
+    bl_label = "Camera Orbits"
+    bl_options = {"REGISTER", "UNDO"}
+
+    axis: bpy.props.FloatVectorProperty(
+        name="Orbit Axis", default=(0.0, 0.0, 1.0), size=3,
+        description="The camera turns counter-clockwise about this world direction (its part across the line "
+                    "from the hole to the camera)")
+    look: bpy.props.EnumProperty(name="Look", default="HOLE", items=_LOOK_ITEMS)
+    frame_start: bpy.props.IntProperty(name="First Frame", default=-1,
+                                       description="Where the orbit starts at the camera's position; -1: the "
+                                                   "scene's first frame")
+    frame_end: bpy.props.IntProperty(name="Last Frame", default=-1,
+                                     description="The last frame keyed; -1: the scene's last frame")
+
+    def execute(self, context):
+        return _run(self, context, "ORBIT", axis=self.axis)
 
 
 def key_geodesic(scene, path, release_radius=0.0, axis=(0.0, 0.0, 1.0), look="HOLE", frame_start=-1,
@@ -215,4 +274,4 @@ class GRLENS_OT_set_speed_of_light(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (GRLENS_OT_camera_geodesic, GRLENS_OT_set_speed_of_light)
+CLASSES = (GRLENS_OT_camera_geodesic, GRLENS_OT_camera_fall, GRLENS_OT_camera_orbit, GRLENS_OT_set_speed_of_light)

@@ -144,7 +144,9 @@ class VIEW3D_PT_grlens_physical_time(_Sub, bpy.types.Panel):
         row = col.row(align=True)
         row.prop(g, "speed_of_light")
         row.operator("grlens.set_speed_of_light", text="", icon="TIME")
-        col.operator("grlens.camera_geodesic")
+        row = col.row(align=True)
+        row.operator("grlens.camera_fall")
+        row.operator("grlens.camera_orbit")
         sub = col.column()
         sub.active = g.speed_of_light > 0
         if g.speed_of_light > 0:

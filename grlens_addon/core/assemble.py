@@ -120,32 +120,40 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
     if patch_corners is not None:
         src_tri = np.concatenate([src_tri, p_src])
     redshift = colour = gravity = None
-    if disc is not None or scene.beta is not None:
-        redshift = image_redshift(scene, v_src, v_dir, disc)
     if scene.beta is not None:  # physical time: the gravitational part too, for the colour's switches
         gravity = 1.0 / observer_view.frequency_ratio(np.linalg.norm(v_src - scene.hole, axis=1) / scene.r_s,
                                                        scene.r_obs, None)
-        gravity = np.nan_to_num(gravity, nan=0.0)
+    if disc is not None or scene.beta is not None:
+        redshift = image_redshift(scene, v_src, v_dir, disc, gravity)
+    if gravity is not None:
+        gravity = np.where(np.isnan(gravity), 0.0, gravity)
     if disc is not None:
         r = np.linalg.norm(v_src - scene.hole, axis=1) / scene.r_s
         colour = np.nan_to_num(thin_disc.disc_colour(r, redshift, disc.mode, r_in=disc.r_in,
                                                      t_peak=disc.t_peak, exposure=disc.exposure))
     if redshift is not None:
-        redshift = np.nan_to_num(redshift, nan=0.0)  # 0: no circular orbit there (r <= 1.5 r_s, axis)
+        redshift = np.where(np.isnan(redshift), 0.0, redshift)  # 0: no circular orbit there (r <= 1.5 r_s, axis)
     return ImageMesh(order=order, positions=v_pos, tris=image_tris, corner_uv=corner_uv,
                      material=mesh.material[src_tri], light_travel_time=v_dist, irradiance=irr, report=report,
                      source_tri=source.origin[src_tri], source_position=v_src, redshift=redshift,
                      disc_colour=colour, corner_normal=n, redshift_gravity=gravity)
 
 
-def image_redshift(scene, points, directions, disc: DiscEmitter | None = None) -> np.ndarray:
+def image_redshift(scene, points, directions, disc: DiscEmitter | None = None, gravity=None) -> np.ndarray:
     """(N,) 1 + z = nu_emitted / nu_seen of the light from the source ``points`` (N, 3; BU) that the
     camera of ``scene`` sees in the image ``directions`` (N, 3; its own frame: aberrated when the scene
     has a velocity ``beta``). Emitters at rest in their static frames (the gravitational shift and
     the camera's motion: observer_view.frequency_ratio), or a thin disc's gas on circular orbits
     (thin_disc, its shift for the static observer, divided by the camera's Doppler factor). NaN where
-    there is none (r <= 1 r_s; disc gas at r <= 1.5 r_s or on the disc axis)."""
+    there is none (r <= 1 r_s; disc gas at r <= 1.5 r_s or on the disc axis). ``gravity``: the
+    gravitational part 1 / frequency_ratio(r, r_obs) of ``points`` when the caller has it (emitters
+    at rest only)."""
     view = scene.view_beta
+    if disc is None and view is not None:  # the Doppler factor from the seen directions themselves
+        if gravity is None:
+            gravity = 1.0 / observer_view.frequency_ratio(np.linalg.norm(points - scene.hole, axis=1) / scene.r_s,
+                                                           scene.r_obs, None)
+        return gravity / observer_view.doppler_factor_seen(directions, view)
     static = directions if view is None else observer_view.unaberrate(directions, view)
     if disc is not None:
         z1 = thin_disc.vertex_redshift_from_direction(points, scene.hole, scene.camera, scene.r_s, disc.axis, static,

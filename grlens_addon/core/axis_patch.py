@@ -62,7 +62,7 @@ from scipy.sparse.csgraph import connected_components
 from . import budget as B
 from . import mapping, silhouette
 from .observer_view import (any_perpendicular, axis_coordinates, axis_crossing, axis_distance, hole_angle,
-                            longest_side, max_ring_span, place_images, projected_area, row_norm, within_axis_distance)
+                            longest_side, magnification, max_ring_span, place_images, projected_area, row_norm, within_axis_distance)
 from .ragged import group_offsets
 
 @dataclass
@@ -463,13 +463,18 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
                          replaced=cand[(corner_d <= radius) & away], radius=radius, orders=tuple(orders),
                          vertex_tri=np.zeros(0, np.int64), vertex_bary=np.zeros((0, 3)),
                          facing={o: np.zeros(0, bool) for o in orders})
-    # the ring's radius on screen, per order
+    # the ring's radius on screen, per order: a moving camera (scene.view_beta) sees it at the static
+    # radius times the aberration's local scale, which varies about the ring: its largest at
+    # B.PROBE_AZIMUTHS azimuths sizes the grid
     look = _limit_look(cr, mp, orders)
-    ring = {o: limit_images(cr, np.zeros(1), mp, o, look[o]) for o in orders}
-    if not all(bool(im.valid[0]) for im in ring.values()):
+    beta = scene.view_beta
+    psi_ring = np.zeros(1) if beta is None else 2.0 * np.pi * np.arange(B.PROBE_AZIMUTHS) / B.PROBE_AZIMUTHS
+    ring = {o: limit_images(cr, psi_ring, mp, o, look[o]) for o in orders}
+    if not all(bool(im.valid.all()) for im in ring.values()):
         return None
-    theta_e = {o: float(hole_angle(im.direction, scene.camera, scene.hole, scene.view_beta)[0]) for o, im in ring.items()}
-    n_az, q = grid_shape(max(theta_e.values()) / pixel_angle, max_error_px)
+    seen = {o: hole_angle(im.direction, scene.camera, scene.hole, beta) for o, im in ring.items()}
+    theta_e = {o: float(seen[o][0] / magnification(ring[o].direction[:1], beta)[0]) for o in orders}  # static
+    n_az, q = grid_shape(max(float(v.max()) for v in seen.values()) / pixel_angle, max_error_px)
     # the innermost circle: probe the image at B.PROBE_AZIMUTHS azimuths in the crossed triangle's plane
     k = np.arange(B.MAX_CIRCLES + 1)
     probe_delta = radius * q ** (-k.astype(np.float64))
@@ -480,9 +485,9 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
     probe = lam @ points[t0]
     band = B.PATCH_BAND_FACTOR * (B.COVERAGE_FACTOR * max_error_px) * pixel_angle
     gap = np.zeros(len(qx))
-    for o, img in mp.images(probe, orders).items():
-        gap = np.maximum(gap, np.abs(hole_angle(img.direction, scene.camera, scene.hole, scene.view_beta)
-                                     - theta_e[o]))  # NaN stays
+    for o, img in mp.images(probe, orders).items():  # how far from the ring each probe is seen
+        gap = np.maximum(gap, np.abs(hole_angle(img.direction, scene.camera, scene.hole, beta)
+                                     - theta_e[o] * magnification(img.direction, beta)))  # NaN stays
     gap = gap.reshape(len(k), B.PROBE_AZIMUTHS).max(axis=1)
     # no image (outside the LUT, horizon) next to the axis: no patch; farther out: a smaller patch
     bad = np.flatnonzero(~np.isfinite(gap))

@@ -141,8 +141,38 @@ def hole_angle(directions, camera, hole, beta=None) -> np.ndarray:
     towards_hole /= np.linalg.norm(towards_hole)
     if beta is None:
         return np.arccos(np.clip(directions @ towards_hole, -1.0, 1.0))
-    static = unaberrate(directions, beta)
-    return np.arccos(np.clip(static @ towards_hole, -1.0, 1.0)) / doppler_factor(static, beta)
+    # from two dot products of the moving observer's directions d' (no (N, 3) temporaries): the static
+    # direction is (d' / gamma - (1 - gamma / (gamma + 1) beta . d') beta) / (1 - beta . d') (aberrate
+    # with -beta), and the local magnification 1 / (gamma (1 + beta . d_static)) = gamma (1 - beta . d')
+    beta = np.asarray(beta, dtype=np.float64).reshape(3)
+    gamma = lorentz_gamma(beta)
+    k = directions @ beta
+    cos_static = ((directions @ towards_hole) / gamma
+                  - (1.0 - (gamma / (gamma + 1.0)) * k) * float(beta @ towards_hole)) / (1.0 - k)
+    return np.arccos(np.clip(cos_static, -1.0, 1.0)) * (gamma * (1.0 - k))
+
+
+def magnification(directions, beta) -> np.ndarray:
+    """(N,) the aberration's local angular scale at the moving observer's unit ``directions`` (N, 3):
+    small angles seen there by the observer moving with ``beta`` (3,; units of c) over the same angles
+    seen by the static observer, gamma (1 - beta . d') = 1 / (gamma (1 + beta . d_static)) (aberration
+    is conformal); ones for ``beta`` None. The reciprocal of :func:`doppler_factor_seen`."""
+    d = np.asarray(directions, dtype=np.float64)
+    if beta is None:
+        return np.ones(d.shape[:-1])
+    beta = np.asarray(beta, dtype=np.float64).reshape(3)
+    return lorentz_gamma(beta) * (1.0 - d @ beta)
+
+
+def doppler_factor_seen(directions, beta) -> np.ndarray:
+    """:func:`doppler_factor` (nu_moving / nu_static, (N,)) from the *moving* observer's unit apparent
+    ``directions`` (N, 3) (e.g. aberrated image directions) instead of the static ones:
+    1 / (gamma (1 - beta . d')), the same value without taking d' back to the static frame (the
+    Doppler factors of a direction and of its aberrated one are reciprocal: gamma (1 + beta . d)
+    gamma (1 - beta . d') = 1). Raises ValueError for |beta| >= 1."""
+    beta = np.asarray(beta, dtype=np.float64).reshape(3)
+    gamma = lorentz_gamma(beta)
+    return 1.0 / (gamma * (1.0 - np.asarray(directions, dtype=np.float64) @ beta))
 
 
 def ring_sagitta(radius, span):
@@ -363,21 +393,24 @@ def aberrate(directions, beta) -> np.ndarray:
     Special-relativistic aberration, exact: with theta the angle between a direction and beta,
     cos theta' = (cos theta + |beta|) / (1 + |beta| cos theta) and sin theta' = sin theta / (gamma
     (1 + |beta| cos theta)), in the same plane through beta: everything crowds towards the direction
-    of motion. beta = 0 returns ``directions`` itself (the same array). Raises ValueError for
-    |beta| >= 1. NaN directions stay NaN. :func:`unaberrate` is the inverse."""
+    of motion. In vector form (one dot product per direction, no normalisation needed: the result is
+    a unit vector to rounding),
+
+        d' = (d / gamma + (1 + gamma / (gamma + 1) beta . d) beta) / (1 + beta . d).
+
+    beta = 0 returns ``directions`` itself (the same array). Raises ValueError for |beta| >= 1. NaN
+    directions stay NaN. :func:`unaberrate` is the inverse."""
     beta = np.asarray(beta, dtype=np.float64).reshape(3)
     gamma = lorentz_gamma(beta)
-    b = float(np.sqrt(beta @ beta))
-    if b == 0.0:
+    if not beta.any():
         return directions
     d = np.asarray(directions, dtype=np.float64)
-    b_hat = beta / b
-    cos_t = d @ b_hat
-    across = d - cos_t[..., None] * b_hat
-    den = 1.0 + b * cos_t
-    out = ((cos_t + b) / den)[..., None] * b_hat + across / (gamma * den)[..., None]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return out / np.sqrt(np.einsum("...j,...j->...", out, out))[..., None]
+    k = d @ beta  # beta . d
+    inv = 1.0 / (1.0 + k)  # (|beta| < 1: never 0 for unit d)
+    along = (1.0 + (gamma / (gamma + 1.0)) * k) * inv
+    out = d * (inv / gamma)[..., None]
+    out += along[..., None] * beta
+    return out
 
 
 def unaberrate(directions, beta) -> np.ndarray:
