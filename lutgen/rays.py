@@ -864,19 +864,20 @@ class RayMap:
 
     def _row_residual(self, row, u, sweep, seg, near=None):
         """f on the concatenated rows ``row`` (1-D cubic along each row); ``near``: targets next to the
-        observer, from whose f the table's error at the observer is subtracted."""
+        observer, from whose f the table's error at the observer is subtracted. ``row`` may be (k, N)
+        with the targets' arrays (N,): k rows per target (the per-target parts formed once)."""
         fl = self.flat
         n_c = fl.n_cols
         th = self.row_theta.take(row) + self.s_dir.take(seg) * sweep
         if self.n_seg > 2:  # turning rays: the angle from the periapsis / apoapsis
             th = np.where(self.s_kind.take(seg) != 1, np.abs(th), th)
-        c = (th - self.row_start.take(row)) * self.row_cscale.take(row)
+        c = ((th - self.row_start.take(row)) * self.row_cscale.take(row)).reshape(-1)
         cc = _clip(c, 0.0, n_c - 1)
         j0, wc = _stencil(cc, n_c)
-        base = self.row_g.take(row) * n_c + j0
+        base = self.row_g.take(row).reshape(-1) * n_c + j0
         v = wc[0] * fl.u.take(base) + wc[1] * fl.u.take(base + 1) + wc[2] * fl.u.take(base + 2) + \
             wc[3] * fl.u.take(base + 3)
-        v = v + _linear_tail(fl.u, base, n_c, c, cc, np.ones((1, c.size)))
+        v = (v + _linear_tail(fl.u, base, n_c, c, cc, np.ones((1, c.size)))).reshape(np.shape(row))
         f = v * self.row_uscale.take(row) - u
         return f if near is None else f - np.where(near, self.row_eps.take(row), 0.0)
 
@@ -982,8 +983,7 @@ class RayMap:
         first, count = self.r_first.take(seg), self.r_count.take(seg)
         orient = self.s_side.take(seg)  # f grows along the nodes when side > 0
         k0 = np.clip(np.floor(self._index_rows(seg, u, sweep)).astype(np.int64) - 1, 0, count - 4)
-        fw = self._row_residual(np.concatenate([first + k0 + j for j in range(4)]), np.tile(u, 4),
-                                np.tile(sweep, 4), np.tile(seg, 4), np.tile(near, 4)).reshape(4, n)
+        fw = self._row_residual(first + k0 + np.arange(4)[:, None], u, sweep, seg, near)  # (4, n)
         bw = orient * fw < 0.0
         lo, hi = np.zeros(n, dtype=np.int64), count.copy()
         f_lo = np.full(n, np.nan)  # node 0's value: computed below where the search never moved lo
@@ -1010,9 +1010,7 @@ class RayMap:
             # rows lo + (hi - lo) j / (K + 1), j = 1..K, inside (lo, hi) (bisection for K = 1)
             mid = lo_o + ((hi_o - lo_o)[None, :] * np.arange(1, n_k + 1)[:, None]) // (n_k + 1)
             mid = np.minimum(np.maximum(mid, lo_o + 1), hi_o - 1)
-            f = self._row_residual((first.take(o) + mid).reshape(-1), np.tile(u.take(o), n_k),
-                                   np.tile(sweep.take(o), n_k), np.tile(seg.take(o), n_k),
-                                   np.tile(near.take(o), n_k)).reshape(n_k, o.size)
+            f = self._row_residual(first.take(o) + mid, u.take(o), sweep.take(o), seg.take(o), near.take(o))
             below = orient.take(o) * f < 0.0  # true on a prefix of the K rows (f changes sign once)
             n_below = below.sum(0)
             ob = np.flatnonzero(n_below > 0)  # the last row below: the new lo
