@@ -102,8 +102,10 @@ def test_essentials_are_open_and_the_knobs_in_the_closed_advanced_panel():
         assert not set(got.props()) & ESSENTIALS
     assert draw(panels.VIEW3D_PT_grlens_illumination, header=True).props() == ["use_gr_illumination"]
     # the essentials panel has no knob under another name: every property of scene.grlens it draws is
-    # an essential, an image-order switch or auto update
-    assert set(main.props(scene.grlens)) <= ESSENTIALS | {"show_order_1", "show_order_2", "auto_update"}
+    # an essential, an image-order switch or auto update (and beside it, whether long builds may run
+    # beside the interface)
+    assert set(main.props(scene.grlens)) <= ESSENTIALS | {"show_order_1", "show_order_2", "auto_update",
+                                                          "build_in_background"}
     # every setting of scene.grlens is drawn somewhere (read-only report strings aside)
     drawn = set()
     for p in (panels.VIEW3D_PT_grlens, panels.VIEW3D_PT_grlens_advanced, panels.VIEW3D_PT_grlens_illumination,

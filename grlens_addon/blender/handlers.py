@@ -5,6 +5,10 @@ The lensed world (world.py) follows the camera on every frame change and edit ev
 is off (it costs a few milliseconds); files are saved with the user's own world (save_pre restores
 it, save_post lenses it again) and lensed again on load.
 
+Automatic updates of the interactive viewport whose build is predicted to be long run beside the
+interface (background.py: progress, Esc, the latest request wins); renders and background mode
+always build at once.
+
 Thin and @persistent (they survive file loads); a re-entrancy flag (reset in finally) keeps our own
 mesh updates from triggering another rebuild. Never calls bpy.ops.
 """
@@ -23,6 +27,11 @@ def wants_preview(depsgraph=None, background=None) -> bool:
     (F12 and animation renders fire the frame handlers with it)."""
     background = bpy.app.background if background is None else background
     return not background and (depsgraph is None or depsgraph.mode != "RENDER")
+
+
+def rendering() -> bool:
+    """Whether a render is running (between render_pre and render_complete / render_cancel)."""
+    return _rendering
 
 
 def quiet(scene, status: str) -> bool:
@@ -55,19 +64,42 @@ def _print(scene, report) -> None:
         _printed = lines
 
 
-def _run(scene, depsgraph=None):
+def _run(scene, depsgraph=None, background=None):
+    """Rebuild ``scene`` (auto update): an interactive viewport update may go to the background
+    (background.allowed; ``background`` False: never)."""
     global _busy
     if _busy or scene is None or not hasattr(scene, "grlens"):
         return None
     _busy = True
     try:
+        from . import background as bg
         from .rebuild import rebuild_scene
 
-        report = rebuild_scene(scene, depsgraph, preview=wants_preview(depsgraph))
-        _print(scene, report)
+        preview = wants_preview(depsgraph)
+        in_bg = preview and background is not False and bg.allowed(scene)
+        report = rebuild_scene(scene, depsgraph, preview=preview, background=in_bg)
+        if report["status"] != "lensing in the background" and not report["status"].startswith("cancelled"):
+            _print(scene, report)
         return report
     finally:
         _busy = False
+
+
+def finish_plan(plan):
+    """Upload a rebuild whose core ran in the background (rebuild.finish) and print its lines, with
+    the re-entrancy flag set like any rebuild here."""
+    global _busy
+    from .rebuild import finish
+
+    was, _busy = _busy, True
+    try:
+        report = finish(plan)
+        scene = plan.scene()
+        if scene is not None:
+            _print(scene, report)
+        return report
+    finally:
+        _busy = was
 
 
 def update_world(scene, depsgraph=None):
@@ -88,12 +120,13 @@ def update_world(scene, depsgraph=None):
         _busy = False
 
 
-def request_rebuild(scene):
-    """Called by property updates: rebuild now if auto update is on (the world in any case)."""
+def request_rebuild(scene, background=None):
+    """Called by property updates: rebuild now if auto update is on (the world in any case); a long
+    build may run beside the interface (``background`` False: never)."""
     if scene is None:
         return
     if scene.grlens.auto_update:
-        _run(scene)
+        _run(scene, background=background)
     else:
         update_world(scene)
 
@@ -122,6 +155,13 @@ def on_render_pre(scene, *_args):
     images are built from their render settings (rebuild.expose_sources); the frame handler hides
     them again after the rebuild, and the render re-evaluates without them."""
     global _rendering
+    from . import background
+
+    if background.running():  # renders wait for a build beside the interface, or build their own
+        if scene is not None and hasattr(scene, "grlens") and scene.grlens.auto_update:
+            background.cancel(quiet=True)
+        else:
+            background.wait()
     _rendering = True
     if scene is not None and hasattr(scene, "grlens"):
         from .rebuild import expose_sources
@@ -195,9 +235,10 @@ def on_depsgraph_update(scene, depsgraph):
 
 @persistent
 def on_load_pre(*_args):
-    from . import world
+    from . import background, world
     from .rebuild import forget_all
 
+    background.forget()  # (a build beside the interface is for the file being closed)
     forget_all()
     world.forget_all()
 
@@ -208,6 +249,15 @@ def on_load_post(*_args):
     for scene in bpy.data.scenes:
         if scene.grlens.lens_world and scene.grlens.black_hole is not None:
             update_world(scene)
+
+
+@persistent
+def on_undo_pre(*_args):
+    """Undo or redo replaces data-blocks: a build running beside the interface is cancelled first (the
+    images and the scene come back together; the next change rebuilds)."""
+    from . import background
+
+    background.forget()
 
 
 @persistent
@@ -238,6 +288,8 @@ HANDLERS = ((bpy.app.handlers.frame_change_post, on_frame_change),
             (bpy.app.handlers.load_post, on_load_post),
             (bpy.app.handlers.save_pre, on_save_pre),
             (bpy.app.handlers.save_post, on_save_post),
+            (bpy.app.handlers.undo_pre, on_undo_pre),
+            (bpy.app.handlers.redo_pre, on_undo_pre),
             (bpy.app.handlers.undo_post, on_undo_post),
             (bpy.app.handlers.redo_post, on_undo_post),
             (bpy.app.handlers.render_pre, on_render_pre),

@@ -1,7 +1,11 @@
 """Operators (public scripting contract): ``bpy.ops.grlens.rebuild()``, ``bpy.ops.grlens.clear()``,
 ``bpy.ops.grlens.demo_scene()``, ``bpy.ops.grlens.pack_lut()``, ``bpy.ops.grlens.unpack_luts()``,
 ``bpy.ops.grlens.check_frame()``, ``bpy.ops.grlens.add_black_hole()`` (Add > Black Hole),
-``bpy.ops.grlens.lens_selected()`` and ``bpy.ops.grlens.unlens_selected()``."""
+``bpy.ops.grlens.lens_selected()``, ``bpy.ops.grlens.unlens_selected()`` and
+``bpy.ops.grlens.build_progress()`` (started for a build beside the interface: its progress, Esc).
+
+Called from scripts (execute), Rebuild, Lens Selected and Unlens Selected build at once; from the
+interface (invoke: buttons, menus, F3) a long build runs beside the interface (background.py)."""
 import math
 
 import bpy
@@ -14,10 +18,22 @@ class GRLENS_OT_rebuild(bpy.types.Operator):
     bl_label = "Rebuild Lensed Images"
     bl_options = {"REGISTER", "UNDO"}
 
+    def invoke(self, context, event):
+        from . import background
+
+        background.clear_cancelled()  # (an explicit rebuild: also the build cancelled last)
+        return self._rebuild(context, background.allowed(context.scene))
+
     def execute(self, context):
+        return self._rebuild(context, False)
+
+    def _rebuild(self, context, in_background):
         from .rebuild import rebuild_scene
 
-        report = rebuild_scene(context.scene, context.evaluated_depsgraph_get())
+        report = rebuild_scene(context.scene, context.evaluated_depsgraph_get(), background=in_background)
+        if report["status"] == "lensing in the background":
+            self.report({"INFO"}, "grlens: lensing in the background (Esc cancels)")
+            return {"FINISHED"}
         for w in report["warnings"]:
             self.report({"WARNING"}, w)
         if report["status"].startswith("grlens:"):
@@ -57,9 +73,10 @@ def _plural(n, word):
     return f"{n} {word}" + ("" if n == 1 else "s")
 
 
-def _set_lens(scene, objs, on: bool) -> int:
+def _set_lens(scene, objs, on: bool, in_background: bool = False) -> int:
     """Switch Lens (``obj.grlens.enabled``) to ``on`` for ``objs``, then rebuild once (if auto update is
-    on) instead of once per object. Returns how many objects changed."""
+    on) instead of once per object; ``in_background``: a long build may run beside the interface.
+    Returns how many objects changed."""
     g = scene.grlens
     auto, g.auto_update = g.auto_update, False
     n = 0
@@ -73,7 +90,7 @@ def _set_lens(scene, objs, on: bool) -> int:
     if n:
         from . import handlers
 
-        handlers.request_rebuild(scene)
+        handlers.request_rebuild(scene, background=in_background)
     return n
 
 
@@ -97,14 +114,20 @@ class GRLENS_OT_lens_selected(bpy.types.Operator):
     bl_label = "Lens Selected"
     bl_options = {"REGISTER", "UNDO"}
 
+    def invoke(self, context, event):
+        return self._lens(context, True)
+
     def execute(self, context):
+        return self._lens(context, False)
+
+    def _lens(self, context, in_background):
         scene = context.scene
         sel = list(context.selected_objects)
         objs = [o for o in sel if lensable(o, scene)]
         if not objs:
             self.report({"WARNING"}, "no selected object that grlens can image")
             return {"CANCELLED"}
-        n = _set_lens(scene, objs, True)
+        n = _set_lens(scene, objs, True, in_background)
         rest = len(sel) - len(objs)
         self.report({"INFO"}, f"lensed {_plural(n, 'object')}" + (f" ({rest} left alone: not imageable)" if rest
                                                                   else ""))
@@ -118,12 +141,18 @@ class GRLENS_OT_unlens_selected(bpy.types.Operator):
     bl_label = "Unlens Selected"
     bl_options = {"REGISTER", "UNDO"}
 
+    def invoke(self, context, event):
+        return self._unlens(context, True)
+
     def execute(self, context):
+        return self._unlens(context, False)
+
+    def _unlens(self, context, in_background):
         objs = [o for o in context.selected_objects if o.grlens.enabled]
         if not objs:
             self.report({"WARNING"}, "no selected object is lensed")
             return {"CANCELLED"}
-        n = _set_lens(context.scene, objs, False)
+        n = _set_lens(context.scene, objs, False, in_background)
         self.report({"INFO"}, f"unlensed {_plural(n, 'object')}")
         return {"FINISHED"}
 
@@ -343,5 +372,52 @@ class GRLENS_OT_check_frame(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (GRLENS_OT_rebuild, GRLENS_OT_clear, GRLENS_OT_demo_scene, GRLENS_OT_pack_lut, GRLENS_OT_unpack_luts,
+class GRLENS_OT_build_progress(bpy.types.Operator):
+    """Show the progress of the images being built beside the interface; Esc cancels the build (the
+    former images stay). Started by grlens for such a build; ends with it"""
+
+    bl_idname = "grlens.build_progress"
+    bl_label = "grlens Build Progress"
+    bl_options = {"INTERNAL"}
+
+    def invoke(self, context, event):
+        from . import background
+
+        if not background.running() or context.window is None:
+            return {"CANCELLED"}
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.modal_handler_add(self)
+        background.set_watching(True)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        return {"CANCELLED"}  # (only meaningful while a build runs, from invoke)
+
+    def modal(self, context, event):
+        from . import background
+
+        if not background.running():
+            self._end(context)
+            return {"FINISHED"}
+        if event.type == "ESC" and event.value == "PRESS":
+            background.cancel(reason="Esc")
+            self._end(context)
+            self.report({"INFO"}, "grlens: build cancelled; the former images stay")
+            return {"CANCELLED"}
+        return {"PASS_THROUGH"}
+
+    def cancel(self, context):
+        self._end(context)
+
+    def _end(self, context):
+        from . import background
+
+        timer, self._timer = getattr(self, "_timer", None), None
+        if timer is not None:
+            context.window_manager.event_timer_remove(timer)
+        background.set_watching(False)
+
+
+CLASSES = (GRLENS_OT_rebuild, GRLENS_OT_build_progress, GRLENS_OT_clear, GRLENS_OT_demo_scene, GRLENS_OT_pack_lut, GRLENS_OT_unpack_luts,
            GRLENS_OT_check_frame, GRLENS_OT_lens_selected, GRLENS_OT_unlens_selected, GRLENS_OT_add_black_hole)

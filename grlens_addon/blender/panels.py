@@ -4,7 +4,8 @@
 
 * grlens (open): the black hole and r_s, the observer, the lensed world, the pixel tolerance (render
   and viewport), the Lens switch of the active object, Lens / Unlens Selected, Rebuild, Unlens All,
-  the status line (with grlens' time for the frame) and the report;
+  the status line (with grlens' time for the frame; while a long build runs beside the interface,
+  its progress above it) and the report;
 * GR Illumination, Frame Check (closed): each its own panel;
 * Advanced (closed): the method's knobs, the tables (mode, range, size, packing), MaxTessLevel, a, b
   and the cull ratio.
@@ -89,10 +90,17 @@ class VIEW3D_PT_grlens(bpy.types.Panel):
         row = col.row(align=True)
         row.operator("grlens.lens_selected", icon="CHECKMARK")
         row.operator("grlens.unlens_selected", icon="PANEL_CLOSE")
-        col.prop(g, "auto_update")
+        row = col.row(align=True)
+        row.prop(g, "auto_update")
+        row.prop(g, "build_in_background", text="In Background")
         row = col.row(align=True)
         row.operator("grlens.rebuild", text="Rebuild", icon="FILE_REFRESH")
         row.operator("grlens.clear", icon="X")
+        from . import background
+
+        building = background.status_line(scene)
+        if building:
+            layout.label(text=building, icon="TIME")
         if g.status:
             layout.label(text=g.status, icon="ERROR" if g.status.startswith("grlens:") else "INFO")
         lines = report_lines(g)

@@ -182,6 +182,12 @@ class GRLENS_SceneSettings(bpy.types.PropertyGroup):
                                  description="Outcome of the last world update (read only)")
     auto_update: BoolProperty(name="Auto Update", default=True,
                               description="Rebuild the images on frame changes and edits")
+    build_in_background: BoolProperty(
+        name="Build in Background", default=True,
+        description="In the viewport, automatic updates and the panel's buttons whose build is predicted to take "
+                    "longer than a quarter of a second run beside the interface: progress in the status bar and the "
+                    "panel, Esc cancels, the former images stay until the new ones are ready. Renders, background "
+                    "mode and scripts calling the operators always build at once. Off: every build at once")
     status: StringProperty(name="Status", default="", options={"SKIP_SAVE"},
                            description="Outcome of the last rebuild (read only)")
     report_lines: StringProperty(

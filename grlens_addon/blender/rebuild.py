@@ -494,23 +494,123 @@ def _empty_images(scene, src, orders, wanted):
                 wanted.add(obj.name)
 
 
-def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
+class _Item:
+    """One marked object in a rebuild: its name and pointer (looked up again before its images are
+    written, so a build finished later never touches an object that is gone), its report lines in
+    order, and its outcome: "pending" (gathered, to be built), "unchanged", "skipped", "failed" or
+    "built" (images computed, to be uploaded)."""
+
+    def __init__(self, src):
+        self.name, self.ptr = src.name, src.as_pointer()
+        self.lines: list = []
+        self.outcome = "pending"
+        self.mesh = self.inputs = self.disc = self.images = self.stats = None
+        self.mats: list = []  # names of the image materials
+        self.built_lines: list = []
+
+    @property
+    def triangles(self) -> int:
+        return 0 if self.mesh is None else len(self.mesh.tris)
+
+
+class RebuildPlan:
+    """A rebuild of one scene in three steps: :func:`plan_rebuild` (main thread: the scene's settings,
+    the table, every marked object gathered and compared with its last build), :func:`compute` (the
+    numeric core of the objects whose inputs changed: bpy-free, so it may run in a worker thread,
+    background.py) and :func:`finish` (main thread: upload, report, status). ``rebuild_scene`` runs
+    the three at once."""
+
+    def __init__(self, scene, preview):
+        self.scene_name, self.scene_ptr = scene.name, scene.as_pointer()
+        self.preview = preview
+        self.t0 = time.perf_counter()
+        self.report = {"status": "", "objects": {}, "stats": {}, "warnings": [], "seconds": 0.0}
+        self.warn: list = []  # lines before the objects' own (sky, hole, light)
+        self.items: list = []
+        self.wanted: set = set()
+        self.srcs = False
+        self.world_line = None
+        self.geo = self.settings = self.lut = self.light = self.planes = None
+        self.compute_seconds = 0.0
+
+    @property
+    def pending(self) -> list:
+        return [it for it in self.items if it.outcome == "pending"]
+
+    def same_work(self, other) -> bool:
+        """Whether ``other`` (a later plan of the same scene) asks for the very same builds: the same
+        objects pending with equal inputs (its outcome would be this plan's)."""
+        if other is None or other.scene_ptr != self.scene_ptr or other.preview != self.preview:
+            return False
+        a = [(it.ptr, it.outcome) for it in self.items]
+        b = [(it.ptr, it.outcome) for it in other.items]
+        if a != b or self.report["status"] != other.report["status"]:
+            return False
+        return all(_equal_inputs(x.inputs, y.inputs) for x, y in zip(self.pending, other.pending))
+
+    def scene(self):
+        """The plan's scene, or None when it is gone."""
+        sc = bpy.data.scenes.get(self.scene_name)
+        return sc if sc is not None and sc.as_pointer() == self.scene_ptr else None
+
+
+def _equal_inputs(a, b) -> bool:
+    if a is None or b is None:
+        return a is b
+    if a[1] != b[1]:
+        return False
+    for x, y in zip(a[0], b[0]):
+        if (x is None) != (y is None):
+            return False
+        if x is not None and not (np.shape(x) == np.shape(y) and np.array_equal(x, y)):
+            return False
+    return True
+
+
+def rebuild_scene(scene, depsgraph=None, preview: bool = False, background: bool = False) -> dict:
     """Rebuild every image object of ``scene`` for its current frame. Returns a report dict
     {"status": str, "objects": {name: {order: (vertices, faces, culled)} | "unchanged" | "skipped" |
     "failed"}, "stats": {name: {order: {reason: pieces}}}, "warnings": [str]}; the warnings (also in
     ``scene.grlens.report_lines``, one per line) name every marked object that is skipped or failed
     and what of an object is not imaged, and why. ``preview``: an automatic update of the interactive
     viewport, built to the viewport's tolerance (see :func:`max_error_px`; renders and explicit
-    rebuilds use the render tolerance)."""
-    t0 = time.perf_counter()
+    rebuilds use the render tolerance).
+
+    ``background``: the build may run beside the interface (background.py) when it is predicted to
+    take longer than background.BUDGET_SECONDS: the report returned then has the status "lensing in
+    the background" and the objects to build as "pending"; the images, the status line and the report
+    lines change when the build finishes. Otherwise (and always in renders and background mode) the
+    build runs here; a background build still running is stopped first (the latest request wins)."""
+    from . import background as bg
+
+    plan = plan_rebuild(scene, depsgraph, preview)
+    running = bg.current()
+    if running is not None and running.plan.same_work(plan):
+        if background:
+            return bg.provisional_report(running.plan)  # (the running build is this very build)
+    if background and plan.pending and bg.wants_background(plan):
+        if bg.was_cancelled(plan):
+            return bg.cancelled_report(plan)  # (Esc: the same build again waits for a change)
+        return bg.start(plan)
+    bg.cancel(quiet=True)  # (superseded; joined: one build at a time)
+    compute(plan)
+    return finish(plan)
+
+
+def plan_rebuild(scene, depsgraph=None, preview: bool = False) -> RebuildPlan:
+    """The first step of a rebuild (main thread): the world refreshed, the scene's settings checked,
+    the table, and every marked object gathered and compared with its last build. Scene-level
+    problems end the plan here (its status starts with "grlens:" and it has no objects)."""
+    plan = RebuildPlan(scene, preview)
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
-    report = {"status": "", "objects": {}, "stats": {}, "warnings": [], "seconds": 0.0}
-    warn = report["warnings"]
+    warn = plan.warn
     srcs = sources(scene)
-    wanted = set()
+    plan.srcs = bool(srcs)
     world_line, world_error = world.refresh(scene, depsgraph)
+    plan.world_line = world_line
     if world_error and srcs:
         warn.append(f"sky: {world_error}")
+    report = plan.report
     try:
         if not srcs:
             if world_error:
@@ -540,6 +640,7 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
                 else:
                     light = pipeline.Light(lpos, g.light_intensity,
                                            lutcache.get_table(g, r_light))
+        plan.geo, plan.settings, plan.lut, plan.light, plan.planes = geo, settings, lut, light, planes
         src_dgs = source_depsgraphs(srcs, depsgraph)
         shading.ensure_view_layer_aovs(scene)
         found, walk_error = {}, None
@@ -548,20 +649,87 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
                 found.update(gather.instances([s for s in srcs if src_dgs[s.as_pointer()] is dg], dg))
             except Exception as exc:  # noqa: BLE001 (reported per object below)
                 walk_error = exc
-        counts = {"lensed": 0, "skipped": 0, "failed": 0}
         for src in srcs:
+            item = _Item(src)
+            plan.items.append(item)
             try:
                 if walk_error is not None and gather.may_have_instances(src):
                     raise walk_error
-                outcome = _rebuild_source(scene, src, src_dgs[src.as_pointer()], found.get(src.as_pointer()), geo,
-                                          settings, lut, light, planes, report, wanted)
+                _plan_source(scene, src, src_dgs[src.as_pointer()], found.get(src.as_pointer()), plan, item)
             except Exception as exc:  # noqa: BLE001 (one object's failure must not stop the others)
-                warn.append(f"{src.name}: failed: {type(exc).__name__}: {exc}" if not str(exc) else
-                            f"{src.name}: failed: {exc}")
-                report["objects"][src.name] = outcome = "failed"
-                _set_source_visibility(src, _hides(src))
-                _empty_images(scene, src, settings.orders, wanted)
-            counts[outcome] += 1
+                _fail(item, exc)
+    except _WorldOnly as exc:
+        report["status"] = str(exc)
+    except RebuildError as exc:
+        report["status"] = f"grlens: {exc}"
+    except ValueError as exc:  # bad numbers from the scene (r_s, NaN transforms, LUT parameters)
+        report["status"] = f"grlens: {exc}"
+    return plan
+
+
+def _fail(item, exc) -> None:
+    item.lines.append(f"{item.name}: failed: {type(exc).__name__}: {exc}" if not str(exc) else
+                      f"{item.name}: failed: {exc}")
+    item.outcome = "failed"
+
+
+def compute(plan: RebuildPlan, progress=None) -> None:
+    """The second step (bpy-free: may run in a worker thread): the images of every pending object
+    (pipeline.build_images) and their report lines and stats. ``progress``: None, or a callable
+    ``progress(item_index, stage, fraction)`` passed on to the core for each pending object, which
+    may raise pipeline.Cancelled (then nothing of the plan is written). An object's failure is its
+    report line; the others are built."""
+    t0 = time.perf_counter()
+    for i, item in enumerate(plan.pending):
+        hook = None if progress is None else (lambda stage, f, i=i: progress(i, stage, f))
+        try:
+            images = pipeline.build_images(item.mesh, plan.geo, plan.lut, plan.settings, plan.light, plan.planes,
+                                           item.disc, progress=hook)
+            lines = []
+            for line in (not_imaged_line(item.name, item.mesh, images, plan.geo, plan.lut, plan.settings.orders),
+                         over_budget_line(item.name, images, plan.settings)):
+                if line:
+                    lines.append(line)
+            item.images, item.built_lines, item.stats = images, lines, _stats(images)
+            item.outcome = "built"
+        except pipeline.Cancelled:
+            raise
+        except Exception as exc:  # noqa: BLE001 (one object's failure must not stop the others)
+            _fail(item, exc)
+    plan.compute_seconds = time.perf_counter() - t0
+
+
+def finish(plan: RebuildPlan) -> dict:
+    """The last step (main thread): upload the built images, empty those of skipped and failed
+    objects, remove the images no longer wanted, and write the status and report lines. Objects gone
+    since the plan was made are left out (the next change rebuilds)."""
+    from . import background as bg
+
+    scene = plan.scene()
+    report, warn = plan.report, plan.report["warnings"]
+    if scene is None:
+        report["status"] = "grlens: the scene is gone"
+        return report
+    warn.extend(plan.warn)
+    counts = {"lensed": 0, "skipped": 0, "failed": 0}
+    wanted = plan.wanted
+    for item in plan.items:
+        src = bpy.data.objects.get(item.name)
+        if src is None or src.as_pointer() != item.ptr:
+            continue  # (gone, or renamed, since the plan was made)
+        try:
+            outcome = _finish_source(scene, src, plan, item)
+        except Exception as exc:  # noqa: BLE001 (one object's failure must not stop the others)
+            _fail(item, exc)
+            outcome = "failed"
+        if outcome == "failed":
+            report["objects"][item.name] = "failed"
+            _set_source_visibility(src, _hides(src))
+            _empty_images(scene, src, plan.settings.orders, wanted)
+        warn.extend(item.lines)
+        counts[outcome] += 1
+    if plan.items:
+        geo, settings, g = plan.geo, plan.settings, scene.grlens
         report["status"] = f"{counts['lensed']} object(s) lensed"
         for key in ("skipped", "failed"):
             if counts[key]:
@@ -571,14 +739,9 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
             report["status"] += f", camera at {np.linalg.norm(geo.beta):.3g} c"
         if settings.max_error_px != max_error_px(g):
             report["status"] += f" (viewport preview: {settings.max_error_px:.3g} px)"
-        if world_line and world_line.startswith("sky lensed"):
+        if plan.world_line and plan.world_line.startswith("sky lensed"):
             report["status"] += "; sky lensed"
-    except _WorldOnly as exc:
-        report["status"] = str(exc)
-    except RebuildError as exc:
-        report["status"] = f"grlens: {exc}"
-    except ValueError as exc:  # bad numbers from the scene (r_s, NaN transforms, LUT parameters)
-        report["status"] = f"grlens: {exc}"
+    world_line, srcs = plan.world_line, plan.srcs
     if report["status"].startswith("grlens:") and srcs:
         # the images are not built; say what the world does, so the two never seem to disagree
         report["status"] += "; no images" + (f" ({world_line})" if world_line and world_line.startswith("sky lensed")
@@ -596,11 +759,12 @@ def rebuild_scene(scene, depsgraph=None, preview: bool = False) -> dict:
     for o in scene.objects:
         if not is_image_object(o) and not o.grlens.enabled:
             _set_source_visibility(o, False)
-    report["seconds"] = time.perf_counter() - t0
+    report["seconds"] = time.perf_counter() - plan.t0
     if not report["status"].startswith("grlens:") or srcs:
         report["status"] += f" [{1000 * report['seconds']:.0f} ms]"
     scene.grlens.status = report["status"]
     scene.grlens.report_lines = "\n".join(warn)
+    bg.measured(plan)
     return report
 
 
@@ -611,43 +775,59 @@ def _hides(src) -> bool:
     return gather.can_lens(src) or src.type == "EMPTY"
 
 
-def _rebuild_source(scene, src, src_dg, inst, geo, settings, lut, light, planes, report, wanted) -> str:
-    """Build (or skip) the images of one marked object; returns "lensed" or "skipped" and fills
-    ``report`` (objects, stats, warnings) and ``wanted`` (names of image objects to keep)."""
-    warn = report["warnings"]
+def _plan_source(scene, src, src_dg, inst, plan, item) -> None:
+    """Gather one marked object and compare it with its last build: ``item`` becomes "skipped",
+    "unchanged" (its report lines repeated) or "pending" (with its source mesh and inputs); the
+    names of its image objects go into ``plan.wanted``."""
+    settings = plan.settings
     src_eval = src.evaluated_get(src_dg)
     _set_source_visibility(src, _hides(src))
     got = gather.gather(src, src_eval, inst)
     if got.skip is not None:
-        warn.append(f"{src.name}: skipped: {got.skip}")
-        report["objects"][src.name] = "skipped"
-        _empty_images(scene, src, settings.orders, wanted)
-        return "skipped"
-    warn.extend(f"{src.name}: {note}" for note in got.notes)
+        item.lines.append(f"{src.name}: skipped: {got.skip}")
+        item.outcome = "skipped"
+        return
+    item.lines.extend(f"{src.name}: {note}" for note in got.notes)
     mesh = got.mesh
     mats = [shading.image_material(m) for m in got.materials] or [shading.image_material(None)]
     disc = _disc_emitter(src_eval)
-    inputs = _inputs(mesh, geo, settings, lut, light, mats, planes, disc)
+    inputs = _inputs(mesh, plan.geo, settings, plan.lut, plan.light, mats, plan.planes, disc)
     objs = {order: _image_object(scene, src, order) for order in settings.orders}
-    wanted.update(o.name for o in objs.values())
+    plan.wanted.update(o.name for o in objs.values())
     tokens = {o.get("grlens_input") for o in objs.values()}
     if len(tokens) == 1 and _same_inputs(next(iter(tokens)), inputs):
-        report["objects"][src.name] = "unchanged"  # same geometry, camera and settings: skip
+        item.outcome = "unchanged"  # same geometry, camera and settings: skip
         _, _, lines, stats = _INPUTS[next(iter(tokens))]
-        warn.extend(lines)
-        if stats is not None:
-            report["stats"][src.name] = stats
+        item.lines.extend(lines)
+        item.stats = stats
+        return
+    item.mesh, item.inputs, item.disc, item.mats = mesh, inputs, disc, [m.name for m in mats]
+
+
+def _finish_source(scene, src, plan, item) -> str:
+    """Write one object's outcome (main thread); returns "lensed", "skipped" or "failed"."""
+    report, settings = plan.report, plan.settings
+    if item.outcome == "skipped":
+        report["objects"][src.name] = "skipped"
+        _empty_images(scene, src, settings.orders, plan.wanted)
+        return "skipped"
+    if item.outcome == "failed":
+        return "failed"
+    if item.outcome == "unchanged":
+        report["objects"][src.name] = "unchanged"
+        if item.stats is not None:
+            report["stats"][src.name] = item.stats
         return "lensed"
-    images = pipeline.build_images(mesh, geo, lut, settings, light, planes, disc)
-    lines = []
-    for line in (not_imaged_line(src.name, mesh, images, geo, lut, settings.orders),
-                 over_budget_line(src.name, images, settings)):
-        if line:
-            lines.append(line)
-    stats = _stats(images)
-    key = _remember_inputs(objs.values(), inputs, lines, stats)
+    if item.outcome != "built":
+        raise RuntimeError(f"not built ({item.outcome})")
+    mats = [bpy.data.materials.get(n) for n in item.mats]
+    if any(m is None for m in mats):
+        raise RuntimeError("an image material was removed while the images were built")
+    objs = {order: _image_object(scene, src, order) for order in settings.orders}
+    plan.wanted.update(o.name for o in objs.values())
+    key = _remember_inputs(objs.values(), item.inputs, item.built_lines, item.stats)
     entry = {}
-    for order, img in images.items():
+    for order, img in item.images.items():
         obj = objs[order]
         upload.upload(obj.data, img, mats)
         upload.set_normals(obj.data, img)
@@ -655,6 +835,6 @@ def _rebuild_source(scene, src, src_dg, inst, geo, settings, lut, light, planes,
         obj["grlens_input"] = key
         entry[order] = (len(img.positions), len(img.tris), img.report.total_culled())
     report["objects"][src.name] = entry
-    report["stats"][src.name] = stats
-    warn.extend(lines)
+    report["stats"][src.name] = item.stats
+    item.lines.extend(item.built_lines)
     return "lensed"

@@ -31,6 +31,9 @@ def unregister():
     global _registered
     if not _registered:
         return
+    from . import background
+
+    background.stop()  # (a build beside the interface: cancelled, its worker waited for)
     handlers.detach()
     bpy.types.VIEW3D_MT_add.remove(operators.menu_add)
     if bpy.app.timers.is_registered(_rebuild_after_enable):

@@ -23,6 +23,7 @@ Units: positions in Blender units (BU); light travel time as a length c*dt in BU
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,11 +36,83 @@ from .mapping import Scene
 from .visibility import is_closed_outward, winding_number  # noqa: F401 (public names)
 
 __all__ = ["SourceMesh", "Settings", "Light", "DiscEmitter", "ImageMesh", "clean_source", "build_images",
-           "is_closed_outward", "winding_number"]
+           "is_closed_outward", "winding_number", "Cancelled", "Progress", "STAGE_WEIGHTS"]
+
+
+class Cancelled(Exception):
+    """A build was stopped between two stages by its progress hook (:class:`Progress.cancel`); it
+    returns nothing, so no partial image exists."""
+
+
+STAGE_WEIGHTS = {"prepare": 0.18, "map": 0.25, "visibility": 0.02, "patches": 0.01, "probes": 0.08,
+                 "plan": 0.15, "cut": 0.03, "cull": 0.04, "refine": 0.03, "assemble": 0.02}
+"""Share of a build's time each stage takes (per order for plan, cut, cull, refine and assemble), for
+the progress fractions: about the shares measured on closed UV spheres of 200k and 1M triangles
+beside the hole at 1920x1080, both orders, to the viewport's tolerance (the shares move with the
+view and the tolerance: benchmarks/bench_background.py prints how far the fraction strays from the
+time). Only the fractions' spacing depends on them; the first split beside the axis (when there is
+one) runs map and visibility again within their shares."""
+
+
+class Progress:
+    """Progress and cancellation of one build, shared between the thread that runs it and the one that
+    watches it (thread-safe: a lock-free read of two fields, a threading.Event).
+
+    The core calls it between stages, ``progress(stage, fraction)`` with the stage about to run and
+    the fraction of the build done (0 to 1, never decreasing); it raises :class:`Cancelled` there once
+    :meth:`cancel` was called. ``callback(stage, fraction)``, if given, is called at each step too (in
+    the building thread)."""
+
+    def __init__(self, callback=None):
+        self._cancel = threading.Event()
+        self.stage, self.fraction, self.callback = "", 0.0, callback
+
+    def cancel(self) -> None:
+        self._cancel.set()
+
+    @property
+    def cancelled(self) -> bool:
+        return self._cancel.is_set()
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        if self._cancel.is_set():
+            raise Cancelled(stage)
+        self.stage, self.fraction = stage, max(self.fraction, float(fraction))
+        if self.callback is not None:
+            self.callback(stage, self.fraction)
+
+
+class _Steps:
+    """The progress fractions of one build's stages (STAGE_WEIGHTS over the stages this build runs)."""
+
+    PER_ORDER = ("plan", "cut", "cull", "refine", "assemble")
+
+    def __init__(self, progress, n_orders: int):
+        self.progress = progress
+        w = STAGE_WEIGHTS
+        self.total = sum(v for k, v in w.items() if k not in self.PER_ORDER) + n_orders * sum(
+            w[k] for k in self.PER_ORDER)
+        self.done = 0.0
+
+    def __call__(self, stage: str) -> None:
+        """Before ``stage``: report the fraction done and check for cancellation; count its share."""
+        if self.progress is None:
+            return
+        self.progress(stage, min(self.done / self.total, 1.0))
+        self.done += STAGE_WEIGHTS.get(stage, 0.0)
+
+    def check(self, stage: str) -> None:
+        """A cancellation point inside a stage's share (the fraction stays)."""
+        if self.progress is not None:
+            self.progress(stage, min(self.done / self.total, 1.0))
+
+    def finish(self) -> None:
+        if self.progress is not None:
+            self.progress("done", 1.0)
 
 
 def build_images(src: SourceMesh, scene: Scene, lut, settings: Settings, light: Light | None = None,
-                 frustum_planes=None, disc: DiscEmitter | None = None) -> dict[int, ImageMesh]:
+                 frustum_planes=None, disc: DiscEmitter | None = None, progress=None) -> dict[int, ImageMesh]:
     """Image meshes {order: ImageMesh} of the requested orders for one source mesh.
 
     ``lut``: the table of connecting rays for the camera's radius (lutgen.LUT, WideLUT or a
@@ -48,13 +121,24 @@ def build_images(src: SourceMesh, scene: Scene, lut, settings: Settings, light: 
     and source triangles whose corners and edge midpoints all map outside one plane are not cut. An
     image whose extent on the view sphere is below one pixel (``settings.pixel_angle``) is not built
     if it is a second-order image (reported as ``below_pixel``); first-order images are always built,
-    so small objects stay visible. ``light``: GR illumination; ``disc``: the source is a thin disc."""
+    so small objects stay visible. ``light``: GR illumination; ``disc``: the source is a thin disc.
+
+    ``progress``: None, or a callable ``progress(stage, fraction)`` (e.g. a :class:`Progress`) called
+    before every stage with its name and the fraction of the build done (non-decreasing, 0 to 1;
+    ("done", 1.0) last); it may raise (:class:`Cancelled`) to stop the build there: nothing is
+    returned then, and nothing the caller holds has changed (the stages build new arrays)."""
     frame = frame_context(scene, lut, settings, light, frustum_planes)
-    st = run_stages(frame, src)
+    steps = _Steps(progress, len(frame.orders))
+    st = run_stages(frame, src, steps)
     if st.source.empty:
+        steps.finish()
         return {o: empty_image(o, _report_of_nothing(st.source)) for o in frame.orders}
-    return {o: assemble(frame, st.source, s.pieces, s.keep, st.patches, s.patch_keep, s.report, o, disc)
-            for o, s in st.orders.items()}
+    out = {}
+    for o, s in st.orders.items():
+        steps("assemble")
+        out[o] = assemble(frame, st.source, s.pieces, s.keep, st.patches, s.patch_keep, s.report, o, disc)
+    steps.finish()
+    return out
 
 
 @dataclass
@@ -83,28 +167,38 @@ class Stages:
     orders: dict = field(default_factory=dict)
 
 
-def run_stages(frame, src: SourceMesh) -> Stages:
+def run_stages(frame, src: SourceMesh, steps=None) -> Stages:
     """The method's stages for ``src`` in ``frame``, in order, up to the culling (build_images then
     assembles the images; tests and benchmarks read the stages' outputs).
 
     Refine (interior.refine): the kept pieces are measured where the renderer interpolates them, and
     those beyond the budget are cut further, within Settings.max_triangles image triangles (each
-    order's report says what is left: CullReport.over_budget, refined, triangle_bound)."""
+    order's report says what is left: CullReport.over_budget, refined, triangle_bound).
+
+    ``steps``: the build's progress (build_images' _Steps), or None."""
+    steps = steps or _Steps(None, 0)
+    steps("prepare")
     source = prepare_source(frame, src)
     if source.empty:
         return Stages(source)
+    steps("map")
     coarse = map_source(frame, source)
+    steps("visibility")
     sight = visibility.see(frame, source, coarse)
     levels = level_plan.presplit(frame, source, coarse, sight)
     if levels is not None:  # a first split next to the axis; the stages run again on the smaller triangles
+        steps.check("presplit")
         source = _split(frame, source, levels)
+        steps.check("map")
         coarse = map_source(frame, source)
+        steps.check("visibility")
         sight = visibility.see(frame, source, coarse)
-    st = _stages(frame, source, coarse, sight)
+    st = _stages(frame, source, coarse, sight, steps)
     # refine: pieces beyond the budget inside are cut further (interior.refine), within max_triangles
     sampled = interior.sampled_sources(frame, source) if frame.budget.active else None
     counts = {o: 0 if s.keep is None else int(np.count_nonzero(s.keep)) for o, s in st.orders.items()}
     for order, s in st.orders.items():
+        steps("refine")
         room = frame.settings.max_triangles - sum(n for o, n in counts.items() if o != order)
         s.pieces, s.keep, beyond, bound, added = interior.refine(frame, source, s.pieces, s.keep, order, room, sampled)
         if s.keep is not None:
@@ -115,14 +209,20 @@ def run_stages(frame, src: SourceMesh) -> Stages:
     return st
 
 
-def _stages(frame, source, coarse, sight) -> Stages:
+def _stages(frame, source, coarse, sight, steps=None) -> Stages:
     """One pass of the stages after the map stage: patches, level plan, cut and cull per order."""
+    steps = steps or _Steps(None, 0)
+    steps("patches")
     patches = axis_patch.build_patches(frame, source, sight)
+    steps("probes")
     probes = level_plan.probe_edges(frame, source, coarse)
     st = Stages(source, coarse, sight, patches, probes)
     for order in frame.orders:
+        steps("plan")
         plan = level_plan.plan_levels(frame, source, coarse, sight, patches, probes, order)
+        steps("cut")
         pieces = None if plan.below_pixel else subdivision.cut(frame, source, plan, coarse.images[order])
+        steps("cull")
         keep, patch_keep, report = culling.cull_pieces(frame, source, coarse, plan, pieces, patches, order)
         st.orders[order] = OrderStages(plan, pieces, keep, patch_keep, report)
     return st
