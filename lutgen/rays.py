@@ -36,9 +36,9 @@ outside the photon sphere and ``I`` inside it), the radius a ray has reached aft
 target's angle, less the target's radius, changes sign exactly once: at the connecting ray (rays
 that escaped before count as below, rays that fell in as above). A point's segment is found from the
 signs at the segments' ends, its ray bracketed between two of the table's rows (1-D lookups along
-rows: four rows about the ray chosen by a per-radius seed index, a binary search where they do not
-bracket it) and found by a Newton step with the slope of the rows' cubic, then secant steps where
-needed, in d = |xi - crit| with the bicubic interpolation (:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius costs a few 1-D
+rows: four rows about the ray chosen by a per-radius seed index, a search over the rows (several
+per pass) where they do not bracket it) and found by a Newton step with the slope of the rows'
+cubic, then secant steps where needed, in d = |xi - crit| with the bicubic interpolation (:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius costs a few 1-D
 arrays (its own phase on each ray, the seed index), not a table build. docs/inside.md describes it with its figures.
 """
 from __future__ import annotations
@@ -950,8 +950,8 @@ class RayMap:
            the rays ordered by xi);
         2. the four rows about the root that the seed index gives (:meth:`_index_rows`; 1-D lookups
            along each row) bracket it between neighbouring rows where f changes sign among them;
-           elsewhere a binary search over the segment's rows does (or the last row and the far end,
-           pi/2);
+           elsewhere a search over the segment's rows does (K-section, SEARCH_BUDGET; or the last
+           row and the far end, pi/2);
         3. between two rows, the cubic through f on four rows gives a start and a slope; a Newton step
            with them and the bicubic interpolation ends where it is shorter than NEWTON_DONE, else
            secant steps converge (d = |xi - crit| to TOL_D); in the end intervals, and where the
@@ -978,7 +978,7 @@ class RayMap:
             f = self._row_residual(np.full(n, self.r_first[0]), u, sweep, np.zeros(n, dtype=np.int64), near)
             seg[f >= 0.0] = 0
         # 2. the seed index's window of four rows about the root: where f changes sign inside it, the
-        # bracket and the cubic's four values are known; elsewhere a binary search over the segment's
+        # bracket and the cubic's four values are known; elsewhere a K-section search over the segment's
         # rows (node count: its rows, then the far end) starts from what the window showed
         first, count = self.r_first.take(seg), self.r_count.take(seg)
         orient = self.s_side.take(seg)  # f grows along the nodes when side > 0
