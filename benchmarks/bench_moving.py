@@ -3,7 +3,8 @@ family of exact tables, per frame, against a static camera; and the orbit table'
 
 Part 1 (the options, in the units of docs/tables.md): the orbit table of lutgen.rays (built once per
 process): build time, memory, the per-radius setup of a RayMap, the lookup time of 1e5 random points
-(both orders, xi/dt/ux/uy; the family's table for the same radius measured in the same run) and the
+(both orders, xi/dt/ux/uy; the family's table for the same radius measured in the same run), the
+fixed cost of a lookup call (one point, both orders; the family's too) and the
 largest |xi - xi_exact| against lutgen.connect in docs/tables.md's four regions, observer at 20 r_s.
 Inside the photon sphere (1.05, 1.2, 1.4 r_s) no closed-form solver exists: each ray the table gives
 is shot with the DOP853 integrator (lutgen.reference.shoot) until it has swept the target's angle;
@@ -73,6 +74,11 @@ def options(rng):
     fam_table = lutgen.LUTFamily().at(20.0)
     fam_table.lookup_orders(r_all, p_all)
     fam_look, _ = _timed(lambda: fam_table.lookup_orders(r_all, p_all))
+    # the fixed cost of one lookup call (both orders, one point): what a frame's few calls pay besides
+    # the per-point cost
+    one_r, one_p = np.array([7.0]), np.array([1.0])
+    call, _ = _timed(lambda: rm.lookup_orders(one_r, one_p), repeat=20)
+    fam_call, _ = _timed(lambda: fam_table.lookup_orders(one_r, one_p), repeat=20)
     err = _errors(rm.lookup_orders, regions, exact)
     inside = {}
     for r_obs in (1.05, 1.2, 1.4):
@@ -90,7 +96,7 @@ def options(rng):
                 dt = max(dt, max(0.0, abs(shot.dt - got[o].dt[i]) - slack) / got[o].dt[i])
         inside[r_obs] = (du, dt)
     return dict(t_build=t_build, mb=table.nbytes / 2**20, setup=np.array(setup), look=1e3 * look,
-                fam_look=1e3 * fam_look, err=err, inside=inside)
+                fam_look=1e3 * fam_look, call=1e3 * call, fam_call=1e3 * fam_call, err=err, inside=inside)
 
 
 def inside_accuracy(width=320, height=180):
@@ -207,7 +213,8 @@ def report(opt, shots, frames, acc):
              f"(once) | {opt['mb']:.0f} | {opt['look']:.0f} | "
              + " | ".join(f"{e[k]:.1e}" for k in regions)
              + f" | per new radius {np.median(opt['setup']):.1f} ms (max {opt['setup'].max():.1f}); the family's "
-               f"table for 20 r_s looks the same points up in {opt['fam_look']:.0f} ms in this run |", "",
+               f"table for 20 r_s looks the same points up in {opt['fam_look']:.0f} ms in this run; one call "
+               f"with one point {opt['call']:.2f} ms (the family's table {opt['fam_call']:.2f} ms) |", "",
              "Inside the photon sphere, the table's rays shot with the DOP853 integrator to the target's swept "
              "angle (40 targets, both orders): largest miss in u = r_s/r, and in the travel time (relative, "
              "beyond the distance between the shot's end and the target along the ray):", "",

@@ -36,9 +36,9 @@ outside the photon sphere and ``I`` inside it), the radius a ray has reached aft
 target's angle, less the target's radius, changes sign exactly once: at the connecting ray (rays
 that escaped before count as below, rays that fell in as above). A point's segment is found from the
 signs at the segments' ends, its ray bracketed between two of the table's rows (1-D lookups along
-rows: four rows about the ray chosen by a per-radius seed index, a binary search where they do not
-bracket it) and found by a Newton step with the slope of the rows' cubic, then secant steps where
-needed, in d = |xi - crit| with the bicubic interpolation (:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius costs a few 1-D
+rows: four rows about the ray chosen by a per-radius seed index, a search over the rows (several
+per pass) where they do not bracket it) and found by a Newton step with the slope of the rows'
+cubic, then secant steps where needed, in d = |xi - crit| with the bicubic interpolation (:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius costs a few 1-D
 arrays (its own phase on each ray, the seed index), not a table build. docs/inside.md describes it with its figures.
 """
 from __future__ import annotations
@@ -407,6 +407,15 @@ the figures of tests/test_rays.py and docs/tables.md are those of the full secan
 TOL_D = 1e-12
 """Iterations stop when their step in d = |xi - crit| is below this relative to d."""
 
+SEARCH_BUDGET = 4096
+"""The search over a segment's rows (points the seed index's window does not bracket) evaluates up to
+this many rows per pass over all its points: K = SEARCH_BUDGET / points rows each (at most
+SEARCH_MAX_K, at least 1: bisection), so that a few points take two or three passes instead of ten
+(each pass costs a fixed numpy overhead); the bracket found is the same (f changes sign once)."""
+
+SEARCH_MAX_K = 63
+"""The most rows per point in one pass of that search."""
+
 INDEX_SWEEPS = 65
 """Angles of the seed index (uniform over [0, 2 pi], see :meth:`RayMap._setup_index`)."""
 
@@ -570,7 +579,7 @@ class RayMap:
         """Per segment, nodes uniform in z = logit(d / far) from the label RHO_MIN + 0.5 to the far end,
         and the observer's phase theta_o and J there (closed forms)."""
         n = SEGMENT_NODES
-        z_all, th_all, j_all = [], [], []
+        z_all, th_all, rho_all, kind_all = [], [], [], []
         self.s_zlo, self.s_zhi = np.empty(self.n_seg), np.empty(self.n_seg)
         uo = self.uo
         twin = self._twins()
@@ -579,7 +588,6 @@ class RayMap:
                 j = twin[i]
                 z_all.append(z_all[j])
                 th_all.append(th_all[j])
-                j_all.append(j_all[j])
                 self.s_zlo[i], self.s_zhi[i] = self.s_zlo[j], self.s_zhi[j]
                 continue
             seg = np.array([i])
@@ -597,7 +605,9 @@ class RayMap:
             x = self.s_crit[i] + self.s_side[i] * d
             with np.errstate(invalid="ignore", divide="ignore"):
                 if name == "P":
-                    theta = _orb.sweep(orb, np.full(n, uo)) - _orb.sweep(orb, np.full(n, _orb.U_PHOTON))
+                    # the swept angle from the photon sphere to the observer: both ends in one call
+                    f_ends = _orb.sweep(orb, np.array([[uo], [_orb.U_PHOTON]]) * np.ones(n))
+                    theta = f_ends[0] - f_ends[1]
                 else:
                     p_uo = uo * uo * (1.0 - uo) * (np.cos(x) / np.sin(x)) ** 2  # P(uo), no cancellation
                     if name == "T":
@@ -605,15 +615,19 @@ class RayMap:
                             orb, uo, np.sqrt(p_uo / ((uo - orb.e1) * (orb.e3 - uo))))
                     else:
                         theta = _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
-            kind = np.full(n, self.s_kind[i])
-            j = self._evaluate(kind, rho, theta, want_j=True, want_u=False)[1]
             z_all.append(z)
             th_all.append(theta)
-            j_all.append(j)
+            rho_all.append(rho)
+            kind_all.append(np.full(n, self.s_kind[i]))
             self.s_zlo[i], self.s_zhi[i] = z[0], z[-1]
         self.n_z = n
         self.node_theta = np.concatenate(th_all)
-        self.node_j = np.concatenate(j_all)
+        # J on the nodes of every segment in one lookup (a twin repeats its first segment's)
+        uniq = [i for i in range(self.n_seg) if twin[i] == i]
+        j_u = self._evaluate(np.concatenate(kind_all), np.concatenate(rho_all),
+                             np.concatenate([th_all[i] for i in uniq]), want_j=True, want_u=False)[1]
+        pieces = dict(zip(uniq, np.split(j_u, len(uniq))))
+        self.node_j = np.concatenate([pieces[twin[i]] for i in range(self.n_seg)])
         self.s_dz = (self.s_zhi - self.s_zlo) / (n - 1)
 
     def _nodes(self, seg, z, values, derivative=False):
@@ -850,19 +864,20 @@ class RayMap:
 
     def _row_residual(self, row, u, sweep, seg, near=None):
         """f on the concatenated rows ``row`` (1-D cubic along each row); ``near``: targets next to the
-        observer, from whose f the table's error at the observer is subtracted."""
+        observer, from whose f the table's error at the observer is subtracted. ``row`` may be (k, N)
+        with the targets' arrays (N,): k rows per target (the per-target parts formed once)."""
         fl = self.flat
         n_c = fl.n_cols
         th = self.row_theta.take(row) + self.s_dir.take(seg) * sweep
         if self.n_seg > 2:  # turning rays: the angle from the periapsis / apoapsis
             th = np.where(self.s_kind.take(seg) != 1, np.abs(th), th)
-        c = (th - self.row_start.take(row)) * self.row_cscale.take(row)
+        c = ((th - self.row_start.take(row)) * self.row_cscale.take(row)).reshape(-1)
         cc = _clip(c, 0.0, n_c - 1)
         j0, wc = _stencil(cc, n_c)
-        base = self.row_g.take(row) * n_c + j0
+        base = self.row_g.take(row).reshape(-1) * n_c + j0
         v = wc[0] * fl.u.take(base) + wc[1] * fl.u.take(base + 1) + wc[2] * fl.u.take(base + 2) + \
             wc[3] * fl.u.take(base + 3)
-        v = v + _linear_tail(fl.u, base, n_c, c, cc, np.ones((1, c.size)))
+        v = (v + _linear_tail(fl.u, base, n_c, c, cc, np.ones((1, c.size)))).reshape(np.shape(row))
         f = v * self.row_uscale.take(row) - u
         return f if near is None else f - np.where(near, self.row_eps.take(row), 0.0)
 
@@ -910,10 +925,13 @@ class RayMap:
             ok = (r >= self.r_min * (1.0 - 1e-12)) & (p >= 0.0) & (p <= math.pi) & ~np.isnan(r)
         idx = np.flatnonzero(ok)
         m = idx.size
-        rr = np.tile(r[idx], len(orders))
-        pp = np.tile(p[idx], len(orders))
-        oo = np.repeat(np.array(orders), m)
-        res = self.solve(rr, pp, oo)
+        if m:
+            rr = np.tile(r[idx], len(orders))
+            pp = np.tile(p[idx], len(orders))
+            oo = np.repeat(np.array(orders), m)
+            res = self.solve(rr, pp, oo)
+        else:  # nothing to solve (no valid point): the solve's fixed cost saved
+            res = {q: np.empty(0) for q in QUANTITIES}
         out = {}
         for i, order in enumerate(orders):
             got = {}
@@ -932,8 +950,8 @@ class RayMap:
            the rays ordered by xi);
         2. the four rows about the root that the seed index gives (:meth:`_index_rows`; 1-D lookups
            along each row) bracket it between neighbouring rows where f changes sign among them;
-           elsewhere a binary search over the segment's rows does (or the last row and the far end,
-           pi/2);
+           elsewhere a search over the segment's rows does (K-section, SEARCH_BUDGET; or the last
+           row and the far end, pi/2);
         3. between two rows, the cubic through f on four rows gives a start and a slope; a Newton step
            with them and the bicubic interpolation ends where it is shorter than NEWTON_DONE, else
            secant steps converge (d = |xi - crit| to TOL_D); in the end intervals, and where the
@@ -960,13 +978,12 @@ class RayMap:
             f = self._row_residual(np.full(n, self.r_first[0]), u, sweep, np.zeros(n, dtype=np.int64), near)
             seg[f >= 0.0] = 0
         # 2. the seed index's window of four rows about the root: where f changes sign inside it, the
-        # bracket and the cubic's four values are known; elsewhere a binary search over the segment's
+        # bracket and the cubic's four values are known; elsewhere a K-section search over the segment's
         # rows (node count: its rows, then the far end) starts from what the window showed
         first, count = self.r_first.take(seg), self.r_count.take(seg)
         orient = self.s_side.take(seg)  # f grows along the nodes when side > 0
         k0 = np.clip(np.floor(self._index_rows(seg, u, sweep)).astype(np.int64) - 1, 0, count - 4)
-        fw = self._row_residual(np.concatenate([first + k0 + j for j in range(4)]), np.tile(u, 4),
-                                np.tile(sweep, 4), np.tile(seg, 4), np.tile(near, 4)).reshape(4, n)
+        fw = self._row_residual(first + k0 + np.arange(4)[:, None], u, sweep, seg, near)  # (4, n)
         bw = orient * fw < 0.0
         lo, hi = np.zeros(n, dtype=np.int64), count.copy()
         f_lo = np.full(n, np.nan)  # node 0's value: computed below where the search never moved lo
@@ -984,16 +1001,22 @@ class RayMap:
         at_first = start & (k0 == 0)
         hi[at_first], f_lo[at_first] = 1, fw[0, at_first]
         f_hi[at_first] = fw[1, at_first]
-        while True:
+        while True:  # a K-section search: K rows per point and pass, as many as SEARCH_BUDGET allows
             o = np.flatnonzero(hi - lo > 1)
             if not o.size:
                 break
-            mid = (lo.take(o) + hi.take(o)) // 2
+            n_k = int(min(max(SEARCH_BUDGET // o.size, 1), SEARCH_MAX_K))
+            lo_o, hi_o = lo.take(o), hi.take(o)
+            # rows lo + (hi - lo) j / (K + 1), j = 1..K, inside (lo, hi) (bisection for K = 1)
+            mid = lo_o + ((hi_o - lo_o)[None, :] * np.arange(1, n_k + 1)[:, None]) // (n_k + 1)
+            mid = np.minimum(np.maximum(mid, lo_o + 1), hi_o - 1)
             f = self._row_residual(first.take(o) + mid, u.take(o), sweep.take(o), seg.take(o), near.take(o))
-            below = orient.take(o) * f < 0.0
-            ob, oa = o[below], o[~below]
-            lo[ob], f_lo[ob] = mid[below], f[below]
-            hi[oa], f_hi[oa] = mid[~below], f[~below]
+            below = orient.take(o) * f < 0.0  # true on a prefix of the K rows (f changes sign once)
+            n_below = below.sum(0)
+            ob = np.flatnonzero(n_below > 0)  # the last row below: the new lo
+            lo[o[ob]], f_lo[o[ob]] = mid[n_below[ob] - 1, ob], f[n_below[ob] - 1, ob]
+            oa = np.flatnonzero(n_below < n_k)  # the first row above: the new hi
+            hi[o[oa]], f_hi[o[oa]] = mid[n_below[oa], oa], f[n_below[oa], oa]
         at0 = np.flatnonzero((lo == 0) & np.isnan(f_lo))
         if at0.size:
             f_lo[at0] = self._row_residual(first[at0], u[at0], sweep[at0], seg[at0], near[at0])

@@ -204,3 +204,43 @@ def test_exact_connect_inside_photon_sphere_against_dop853(r_obs):
             assert shot.status == "phi"
             assert abs(1.0 / shot.r - 1.0 / r[i]) < 1e-9
             assert abs(shot.dt / c.dt[i] - 1.0) < 1e-8
+
+
+@pytest.mark.parametrize("r_obs", [20.0, 1.2])
+def test_row_search_passes_give_the_bisections_bracket(r_obs, monkeypatch):
+    """The search over a segment's rows (points outside the seed index's window) takes up to
+    SEARCH_MAX_K rows per point and pass; it ends at the same bracket as bisection (SEARCH_BUDGET = 1),
+    so the rays are bit-identical, and it takes fewer passes."""
+    rng = np.random.default_rng(11)
+    r, p = _targets(rng, r_obs, 300)
+    ok = r >= 1.05
+    r, p = r[ok], p[ok]
+    # the index disabled: every point goes through the search
+    monkeypatch.setattr(rays.RayMap, "_index_rows", lambda self, seg, u, sweep: np.zeros(seg.size))
+    calls = []
+    real = rays.RayMap._row_residual
+
+    def counting(self, row, *a, **k):
+        calls.append(np.size(row))
+        return real(self, row, *a, **k)
+
+    monkeypatch.setattr(rays.RayMap, "_row_residual", counting)
+    m = rays.RayMap(r_obs)
+    got = m.lookup_orders(r, p)
+    passes = len(calls)
+    monkeypatch.setattr(rays, "SEARCH_BUDGET", 1)
+    calls.clear()
+    bisect = m.lookup_orders(r, p)
+    assert len(calls) > passes + 3
+    for o in (1, 2):
+        for q in ("xi", "dt", "ux", "uy"):
+            assert np.array_equal(getattr(got[o], q), getattr(bisect[o], q), equal_nan=True), (o, q)
+
+
+def test_no_valid_point():
+    """Empty input and points that are all outside the range give empty / NaN results (no solve)."""
+    m = rays.RayMap(6.0)
+    got = m.lookup_orders(np.empty(0), np.empty(0))
+    assert got[1].xi.shape == (0,) and got[2].dt.shape == (0,)
+    got = m.lookup_orders(np.array([[0.5, np.nan]]), np.array([[0.3, 0.3]]), orders=(2,))
+    assert got[2].xi.shape == (1, 2) and np.isnan(got[2].xi).all() and np.isnan(got[2].uy).all()
