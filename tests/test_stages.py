@@ -96,6 +96,18 @@ def test_map_stage_is_the_connecting_rays(table):
     assert np.array_equal(ext.position[[0, 1, 4]], img[1].position[[3, 7, 0]])
     direct = mp.images(new_pts[2:4], (1,))[1]
     assert np.array_equal(ext.position[2:4], direct.position)
+    # every new vertex among the known points: the table is not asked at all, the images are the same
+    known = (np.array([41, 45]), mapping.take(direct, [0, 1]))
+    calls = []
+    lookup = mp.table.lookup_orders
+    mp.table.lookup_orders = lambda *a, **k: calls.append(a) or lookup(*a, **k)
+    try:
+        reused = mp.extend(img[1], new_pts, keys, 40, 1, known=known)
+    finally:
+        del mp.table.lookup_orders
+    assert calls == []
+    for name in ("position", "direction", "distance", "valid", "xi", "dt"):
+        assert np.array_equal(getattr(reused, name), getattr(ext, name), equal_nan=True), name
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))

@@ -204,7 +204,8 @@ class Mapper:
             if hit.any():
                 reuse = (rest[hit], at[hit])
                 rest = rest[~hit]
-        new = self.images(positions[rest], (order,))[order]
+        # every new vertex known already: no lookup (a table call costs ~0.1-1 ms even without points)
+        new = self.images(positions[rest], (order,))[order] if rest.size else None
         n = len(positions)
         out = Images(position=np.empty((n, 3)), direction=np.empty((n, 3)), distance=np.empty(n),
                      valid=np.empty(n, dtype=bool), plane=None, xi=np.empty(n), dt=np.empty(n), ux=None, uy=None)
@@ -212,7 +213,8 @@ class Mapper:
         for name in ("position", "direction", "distance", "valid", "xi", "dt"):
             dst = getattr(out, name)
             dst[is_corner] = getattr(coarse, name)[idx]
-            dst[rest] = getattr(new, name)
+            if new is not None:
+                dst[rest] = getattr(new, name)
             if reuse is not None:
                 dst[reuse[0]] = getattr(known_img, name)[reuse[1]]
         return out
