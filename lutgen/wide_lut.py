@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -306,7 +307,9 @@ class WideLUT:
 
 class _InterpolatedLUT(WideLUT):
     """A family's table for a radius between its nodes: rows are interpolated from the node tables in
-    bands of BAND_ROWS rows, when a lookup first needs them (a frame reads a fraction of the table)."""
+    bands of BAND_ROWS rows, when a lookup first needs them (a frame reads a fraction of the table).
+    Thread-safe: a band is made by one thread at a time, and is read only once it is whole (the
+    add-on's worker thread and the main thread may look up the same table)."""
 
     BAND_ROWS = 8
 
@@ -315,13 +318,15 @@ class _InterpolatedLUT(WideLUT):
         self.apex = sum(wk * a for wk, a in zip(weights, apexes))
         self._made = np.zeros(-(-sum(rows) // self.BAND_ROWS), dtype=bool)
         self._partial = np.empty(tables[0].shape)
+        self._lock = threading.Lock()
         self.r_obs, self.r_min, self.rows, self.source = r_obs, r_min, rows, "family"
         self._checked(self._partial)
 
     @property
     def data(self) -> np.ndarray:
         """The whole interpolated table (float64, as :class:`WideLUT`'s; every band is made)."""
-        self._make_bands(np.flatnonzero(~self._made))
+        with self._lock:
+            self._make_bands(np.flatnonzero(~self._made))
         return self._partial
 
     def _make_bands(self, bands):
@@ -337,9 +342,11 @@ class _InterpolatedLUT(WideLUT):
         need = np.zeros(self._made.size, dtype=bool)
         need[first_rows // self.BAND_ROWS] = True
         need[(first_rows + 3) // self.BAND_ROWS] = True
-        missing = np.flatnonzero(need & ~self._made)
-        if missing.size:
-            self._make_bands(missing)
+        if (need & ~self._made).any():
+            with self._lock:  # checked again under the lock: another thread may have made them meanwhile
+                missing = np.flatnonzero(need & ~self._made)
+                if missing.size:
+                    self._make_bands(missing)
         return self._partial
 
 
@@ -394,6 +401,7 @@ class LUTFamily:
         self.max_slices = int(max_slices)
         self._builder = builder
         self._slices: OrderedDict = OrderedDict()
+        self._lock = threading.RLock()  # exact(): one thread builds a table, the others wait for it
         self.built = 0  # exact tables built so far (for benchmarks and tests)
 
     @property
@@ -406,15 +414,16 @@ class LUTFamily:
     def exact(self, r_obs) -> WideLUT:
         """The exact table at one radius (cached with the family's node tables)."""
         key = float(r_obs)
-        lut = self._slices.get(key)
-        if lut is None:
-            lut = self._builder(key, self.r_min, self.rows, self.n_phi)
-            self.built += 1
-            self._slices[key] = lut
-            while len(self._slices) > self.max_slices:
-                self._slices.popitem(last=False)
-        else:
-            self._slices.move_to_end(key)
+        with self._lock:
+            lut = self._slices.get(key)
+            if lut is None:
+                lut = self._builder(key, self.r_min, self.rows, self.n_phi)
+                self.built += 1
+                self._slices[key] = lut
+                while len(self._slices) > self.max_slices:
+                    self._slices.popitem(last=False)
+            else:
+                self._slices.move_to_end(key)
         return lut
 
     def nodes_for(self, r_obs) -> list[int] | None:

@@ -179,3 +179,42 @@ def test_build_is_bit_identical_whatever_the_threads():
     a = W.build_wide_lut(7.0, rows=(8, 8, 16), n_phi=32, workers=1)
     b = W.build_wide_lut(7.0, rows=(8, 8, 16), n_phi=32, workers=3)
     assert np.array_equal(a.data, b.data) and np.array_equal(a.apex, b.apex)
+
+
+def test_a_table_looked_up_from_two_threads_at_once_gives_the_single_thread_values(family):
+    """The add-on's worker thread and the main thread may look up one family table at the same time:
+    its rows, made on first lookup, must be made once and read only when whole. The node tables are
+    read slowly here, so that without the table's lock both threads make the same bands at once."""
+    import threading
+    import time
+
+    rng = np.random.default_rng(11)
+    r, phi = 10 ** rng.uniform(0.1, 3, 3000), rng.uniform(0, np.pi, 3000)
+    r_obs = 12.3
+    want = family.at(r_obs).lookup_orders(r, phi)
+
+    class Slow:
+        def __init__(self, data):
+            self.data, self.shape = data, data.shape
+
+        def __getitem__(self, index):
+            time.sleep(0.002)
+            return self.data[index]
+
+    lut = family.at(r_obs)
+    lut._tables = [Slow(t) for t in lut._tables]
+    start, got = threading.Barrier(2), [None, None]
+
+    def look(i):
+        start.wait()
+        got[i] = lut.lookup_orders(r, phi)
+
+    threads = [threading.Thread(target=look, args=(i,)) for i in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for res in got:
+        for o in (1, 2):
+            for q in lutgen.lut.QUANTITIES:
+                assert np.array_equal(getattr(res[o], q), getattr(want[o], q), equal_nan=True), (o, q)
