@@ -354,10 +354,9 @@ def _show(job) -> None:
 
 
 def _hide() -> None:
-    if not _state["shown"] or bpy.app.background:
-        _state["shown"] = False
+    shown, _state["shown"] = _state["shown"], False
+    if not shown or bpy.app.background:
         return
-    _state["shown"] = False
     try:
         bpy.context.window_manager.progress_end()
         for win in _windows():

@@ -387,16 +387,25 @@ def forget_all() -> None:
     upload.forget_all()
 
 
-def _same_inputs(token, inputs) -> bool:
-    old = _INPUTS.get(token)
-    if old is None or old[1] != inputs[1]:
+def _equal_inputs(a, b) -> bool:
+    """Whether two builds' inputs (arrays, other values), as made by _inputs, are equal; None (no
+    inputs) equals only None."""
+    if a is None or b is None:
+        return a is b
+    if a[1] != b[1]:
         return False
-    for a, b in zip(old[0], inputs[0]):
-        if (a is None) != (b is None):
+    for x, y in zip(a[0], b[0]):
+        if (x is None) != (y is None):
             return False
-        if a is not None and not (np.shape(a) == np.shape(b) and np.array_equal(a, b)):
+        if x is not None and not (np.shape(x) == np.shape(y) and np.array_equal(x, y)):
             return False
     return True
+
+
+def _same_inputs(token, inputs) -> bool:
+    """Whether ``inputs`` equal those remembered under ``token`` (the last build's)."""
+    old = _INPUTS.get(token)
+    return old is not None and _equal_inputs(old, inputs)
 
 
 def _remember_inputs(objs, inputs, lines=(), stats=None) -> str:
@@ -552,19 +561,6 @@ class RebuildPlan:
         """The plan's scene, or None when it is gone."""
         sc = bpy.data.scenes.get(self.scene_name)
         return sc if sc is not None and sc.as_pointer() == self.scene_ptr else None
-
-
-def _equal_inputs(a, b) -> bool:
-    if a is None or b is None:
-        return a is b
-    if a[1] != b[1]:
-        return False
-    for x, y in zip(a[0], b[0]):
-        if (x is None) != (y is None):
-            return False
-        if x is not None and not (np.shape(x) == np.shape(y) and np.array_equal(x, y)):
-            return False
-    return True
 
 
 def rebuild_scene(scene, depsgraph=None, preview: bool = False, background: bool = False) -> dict:
