@@ -169,10 +169,9 @@ def doppler_factor_seen(directions, beta) -> np.ndarray:
     ``directions`` (N, 3) (e.g. aberrated image directions) instead of the static ones:
     1 / (gamma (1 - beta . d')), the same value without taking d' back to the static frame (the
     Doppler factors of a direction and of its aberrated one are reciprocal: gamma (1 + beta . d)
-    gamma (1 - beta . d') = 1). Raises ValueError for |beta| >= 1."""
-    beta = np.asarray(beta, dtype=np.float64).reshape(3)
-    gamma = lorentz_gamma(beta)
-    return 1.0 / (gamma * (1.0 - np.asarray(directions, dtype=np.float64) @ beta))
+    gamma (1 - beta . d') = 1): the reciprocal of :func:`magnification`. Raises ValueError for
+    |beta| >= 1."""
+    return 1.0 / magnification(directions, np.asarray(beta, dtype=np.float64))
 
 
 def ring_sagitta(radius, span):
