@@ -422,6 +422,10 @@ INDEX_SWEEPS = 65
 INDEX_ROW_STEP = 8
 """The seed index holds every this-many-th row of a segment (and its last)."""
 
+INDEX_SHIFT = 4.0
+"""The seed index's angles follow one another in one sorted array, each shifted by this much more than
+the one before (its values, u clipped to [-1, 2], span less)."""
+
 _KINDS = ("T", "P", "I")
 
 
@@ -526,22 +530,22 @@ class RayMap:
         self.s_side = np.array([sp[3] for sp in specs])
         self.s_far = np.array([sp[4] for sp in specs])
         self.c2, self.sin2c = 2.0 * xi_c, sin_c * sin_c
-        self._setup_nodes()
-        self._setup_rows()
-        self._setup_index()
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # one for all set-up steps
+            self._setup_nodes()
+            self._setup_rows()
+            self._setup_index()
 
     # ---- per segment 1-D arrays -------------------------------------------------------------------
     def _rho(self, seg, d):
         """Labels of the rays d = |xi - crit| of segments ``seg`` (arrays)."""
         kind = self.s_kind.take(seg)
         c2 = self.c2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            # T, I: (b/b_c)^2 - 1 = sin(d) sin(2 xi_c + d) / sin^2 xi_c;
-            # P: (b_c/b)^2 - 1 = sin(d) sin(2 xi_c - d) / sin^2(xi_c - d)
-            turning = kind != 1
-            s2 = np.sin(np.where(turning, c2 + d, c2 - d))
-            den = np.where(turning, self.sin2c, np.sin(0.5 * c2 - d) ** 2)
-            return np.log(np.sin(d) * s2 / den)
+        # T, I: (b/b_c)^2 - 1 = sin(d) sin(2 xi_c + d) / sin^2 xi_c;
+        # P: (b_c/b)^2 - 1 = sin(d) sin(2 xi_c - d) / sin^2(xi_c - d)
+        turning = kind != 1
+        s2 = np.sin(np.where(turning, c2 + d, c2 - d))
+        den = np.where(turning, self.sin2c, np.sin(0.5 * c2 - d) ** 2)
+        return np.log(np.sin(d) * s2 / den)
 
     def _d_of_rho(self, seg, rho):
         """Inverse of :meth:`_rho` (each kind's closed form on its own points only)."""
@@ -550,22 +554,21 @@ class RayMap:
         out = np.empty(rho.shape)
         c = self.xi_c
         p = kind == 1
-        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            if p.any():
-                # P: sin d = sin c e^rho / ((sqrt(cos^2 c + e^rho) + cos c) sqrt(1 + e^rho))
-                x = np.exp(rho[p])
-                sd = math.sin(c) * x / ((np.sqrt(math.cos(c) ** 2 + x) + math.cos(c)) * np.sqrt(1.0 + x))
-                out[p] = np.arcsin(np.minimum(sd, 1.0))
-            if not p.all():
-                # T, I: cos(2c + 2d) = cos 2c - 2 X, X = e^rho sin^2 c (Newton next to the critical angle)
-                xx = np.exp(rho[~p]) * self.sin2c
-                d_t = np.where(xx > 1e-6,
-                               0.5 * (np.arccos(np.clip(math.cos(self.c2) - 2.0 * xx, -1.0, 1.0)) - self.c2),
-                               xx / math.sin(self.c2))
-                for _ in range(3):
-                    s_d, s_cd = np.sin(d_t), np.sin(self.c2 + d_t)
-                    d_t = d_t - (s_d * s_cd - xx) / (np.cos(d_t) * s_cd + s_d * np.cos(self.c2 + d_t))
-                out[~p] = d_t
+        if p.any():
+            # P: sin d = sin c e^rho / ((sqrt(cos^2 c + e^rho) + cos c) sqrt(1 + e^rho))
+            x = np.exp(rho[p])
+            sd = math.sin(c) * x / ((np.sqrt(math.cos(c) ** 2 + x) + math.cos(c)) * np.sqrt(1.0 + x))
+            out[p] = np.arcsin(np.minimum(sd, 1.0))
+        if not p.all():
+            # T, I: cos(2c + 2d) = cos 2c - 2 X, X = e^rho sin^2 c (Newton next to the critical angle)
+            xx = np.exp(rho[~p]) * self.sin2c
+            d_t = np.where(xx > 1e-6,
+                           0.5 * (np.arccos(np.clip(math.cos(self.c2) - 2.0 * xx, -1.0, 1.0)) - self.c2),
+                           xx / math.sin(self.c2))
+            for _ in range(3):
+                s_d, s_cd = np.sin(d_t), np.sin(self.c2 + d_t)
+                d_t = d_t - (s_d * s_cd - xx) / (np.cos(d_t) * s_cd + s_d * np.cos(self.c2 + d_t))
+            out[~p] = d_t
         return out
 
     def _twins(self):
@@ -603,18 +606,17 @@ class RayMap:
             name = _KINDS[self.s_kind[i]]
             orb = _orbits(name, rho)
             x = self.s_crit[i] + self.s_side[i] * d
-            with np.errstate(invalid="ignore", divide="ignore"):
-                if name == "P":
-                    # the swept angle from the photon sphere to the observer: both ends in one call
-                    f_ends = _orb.sweep(orb, np.array([[uo], [_orb.U_PHOTON]]) * np.ones(n))
-                    theta = f_ends[0] - f_ends[1]
+            if name == "P":
+                # the swept angle from the photon sphere to the observer: both ends in one call
+                f_ends = _orb.sweep(orb, np.array([[uo], [_orb.U_PHOTON]]) * np.ones(n))
+                theta = f_ends[0] - f_ends[1]
+            else:
+                p_uo = uo * uo * (1.0 - uo) * (np.cos(x) / np.sin(x)) ** 2  # P(uo), no cancellation
+                if name == "T":
+                    theta = _orb.sweep_from_turning_point(
+                        orb, uo, np.sqrt(p_uo / ((uo - orb.e1) * (orb.e3 - uo))))
                 else:
-                    p_uo = uo * uo * (1.0 - uo) * (np.cos(x) / np.sin(x)) ** 2  # P(uo), no cancellation
-                    if name == "T":
-                        theta = _orb.sweep_from_turning_point(
-                            orb, uo, np.sqrt(p_uo / ((uo - orb.e1) * (orb.e3 - uo))))
-                    else:
-                        theta = _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
+                    theta = _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
             z_all.append(z)
             th_all.append(theta)
             rho_all.append(rho)
@@ -663,8 +665,7 @@ class RayMap:
             seg = np.full(k.size, i)
             d = self._d_of_rho(seg, rho)
             far = self.s_far[i]
-            with np.errstate(divide="ignore"):
-                z = np.log(d) - np.log(far - d)
+            z = np.log(d) - np.log(far - d)
             b = _b_of(np.full(k.size, kc), rho)
             sc = _scale(np.full(k.size, kc), b)
             g = k + fl.offset[kc]
@@ -712,80 +713,89 @@ class RayMap:
                                           seg_of_row)
 
     def _setup_index(self):
-        """The seed index: per segment, the table's u along every INDEX_ROW_STEP-th of its rows at
-        INDEX_SWEEPS angles uniform over [0, 2 pi] (the swept angle of either order), times the
-        segment's side (so growing along the rows; made monotone). :meth:`solve` reads a point's
-        fractional row from it (binary search over the coarse rows at the point's angle, linear in
-        between) and tries the table's rows around it as the bracket; where they do not bracket the
-        root it searches all rows. The index only chooses where the search starts: the bracket it
-        yields is the one the full search finds (f changes sign once along a segment's rows), so
-        the rays are the same as without it. About INDEX_SWEEPS * (rows / INDEX_ROW_STEP) 1-D
-        lookups per segment."""
-        ns, n_s = self.n_seg, INDEX_SWEEPS
-        pos, vals, q0, qn = [], [], np.zeros(ns, dtype=np.int64), np.zeros(ns, dtype=np.int64)
-        v0 = np.zeros(ns, dtype=np.int64)
-        sweeps = np.linspace(0.0, 2.0 * math.pi, n_s)
-        n_c, u_flat = self.flat.n_cols, self.flat.u
-        n_pos = n_val = 0
-        for i in range(ns):
+        """The seed index: the table's u along every INDEX_ROW_STEP-th row of every segment (and each
+        segment's last), in the order of the rays' xi over the whole sky (a segment whose rows run
+        towards smaller xi reversed), at INDEX_SWEEPS angles uniform over [0, 2 pi] (the swept angle of
+        either order). Along xi the radius a ray has reached grows (f changes sign once), so each
+        angle's sequence is made monotone (a running maximum) and stored shifted by INDEX_SHIFT per
+        angle, all angles in one sorted array: a point's place in it is one ``np.searchsorted``
+        (:meth:`_seed`). The index only chooses where the solve looks first (its segment and four
+        rows): the bracket it yields is the one the full search finds (f changes sign once along the
+        rays), so the rays are the same as without it. About INDEX_SWEEPS * (rows / INDEX_ROW_STEP)
+        1-D lookups, linear along each row."""
+        n_s = INDEX_SWEEPS
+        segs, locs = [], []
+        for i in range(self.n_seg):
             count = int(self.r_count[i])
             p = np.arange(0, count, INDEX_ROW_STEP)
             if p[-1] != count - 1:
                 p = np.append(p, count - 1)
-            q = p.size
-            rows = self.r_first[i] + p
-            # u along each row, linear between its columns (and beyond them): a seed needs no more
-            th = self.row_theta[rows, None] + self.s_dir[i] * sweeps[None, :]
-            if self.s_kind[i] != 1:
-                th = np.abs(th)
-            c = (th - self.row_start[rows, None]) * ((n_c - 1) / self.row_length[rows, None])
-            j = np.clip(np.floor(c).astype(np.int64), 0, n_c - 2)
-            t = c - j
-            base = self.row_g[rows, None] * n_c + j
-            f = u_flat.take(base) * (1.0 - t) + u_flat.take(base + 1) * t
-            if self.s_kind[i] == 0:
-                f = f / self.row_b[rows, None]
-            f = self.s_side[i] * f
-            f[np.isnan(f)] = 0.0
-            f = np.maximum.accumulate(f, axis=0).T  # (n_s, q): one angle's coarse rows contiguous
-            pos.append(p)
-            vals.append(f.reshape(-1))
-            q0[i], qn[i], v0[i] = n_pos, q, n_val
-            n_pos += q
-            n_val += f.size
-        self.ix_pos = np.concatenate(pos).astype(float)
-        self.ix_val = np.concatenate(vals)
-        self.ix_q0, self.ix_qn, self.ix_v0 = q0, qn, v0
-        self.ix_steps = int(math.ceil(math.log2(max(int(qn.max()) - 1, 1))))
+            if self.s_side[i] < 0:  # rows towards smaller xi: reversed
+                p = p[::-1]
+            segs.append(np.full(p.size, i))
+            locs.append(p)
+        seg, loc = np.concatenate(segs), np.concatenate(locs)
+        rows = self.r_first.take(seg) + loc
+        n_c, u_flat = self.flat.n_cols, self.flat.u
+        sweeps = np.linspace(0.0, 2.0 * math.pi, n_s)
+        # u along each row, linear between its columns (and beyond them): a seed needs no more
+        th = self.row_theta.take(rows)[None, :] + self.s_dir.take(seg)[None, :] * sweeps[:, None]
+        th = np.where((self.s_kind.take(seg) != 1)[None, :], np.abs(th), th)
+        c = (th - self.row_start.take(rows)) * self.row_cscale.take(rows)
+        j = _clip(np.floor(c), 0.0, n_c - 2.0).astype(np.int64)
+        t = c - j
+        base = self.row_g.take(rows) * n_c + j
+        f = (u_flat.take(base) * (1.0 - t) + u_flat.take(base + 1) * t) * self.row_uscale.take(rows)
+        # (n_s, q): monotone along xi, each value the least of those after it (rays that escaped,
+        # below every target, may wind up and down below zero: a running minimum from the side of
+        # the rays that fell in keeps the values next to every target's root)
+        f = _clip(np.where(np.isnan(f), 2.0, f), -1.0, 2.0)
+        f = np.minimum.accumulate(f[:, ::-1], axis=1)[:, ::-1]
+        self.ix_n = seg.size
+        self.ix_val = f  # per angle, the coarse rows' u
+        self.ix_flat = (f + INDEX_SHIFT * np.arange(n_s)[:, None]).reshape(-1)
+        self.ix_seg, self.ix_loc = seg, loc.astype(float)
 
-    def _index_rows(self, seg, u, sweep):
-        """Fractional local rows (0 .. count - 1) of the points' roots in their segments, from the seed
-        index (see :meth:`_setup_index`)."""
-        n_s = INDEX_SWEEPS
+    def _seed(self, u, sweep):
+        """(segment, fractional local row) of the points' roots from the seed index (see
+        :meth:`_setup_index`): the place of u among the coarse rows at the point's angle, the index's
+        values interpolated linearly between its two angles about it, and linearly between two coarse
+        rows. That place lies between the places at the two angles (each one ``np.searchsorted``): a
+        bisection between them, which most points skip (both places the same)."""
+        n_s, q = INDEX_SWEEPS, self.ix_n
         x = sweep * ((n_s - 1) / (2.0 * math.pi))
-        j = np.clip(np.floor(x).astype(np.int64), 0, n_s - 2)
+        j = _clip(x.astype(np.int64), 0, n_s - 2)  # x >= 0: truncation is floor
         w = x - j
-        qn = self.ix_qn.take(seg)
-        c0 = self.ix_v0.take(seg) + j * qn
-        c1 = c0 + qn
-        y = self.s_side.take(seg) * u
-        lo = np.zeros(seg.size, dtype=np.int64)
-        hi = qn - 1
         w0 = 1.0 - w
-        val = self.ix_val
-        for _ in range(self.ix_steps):
-            mid = (lo + hi) >> 1
-            below = w0 * val.take(c0 + mid) + w * val.take(c1 + mid) < y
-            lo = np.where(below, mid, lo)
-            hi = np.where(below, hi, mid)
-        v_lo = w0 * val.take(c0 + lo) + w * val.take(c1 + lo)
-        v_hi = w0 * val.take(c0 + hi) + w * val.take(c1 + hi)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.clip((y - v_lo) / (v_hi - v_lo), 0.0, 1.0)
+        y = _clip(u, -1.0, 2.0)
+        c0 = j * q  # the first coarse row of angle j in the flat arrays; angle j + 1's: c0 + q
+        key = y + INDEX_SHIFT * j
+        a0 = np.searchsorted(self.ix_flat, key) - c0  # the first coarse row >= u at angle j
+        a1 = np.searchsorted(self.ix_flat, key + INDEX_SHIFT) - (c0 + q)
+        # the interpolated values' first coarse row >= u, in [lo, hi]
+        lo, hi = np.minimum(a0, a1), np.maximum(a0, a1)
+        val = self.ix_val.reshape(-1)
+        o = np.flatnonzero(hi > lo)
+        while o.size:
+            lo_o, hi_o = lo.take(o), hi.take(o)
+            mid = (lo_o + hi_o) >> 1
+            at = c0.take(o) + mid
+            below = w0.take(o) * val.take(at) + w.take(o) * val.take(at + q) < y.take(o)
+            lo[o] = np.where(below, mid + 1, lo_o)
+            hi[o] = np.where(below, hi_o, mid)
+            o = o[hi.take(o) > lo.take(o)]
+        a = _clip(lo - 1, 0, q - 2)  # the coarse interval [a, a + 1]
+        at = c0 + a
+        v_a = w0 * val.take(at) + w * val.take(at + q)
+        v_b = w0 * val.take(at + 1) + w * val.take(at + q + 1)
+        t = _clip((y - v_a) / (v_b - v_a), 0.0, 1.0)
         t = np.where(np.isfinite(t), t, 0.5)
-        q0 = self.ix_q0.take(seg)
-        p_lo, p_hi = self.ix_pos.take(q0 + lo), self.ix_pos.take(q0 + hi)
-        return p_lo + t * (p_hi - p_lo)
+        s_a, s_b = self.ix_seg.take(a), self.ix_seg.take(a + 1)
+        l_a, l_b = self.ix_loc.take(a), self.ix_loc.take(a + 1)
+        same = s_a == s_b  # else between two segments' ends: the nearer one's
+        seg = np.where(same | (t < 0.5), s_a, s_b)
+        row = np.where(same, l_a + t * (l_b - l_a), np.where(t < 0.5, l_a, l_b))
+        return seg, row
 
     # ---- table lookups ----------------------------------------------------------------------------
     def _evaluate(self, kind, rho, theta, want_j=False, theta_ref=None, want_u=True):
@@ -833,8 +843,7 @@ class RayMap:
         targets next to the observer, whose f is formed as u_ray - u_ray(theta_o) + uo - u. With
         ``want``: (f, the rays' values for :meth:`_finish`); without ``want_f`` f is None."""
         far = self.s_far.take(seg)
-        with np.errstate(divide="ignore"):
-            z = np.log(d) - np.log(far - d)
+        z = np.log(d) - np.log(far - d)
         kind = self.s_kind.take(seg)
         rho = self._rho(seg, d)
         th_o = self._nodes(seg, z, self.node_theta)
@@ -944,6 +953,13 @@ class RayMap:
 
     def solve(self, r, phi, order) -> dict:
         """{xi, dt, ux, uy} of the connecting rays of orders ``order`` (array of 1 and 2) to points
+        (r, phi) (1-D, valid): see :meth:`_solve` (under one np.errstate: the steps divide by zero and
+        meet NaN by design, e.g. at rows' ends and for rays that escaped)."""
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            return self._solve(r, phi, order)
+
+    def _solve(self, r, phi, order) -> dict:
+        """{xi, dt, ux, uy} of the connecting rays of orders ``order`` (array of 1 and 2) to points
         (r, phi) (1-D, valid). Every point goes through the same vectorised steps:
 
         1. its segment: the first whose end towards larger xi has f >= 0 (f changes sign once along
@@ -957,32 +973,19 @@ class RayMap:
            secant steps converge (d = |xi - crit| to TOL_D); in the end intervals, and where the
            secant steps do not converge, the Anderson-Bjorck variant of regula falsi in d does."""
         n = r.size
-        with np.errstate(divide="ignore"):
-            u = 1.0 / r
+        u = 1.0 / r
         sweep = np.where(order == 1, phi, 2.0 * math.pi - phi)
-        with np.errstate(invalid="ignore"):
-            h = np.sin(0.5 * phi)
-            gap = np.hypot(r - self.r_obs, 2.0 * np.sqrt(r * self.r_obs) * h)  # distance from the observer
+        h = np.sin(0.5 * phi)
+        gap = np.hypot(r - self.r_obs, 2.0 * np.sqrt(r * self.r_obs) * h)  # distance from the observer
         near = (gap < NEAR * self.r_obs) & (order == 1)
         ns = self.n_seg
-        # 1. segments: the first whose end towards larger xi has f >= 0
-        seg = np.full(n, ns - 1)
-        if ns == 4:  # the ray tangent at the observer first, then one end on its side: two tests
-            low = self._tangent_residual(u, sweep, self.s_dir[1]) >= 0.0
-            for i, side in ((0, low), (2, ~low)):
-                at = np.flatnonzero(side)
-                f = self._row_residual(np.full(at.size, self.r_first[i]), u[at], sweep[at], np.full(at.size, i),
-                                       near[at])
-                seg[at] = np.where(f >= 0.0, i, i + 1)
-        else:  # two segments (an observer next to the photon sphere): the first's end
-            f = self._row_residual(np.full(n, self.r_first[0]), u, sweep, np.zeros(n, dtype=np.int64), near)
-            seg[f >= 0.0] = 0
-        # 2. the seed index's window of four rows about the root: where f changes sign inside it, the
-        # bracket and the cubic's four values are known; elsewhere a K-section search over the segment's
-        # rows (node count: its rows, then the far end) starts from what the window showed
+        # 1. the seed index's segment and window of four rows about the root: where f changes sign inside
+        # it (f changes sign once along the rays ordered by xi), the bracket and the cubic's four values
+        # are known
+        seg, k_row = self._seed(u, sweep)
         first, count = self.r_first.take(seg), self.r_count.take(seg)
-        orient = self.s_side.take(seg)  # f grows along the nodes when side > 0
-        k0 = np.clip(np.floor(self._index_rows(seg, u, sweep)).astype(np.int64) - 1, 0, count - 4)
+        orient = self.s_side.take(seg)  # f grows along the rows when side > 0
+        k0 = _clip(k_row.astype(np.int64) - 1, 0, count - 4)  # k_row >= 0: truncation is floor
         fw = self._row_residual(first + k0 + np.arange(4)[:, None], u, sweep, seg, near)  # (4, n)
         bw = orient * fw < 0.0
         lo, hi = np.zeros(n, dtype=np.int64), count.copy()
@@ -993,14 +996,38 @@ class RayMap:
             at = bw[j] & ~bw[j + 1]
             lo[at], hi[at], f_lo[at], f_hi[at] = k0[at] + j, k0[at] + j + 1, fw[j, at], fw[j + 1, at]
             window |= at
-        rest = ~window
-        last = rest & bw[3]  # below on all four: the root is beyond them
-        lo[last], f_lo[last] = k0[last] + 3, fw[3, last]
-        start = rest & ~bw[0]  # above on all four: before them (at the critical end if k0 = 0)
-        hi[start], f_hi[start] = k0[start], fw[0, start]
-        at_first = start & (k0 == 0)
-        hi[at_first], f_lo[at_first] = 1, fw[0, at_first]
-        f_hi[at_first] = fw[1, at_first]
+        rest = np.flatnonzero(~window)
+        if rest.size:
+            # 2. elsewhere the segment from the signs at the segments' ends (the first whose end towards
+            # larger xi has f >= 0); in the seed's segment the search over its rows starts from what the
+            # window showed, in another one from all its rows
+            ur, sr, nr = u.take(rest), sweep.take(rest), near.take(rest)
+            s_rest = np.full(rest.size, ns - 1)
+            if ns == 4:  # the ray tangent at the observer first, then one end on its side: two tests
+                low = self._tangent_residual(ur, sr, self.s_dir[1]) >= 0.0
+                for i, side in ((0, low), (2, ~low)):
+                    at = np.flatnonzero(side)
+                    f = self._row_residual(np.full(at.size, self.r_first[i]), ur[at], sr[at], np.full(at.size, i),
+                                           nr[at])
+                    s_rest[at] = np.where(f >= 0.0, i, i + 1)
+            else:  # two segments (an observer next to the photon sphere): the first's end
+                f = self._row_residual(np.full(rest.size, self.r_first[0]), ur, sr, np.zeros(rest.size, dtype=np.int64),
+                                       nr)
+                s_rest[f >= 0.0] = 0
+            same = s_rest == seg.take(rest)
+            rs, ro = rest[same], rest[~same]
+            last = rs[bw[3, rs]]  # below on all four: the root is beyond them
+            lo[last], f_lo[last] = k0[last] + 3, fw[3, last]
+            start = rs[~bw[0, rs]]  # above on all four: before them (at the critical end if k0 = 0)
+            hi[start], f_hi[start] = k0[start], fw[0, start]
+            at_first = start[k0[start] == 0]
+            hi[at_first], f_lo[at_first] = 1, fw[0, at_first]
+            f_hi[at_first] = fw[1, at_first]
+            if ro.size:  # another segment: all its rows
+                seg[ro] = s_rest[~same]
+                first[ro], count[ro], orient[ro] = (self.r_first.take(seg[ro]), self.r_count.take(seg[ro]),
+                                                    self.s_side.take(seg[ro]))
+                hi[ro], f_hi[ro] = count[ro], orient[ro] * np.inf
         while True:  # a K-section search: K rows per point and pass, as many as SEARCH_BUDGET allows
             o = np.flatnonzero(hi - lo > 1)
             if not o.size:
@@ -1053,8 +1080,7 @@ class RayMap:
             d_a, d_b = self.row_d.take(first[i] + lo[i]), self.row_d.take(first[i] + hi[i])
             d0 = np.clip(d0, np.minimum(d_a, d_b), np.maximum(d_a, d_b))
             # the cubic's slope as df/dd: the first step is Newton's with it
-            with np.errstate(divide="ignore", invalid="ignore"):
-                slope = dp / dd_dt
+            slope = dp / dd_dt
             d[i], ok = self._secant(si, u[i], sweep[i], d0, d_a, d_b, near[i], slope=slope)
             inner[i[~ok]] = False
         e = np.flatnonzero(~none & ~inner)
@@ -1067,8 +1093,7 @@ class RayMap:
             if tan.size and self.tan is not None:  # the far end is the ray tangent at the observer: its f
                 f_b[tan] = self._tangent_residual(u[e[tan]], sweep[e[tan]], self.s_dir.take(seg[e[tan]]))
             # in these intervals f is smooth in d: regula falsi for a start, then secant steps
-            with np.errstate(divide="ignore", invalid="ignore"):
-                d0 = d_a - f_a * (d_b - d_a) / (f_b - f_a)
+            d0 = d_a - f_a * (d_b - d_a) / (f_b - f_a)
             lo_d, hi_d = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
             d0 = np.where(np.isfinite(d0) & (d0 > lo_d) & (d0 < hi_d), d0, 0.5 * (d_a + d_b))
             d[e], ok = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6)
@@ -1092,8 +1117,7 @@ class RayMap:
         else:
             x_prev = d0
             f_prev = self._residual(seg, d0, u, sweep, near=near)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                x = d0 - f_prev / slope
+            x = d0 - f_prev / slope
             newton = np.isfinite(x) & (x >= lo) & (x <= hi) & (x != d0)
             x = np.where(newton, x, d0 + 1e-7 * (hi - lo))
         out = d0.copy()
@@ -1108,8 +1132,7 @@ class RayMap:
             if not act.size:
                 break
             f = self._residual(seg.take(act), x, u.take(act), sweep.take(act), near=near.take(act))
-            with np.errstate(divide="ignore", invalid="ignore"):
-                x_new = x - f * (x - x_prev) / (f - f_prev)
+            x_new = x - f * (x - x_prev) / (f - f_prev)
             x_new = np.where(f == 0.0, x, x_new)
             good = np.isfinite(x_new) & (x_new >= lo.take(act)) & (x_new <= hi.take(act))
             # a step this short leaves an error of order its square: converged
@@ -1128,14 +1151,12 @@ class RayMap:
         for _ in range(100):
             if not act.size:
                 break
-            with np.errstate(divide="ignore", invalid="ignore"):
-                c = b - f_b * (b - a) / (f_b - f_a)
+            c = b - f_b * (b - a) / (f_b - f_a)
             lo_d, hi_d = np.minimum(a, b), np.maximum(a, b)
             c = np.where(np.isfinite(c) & (c > lo_d) & (c < hi_d), c, 0.5 * (a + b))
             f_c = self._residual(seg.take(act), c, u.take(act), sweep.take(act), near=near.take(act))
             flip = (f_c < 0) != (f_b < 0)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                mm = 1.0 - f_c / f_b
+            mm = 1.0 - f_c / f_b
             mm = np.where(mm > 0.0, mm, 0.5)
             a, f_a = np.where(flip, b, a), np.where(flip, f_b, f_a * mm)
             tol = TOL_D * c
@@ -1158,21 +1179,20 @@ class RayMap:
         j_o = self._nodes(seg, got["z"], self.node_j)
         turning = kind != 1
         j_t = np.where(turning, np.sign(th), 1.0) * got["j"]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rs_o = self.r_obs + math.log(self.r_obs - 1.0)
-            rs_t = r + np.log(r - 1.0)
-            radial = np.abs(rs_t - rs_o)
-            tt = np.flatnonzero(turning & (th < 0.0))  # the ray passed its periapsis / apoapsis
-            if tt.size:
-                orb = _orbits("T", rho[tt]) if kind[tt[0]] == 0 else _orbits("I", rho[tt])
-                r_ref = 1.0 / np.where(kind[tt] == 0, orb.e2, orb.e3)
-                rs_ref = r_ref + np.log(r_ref - 1.0)
-                radial[tt] = np.abs(rs_t[tt] - rs_ref) + np.abs(rs_o - rs_ref)
-            dj = j_t - j_o
-            if got["j_diff"] is not None:  # next to the observer: J(theta) - J(theta_o) from one stencil
-                same = near & ((th >= 0.0) | ~turning)
-                dj = np.where(same, got["j_diff"], dj)
-            dt = radial + np.abs(dj)
+        rs_o = self.r_obs + math.log(self.r_obs - 1.0)
+        rs_t = r + np.log(r - 1.0)
+        radial = np.abs(rs_t - rs_o)
+        tt = np.flatnonzero(turning & (th < 0.0))  # the ray passed its periapsis / apoapsis
+        if tt.size:
+            orb = _orbits("T", rho[tt]) if kind[tt[0]] == 0 else _orbits("I", rho[tt])
+            r_ref = 1.0 / np.where(kind[tt] == 0, orb.e2, orb.e3)
+            rs_ref = r_ref + np.log(r_ref - 1.0)
+            radial[tt] = np.abs(rs_t[tt] - rs_ref) + np.abs(rs_o - rs_ref)
+        dj = j_t - j_o
+        if got["j_diff"] is not None:  # next to the observer: J(theta) - J(theta_o) from one stencil
+            same = near & ((th >= 0.0) | ~turning)
+            dj = np.where(same, got["j_diff"], dj)
+        dt = radial + np.abs(dj)
         direction = self.s_dir.take(seg)
         outward = np.where(turning, (np.sign(th) * direction > 0) == (kind == 0), direction < 0)
         s2 = np.maximum(1.0 - b * b * u * u * (1.0 - u), 0.0)
@@ -1193,13 +1213,11 @@ def _cubic_root(fs, t0, slope=False):
     e = (f3 - 3.0 * f2 + 3.0 * f1 - f0) / 6.0
     fa = np.where(t0 == 0, f0, np.where(t0 == 1, f1, f2))
     fb = np.where(t0 == 0, f1, np.where(t0 == 1, f2, f3))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = t0 + np.where(fb != fa, fa / (fa - fb), 0.5)
+    t = t0 + np.where(fb != fa, fa / (fa - fb), 0.5)
     for _ in range(CUBIC_STEPS):
         p = f0 + t * (a + (t - 1.0) * (c + (t - 2.0) * e))
         dp = a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t_new = t - p / dp
+        t_new = t - p / dp
         t = np.where(np.isfinite(t_new), np.clip(t_new, t0, t0 + 1.0), t)
     if slope:  # and the cubic's derivative there
         return t, a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e

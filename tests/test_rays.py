@@ -134,11 +134,17 @@ def test_batch_independence_and_determinism():
             assert np.array_equal(getattr(a[o], q)[sub], getattr(b[o], q)), (o, q)
 
 
+def _no_seed(self, u, sweep):
+    """The seed index disabled: every point's window at the first segment's first rows."""
+    return np.zeros(u.size, dtype=np.int64), np.zeros(u.size)
+
+
 @pytest.mark.parametrize("r_obs", [1e4, 20.0, 2.0, 1.2])
 def test_seed_index_chooses_only_where_the_search_starts(r_obs, monkeypatch):
     """The per-radius seed index puts most points' roots inside its window of four rows (so the rows
-    looked up per point stay few), and the rays are those of the full binary search over the rows
-    (index disabled: the window at the segment's first rows, which brackets almost nothing)."""
+    looked up per point stay few: no segment tests for those), and the rays are those of the segment
+    tests and the full search over the rows (index disabled: the window at the first segment's first
+    rows, which brackets almost nothing)."""
     rng = np.random.default_rng(int(r_obs) + 3)
     r, p = _targets(rng, r_obs, 4000)
     ok = r >= 1.05
@@ -155,7 +161,7 @@ def test_seed_index_chooses_only_where_the_search_starts(r_obs, monkeypatch):
     evaluated.clear()
     got = m.lookup_orders(r, p)
     with_index = sum(evaluated) / (2 * r.size)
-    monkeypatch.setattr(rays.RayMap, "_index_rows", lambda self, seg, u, sweep: np.zeros(seg.size))
+    monkeypatch.setattr(rays.RayMap, "_seed", _no_seed)
     evaluated.clear()
     full = m.lookup_orders(r, p)
     without = sum(evaluated) / (2 * r.size)
@@ -216,7 +222,7 @@ def test_row_search_passes_give_the_bisections_bracket(r_obs, monkeypatch):
     ok = r >= 1.05
     r, p = r[ok], p[ok]
     # the index disabled: every point goes through the search
-    monkeypatch.setattr(rays.RayMap, "_index_rows", lambda self, seg, u, sweep: np.zeros(seg.size))
+    monkeypatch.setattr(rays.RayMap, "_seed", _no_seed)
     calls = []
     real = rays.RayMap._row_residual
 
