@@ -119,6 +119,25 @@ def _orbits(kind, rho) -> _orb.Orbit:
     return orb
 
 
+def _reference_u(kind, rho) -> np.ndarray:
+    """u at the reference point of turning orbits of kind "T" (the periapsis, e2) or "I" (the apoapsis,
+    e3) with labels rho: the same numbers as :func:`_orbits`'s roots, only the one needed."""
+    rho = np.asarray(rho, dtype=float)
+    far = rho > 0.0
+    x = np.exp(rho)
+    y = 4.0 * x / (1.0 + x)
+    sigma = 4.0 * np.sin(np.arcsin(np.minimum(0.5 * np.sqrt(y), 1.0)) / 3.0) ** 2
+    e1 = (sigma - 1.0) / 3.0
+    one_m = 1.0 - e1
+    delta = np.sqrt(one_m * sigma)
+    e2 = -2.0 * e1 * one_m / (one_m + delta)
+    out = e2 if kind == "T" else e2 + delta
+    if far.any():  # far orbits: orbit_from_b polishes e1 (~ -1/b)
+        ob = _orb.orbit_from_b(impact_parameter(kind, rho[far]))
+        out[far] = ob.e2 if kind == "T" else ob.e3
+    return out
+
+
 _sweep_inner = _orb.sweep_inner
 
 
@@ -416,7 +435,7 @@ SEARCH_MAX_K, at least 1: bisection), so that a few points take two or three pas
 SEARCH_MAX_K = 63
 """The most rows per point in one pass of that search."""
 
-INDEX_SWEEPS = 65
+INDEX_SWEEPS = 33
 """Angles of the seed index (uniform over [0, 2 pi], see :meth:`RayMap._setup_index`)."""
 
 INDEX_ROW_STEP = 8
@@ -457,8 +476,8 @@ class _Flat:
 
 def _b_of(kind, rho):
     """b of labels rho of kind codes ``kind`` (0 T, 1 P, 2 I)."""
-    x = np.exp(rho)
-    return np.where(kind == 1, B_C / np.sqrt(1.0 + x), B_C * np.sqrt(1.0 + x))
+    q = np.sqrt(1.0 + np.exp(rho))
+    return np.where(kind == 1, B_C / q, B_C * q)
 
 
 def _scale(kind, b):
@@ -632,13 +651,16 @@ class RayMap:
         self.node_j = np.concatenate([pieces[twin[i]] for i in range(self.n_seg)])
         self.s_dz = (self.s_zhi - self.s_zlo) / (n - 1)
 
-    def _nodes(self, seg, z, values, derivative=False):
+    def _nodes(self, seg, z, values, more=None):
+        """``values`` (per segment on its nodes, see :meth:`_setup_nodes`) at z, cubic; with ``more``
+        (another such array) both, from one stencil."""
         n = self.n_z
         g = _clip((z - self.s_zlo.take(seg)) / self.s_dz.take(seg), 0.0, n - 1)
         i0, w = _stencil(g, n)
         base = i0 + seg * n
-        return w[0] * values.take(base) + w[1] * values.take(base + 1) + w[2] * values.take(base + 2) + \
-            w[3] * values.take(base + 3)
+        out = [w[0] * v.take(base) + w[1] * v.take(base + 1) + w[2] * v.take(base + 2) + w[3] * v.take(base + 3)
+               for v in ((values,) if more is None else (values, more))]
+        return out[0] if more is None else out
 
     def _setup_rows(self):
         """Per segment, the table's rows inside it (from the label RHO_MIN + 0.5, the critical end, to the
@@ -679,6 +701,7 @@ class RayMap:
             total += k.size
         self.row_g, self.row_d, self.row_theta = np.concatenate(rows), np.concatenate(ds), np.concatenate(ths)
         self.row_b, self.row_start, self.row_length = np.concatenate(bs), np.concatenate(sts), np.concatenate(lns)
+        self.row_ld = np.log(self.row_d)
         # per row: columns per radian, and the factor from the stored u (u b for T) to u
         self.row_cscale = (fl.n_cols - 1) / self.row_length
         row_kind = np.concatenate([np.full(self.r_count[i], self.s_kind[i]) for i in range(self.n_seg)
@@ -798,12 +821,14 @@ class RayMap:
         return seg, row
 
     # ---- table lookups ----------------------------------------------------------------------------
-    def _evaluate(self, kind, rho, theta, want_j=False, theta_ref=None, want_u=True):
-        """u (and J, r_s/c) on orbits of kind codes ``kind`` and labels ``rho`` at angles ``theta`` from
-        their reference points, bicubic, continued linearly beyond a row's range. With ``theta_ref``
-        (the observer's phase): u(theta) - u(theta_ref) + uo and J(theta) - J(theta_ref), from the same
-        row stencil, so that the table's own small error cancels next to the observer. Without
-        ``want_u`` (J only) u is None."""
+    def _evaluate(self, kind, rho, theta, want_j=False, ref=None, want_u=True):
+        """(u, J (r_s/c), J's difference, b) on orbits of kind codes ``kind`` and labels ``rho`` at angles
+        ``theta`` from their reference points, bicubic, continued linearly beyond a row's range; b the
+        orbits' impact parameters (r_s). With ``ref`` = (indices k, the observer's phase theta_ref at
+        them): at those points u(theta) - u(theta_ref) + uo, and J(theta) - J(theta_ref) as the third
+        value (at k, NaN elsewhere), from the same row stencil, so that the table's own small error
+        cancels next to the observer. Without ``want_u`` (J only) u is None; without ``want_j`` J and
+        its difference are None."""
         fl = self.flat
         n_c = fl.n_cols
         nr = fl.n_rows.take(kind)
@@ -817,15 +842,22 @@ class RayMap:
         ln = (wr[0] * fl.length.take(i0) + wr[1] * fl.length.take(i0 + 1) + wr[2] * fl.length.take(i0 + 2)
               + wr[3] * fl.length.take(i0 + 3)) * sc
         u, j = self._columns(i0, wr, (theta - st) / ln * (n_c - 1), want_j, want_u)
-        if theta_ref is not None:
-            u0, j0 = self._columns(i0, wr, (theta_ref - st) / ln * (n_c - 1), want_j, want_u)
-            u = None if u is None else u - u0
-            j = None if j is None else j - j0
+        j_diff = None
+        if ref is not None:
+            k, theta_ref = ref
+            lk = ln.take(k)
+            u0, j0 = self._columns(i0.take(k), wr[:, k], (theta_ref - st.take(k)) / lk * (n_c - 1), want_j,
+                                   want_u)
+            if u is not None:
+                u[k] -= u0
+            if j is not None:
+                j_diff = np.full(j.size, np.nan)
+                j_diff[k] = (j.take(k) - j0) * lk * b.take(k)
         if u is not None:
             u = np.where(kind == 0, u / b, u)
-            if theta_ref is not None:
-                u = u + self.uo
-        return u, (None if j is None else j * ln * b)
+            if ref is not None:
+                u[ref[0]] += self.uo
+        return u, (None if j is None else j * ln * b), j_diff, b
 
     def _columns(self, i0, wr, c, want_j, want_u=True):
         fl = self.flat
@@ -846,29 +878,23 @@ class RayMap:
         z = np.log(d) - np.log(far - d)
         kind = self.s_kind.take(seg)
         rho = self._rho(seg, d)
-        th_o = self._nodes(seg, z, self.node_theta)
+        j_o = None
+        if want:  # the observer's phase and J there
+            th_o, j_o = self._nodes(seg, z, self.node_theta, self.node_j)
+        else:
+            th_o = self._nodes(seg, z, self.node_theta)
         th = th_o + self.s_dir.take(seg) * sweep
         turning = kind != 1
         th_row = np.where(turning, np.abs(th), th)
-        if near is not None and near.any():  # each point evaluated once: plainly, or next to the observer
-            k, f = np.flatnonzero(near), np.flatnonzero(~near)
-            uf, jf = self._evaluate(kind[f], rho[f], th_row[f], want, want_u=want_f)
-            uk, jk = self._evaluate(kind[k], rho[k], th_row[k], want, theta_ref=th_o[k], want_u=want_f)
-            u_ray = j = None
-            if want_f:
-                u_ray = np.empty(u.size)
-                u_ray[f], u_ray[k] = uf, uk
-            if want:
-                j = np.empty(u.size)
-                j[f] = jf
-                j[k] = np.nan  # marks the difference J(theta) - J(theta_o) (see _finish)
-                j_diff = np.full(u.size, np.nan)
-                j_diff[k] = jk
-        else:
-            u_ray, j = self._evaluate(kind, rho, th_row, want, want_u=want_f)
+        ref = None
+        if near is not None:
+            k = np.flatnonzero(near)
+            if k.size:
+                ref = (k, th_o.take(k))
+        u_ray, j, j_diff, b = self._evaluate(kind, rho, th_row, want, ref=ref, want_u=want_f)
         if want:
-            return (u_ray - u if want_f else None), dict(z=z, rho=rho, theta=th, theta_o=th_o, j=j,
-                                   j_diff=j_diff if near is not None and near.any() else None)
+            return (u_ray - u if want_f else None), dict(z=z, rho=rho, theta=th, theta_o=th_o, j=j, j_diff=j_diff,
+                                                         b=b, j_o=j_o)
         return u_ray - u
 
     def _row_residual(self, row, u, sweep, seg, near=None):
@@ -938,7 +964,7 @@ class RayMap:
             rr = np.tile(r[idx], len(orders))
             pp = np.tile(p[idx], len(orders))
             oo = np.repeat(np.array(orders), m)
-            res = self.solve(rr, pp, oo)
+            res = self.solve(rr, pp, oo, quantities)
         else:  # nothing to solve (no valid point): the solve's fixed cost saved
             res = {q: np.empty(0) for q in QUANTITIES}
         out = {}
@@ -951,14 +977,14 @@ class RayMap:
             out[order] = Lookup(*(got.get(q) for q in QUANTITIES))
         return out
 
-    def solve(self, r, phi, order) -> dict:
+    def solve(self, r, phi, order, quantities=QUANTITIES) -> dict:
         """{xi, dt, ux, uy} of the connecting rays of orders ``order`` (array of 1 and 2) to points
-        (r, phi) (1-D, valid): see :meth:`_solve` (under one np.errstate: the steps divide by zero and
+        (r, phi) (1-D, valid; ux, uy only where ``quantities`` asks for either): see :meth:`_solve` (under one np.errstate: the steps divide by zero and
         meet NaN by design, e.g. at rows' ends and for rays that escaped)."""
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            return self._solve(r, phi, order)
+            return self._solve(r, phi, order, "ux" in quantities or "uy" in quantities)
 
-    def _solve(self, r, phi, order) -> dict:
+    def _solve(self, r, phi, order, tangents=True) -> dict:
         """{xi, dt, ux, uy} of the connecting rays of orders ``order`` (array of 1 and 2) to points
         (r, phi) (1-D, valid). Every point goes through the same vectorised steps:
 
@@ -1059,7 +1085,7 @@ class RayMap:
             kc = np.where(wi, k0[i], np.clip(lo[i] - 1, 0, count[i] - 4))
             fs = np.where(wi, fw[:, i], np.nan)
             m_all = np.flatnonzero(~wi)
-            for j in range(4):  # outside the window: the bracket's two rows are known from the search
+            for j in range(4 if m_all.size else 0):  # outside the window: the bracket's rows known from the search
                 im = i[m_all]
                 kj = kc[m_all] + j
                 known_lo, known_hi = kj == lo[im], kj == hi[im]
@@ -1072,11 +1098,10 @@ class RayMap:
             si = seg[i]
             # the ray at t: ln d is smooth in the row index (rows uniform in rho, ln d ~ rho next to
             # the critical angle), so the cubic through the four rows' ln d gives d and dd/dt
-            r0 = first[i] + kc
-            ld = np.log(np.stack([self.row_d.take(r0 + j) for j in range(4)]))
-            _, wt = _cubic_stencil(t, 4)
-            d0 = np.exp((wt * ld).sum(0))
-            dd_dt = d0 * (_derivative_weights(t, 4) * ld).sum(0)
+            ld = self.row_ld.take(first[i] + kc + np.arange(4)[:, None])
+            p, dp_ld = _cubic_at(ld, t)
+            d0 = np.exp(p)
+            dd_dt = d0 * dp_ld
             d_a, d_b = self.row_d.take(first[i] + lo[i]), self.row_d.take(first[i] + hi[i])
             d0 = np.clip(d0, np.minimum(d_a, d_b), np.maximum(d_a, d_b))
             # the cubic's slope as df/dd: the first step is Newton's with it
@@ -1102,7 +1127,7 @@ class RayMap:
                 er = e[rest]
                 d[er] = self._regula_falsi(seg[er], u[er], sweep[er], d_a[rest], d_b[rest], f_a[rest], f_b[rest],
                                            near[er])
-        return self._finish(seg, d, u, r, phi, sweep, order, near)
+        return self._finish(seg, d, u, r, phi, sweep, order, near, tangents)
 
     def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4, slope=None):
         """Secant steps in d from d0 (inside the bracket [d_a, d_b], next to the root) with the bicubic
@@ -1168,15 +1193,14 @@ class RayMap:
         out[act] = b
         return out
 
-    def _finish(self, seg, d, u, r, phi, sweep, order, near) -> dict:
-        """xi, dt, ux, uy of the rays d of segments ``seg``."""
+    def _finish(self, seg, d, u, r, phi, sweep, order, near, tangents=True) -> dict:
+        """xi, dt and (with ``tangents``) ux, uy of the rays d of segments ``seg``."""
         k = self.k
         kind = self.s_kind.take(seg)
         xi = self.s_crit.take(seg) + self.s_side.take(seg) * d
         _, got = self._residual(seg, d, u, sweep, want=True, near=near, want_f=False)
-        rho, th = got["rho"], got["theta"]
-        b = _b_of(kind, rho)
-        j_o = self._nodes(seg, got["z"], self.node_j)
+        rho, th, b = got["rho"], got["theta"], got["b"]
+        j_o = got["j_o"]
         turning = kind != 1
         j_t = np.where(turning, np.sign(th), 1.0) * got["j"]
         rs_o = self.r_obs + math.log(self.r_obs - 1.0)
@@ -1184,8 +1208,7 @@ class RayMap:
         radial = np.abs(rs_t - rs_o)
         tt = np.flatnonzero(turning & (th < 0.0))  # the ray passed its periapsis / apoapsis
         if tt.size:
-            orb = _orbits("T", rho[tt]) if kind[tt[0]] == 0 else _orbits("I", rho[tt])
-            r_ref = 1.0 / np.where(kind[tt] == 0, orb.e2, orb.e3)
+            r_ref = 1.0 / _reference_u("T" if kind[tt[0]] == 0 else "I", rho[tt])
             rs_ref = r_ref + np.log(r_ref - 1.0)
             radial[tt] = np.abs(rs_t[tt] - rs_ref) + np.abs(rs_o - rs_ref)
         dj = j_t - j_o
@@ -1193,14 +1216,27 @@ class RayMap:
             same = near & ((th >= 0.0) | ~turning)
             dj = np.where(same, got["j_diff"], dj)
         dt = radial + np.abs(dj)
+        dt = np.where(np.isinf(r), np.inf, dt)
+        if not tangents:
+            return dict(xi=xi, dt=dt)
         direction = self.s_dir.take(seg)
         outward = np.where(turning, (np.sign(th) * direction > 0) == (kind == 0), direction < 0)
         s2 = np.maximum(1.0 - b * b * u * u * (1.0 - u), 0.0)
         u_r = np.where(outward, 1.0, -1.0) * k * np.sqrt(s2)
-        dt = np.where(np.isinf(r), np.inf, dt)
         r_u_phi = np.where(order == 1, 1.0, -1.0) * k * b * u
         c, s = np.cos(phi), np.sin(phi)
         return dict(xi=xi, dt=dt, ux=u_r * c - r_u_phi * s, uy=u_r * s + r_u_phi * c)
+
+
+def _cubic_at(fs, t):
+    """(p(t), p'(t)) of the cubic through (j, fs[j]), j = 0..3 (fs (4, N)), in Newton form."""
+    f0, f1, f2, f3 = fs
+    a = f1 - f0
+    c = 0.5 * (f2 - 2.0 * f1 + f0)
+    e = (f3 - 3.0 * f2 + 3.0 * f1 - f0) * (1.0 / 6.0)
+    t1 = t - 1.0
+    q = c + (t - 2.0) * e
+    return f0 + t * (a + t1 * q), a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e
 
 
 def _cubic_root(fs, t0, slope=False):
