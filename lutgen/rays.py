@@ -306,7 +306,7 @@ class Kind:
         j0, wc = _cubic_stencil(cc, n_c)
         flat = data.reshape(-1)
         base = i0 * n_c + j0
-        return _gather(flat, base, wr, wc, n_c) + _linear_tail(flat, base, n_c, c, cc, wr)
+        return _linear_tail(flat, base, n_c, c, cc, wr, _gather(flat, base, wr, wc, n_c))
 
 
 def build_kind(name, rho_max, step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS, rho_min=RHO_MIN) -> Kind:
@@ -496,17 +496,18 @@ def _gather(flat, base, wr, wc, n_c):
     return v
 
 
-def _linear_tail(flat, base, n_c, c, cc, wr):
-    """The linear continuation beyond a row's range: slope (per column) times the excess."""
+def _linear_tail(flat, base, n_c, c, cc, wr, v):
+    """``v`` (N,; the interpolated values, changed in place and returned) plus the linear continuation
+    beyond a row's range where c (the fractional column) was clipped to cc: slope (per column) times
+    the excess. ``wr``: the rows' weights (4, N), or None for one row."""
     out = np.flatnonzero(c != cc)
-    v = np.zeros(c.size)
     if out.size:
         dw = _derivative_weights(cc[out], n_c)
         slope = np.zeros(out.size)
-        for i in range(wr.shape[0]):
+        for i in range(1 if wr is None else wr.shape[0]):
             for j in range(4):
-                slope += (wr[i, out] if wr.shape[0] > 1 else 1.0) * dw[j] * flat.take(base[out] + (i * n_c + j))
-        v[out] = slope * (c[out] - cc[out])
+                slope += (1.0 if wr is None else wr[i, out]) * dw[j] * flat.take(base[out] + (i * n_c + j))
+        v[out] += slope * (c[out] - cc[out])
     return v
 
 
@@ -865,10 +866,10 @@ class RayMap:
         cc = _clip(c, 0.0, n_c - 1)
         j0, wc = _stencil(cc, n_c)
         base = i0 * n_c + j0
-        u = _gather(fl.u, base, wr, wc, n_c) + _linear_tail(fl.u, base, n_c, c, cc, wr) if want_u else None
+        u = _linear_tail(fl.u, base, n_c, c, cc, wr, _gather(fl.u, base, wr, wc, n_c)) if want_u else None
         if not want_j:
             return u, None
-        return u, _gather(fl.j, base, wr, wc, n_c) + _linear_tail(fl.j, base, n_c, c, cc, wr)
+        return u, _linear_tail(fl.j, base, n_c, c, cc, wr, _gather(fl.j, base, wr, wc, n_c))
 
     def _residual(self, seg, d, u, sweep, want=False, near=None, want_f=True):
         """f = u_ray - u on the rays d of segments ``seg`` for targets (u, sweep); ``near`` (mask):
@@ -912,9 +913,11 @@ class RayMap:
         base = self.row_g.take(row).reshape(-1) * n_c + j0
         v = wc[0] * fl.u.take(base) + wc[1] * fl.u.take(base + 1) + wc[2] * fl.u.take(base + 2) + \
             wc[3] * fl.u.take(base + 3)
-        v = (v + _linear_tail(fl.u, base, n_c, c, cc, np.ones((1, c.size)))).reshape(np.shape(row))
+        v = _linear_tail(fl.u, base, n_c, c, cc, None, v).reshape(np.shape(row))
         f = v * self.row_uscale.take(row) - u
-        return f if near is None else f - np.where(near, self.row_eps.take(row), 0.0)
+        if near is None or not near.any():
+            return f
+        return f - np.where(near, self.row_eps.take(row), 0.0)
 
     def _tangent_residual(self, u, sweep, direction):
         """f on the ray tangent at the observer (1-D cubic along its interpolated row)."""
@@ -1081,32 +1084,37 @@ class RayMap:
         inner = ~none & ~(turning & (hi >= count - 2)) & (hi < count)
         i = np.flatnonzero(inner)
         if i.size:
-            wi = window[i]
-            kc = np.where(wi, k0[i], np.clip(lo[i] - 1, 0, count[i] - 4))
-            fs = np.where(wi, fw[:, i], np.nan)
-            m_all = np.flatnonzero(~wi)
-            for j in range(4 if m_all.size else 0):  # outside the window: the bracket's rows known from the search
-                im = i[m_all]
-                kj = kc[m_all] + j
-                known_lo, known_hi = kj == lo[im], kj == hi[im]
-                fs[j, m_all[known_lo]], fs[j, m_all[known_hi]] = f_lo[im[known_lo]], f_hi[im[known_hi]]
-                m = m_all[~known_lo & ~known_hi]
-                if m.size:
-                    im = i[m]
-                    fs[j, m] = self._row_residual(first[im] + kc[m] + j, u[im], sweep[im], seg[im], near[im])
-            t, dp = _cubic_root(fs, (lo[i] - kc).astype(float), slope=True)
-            si = seg[i]
+            # the points' arrays at i (all of them, most often: no copies then)
+            pick = (lambda a: a) if i.size == n else (lambda a: a.take(i, axis=-1))
+            wi, lo_i, fst_i = pick(window), pick(lo), pick(first)
+            if wi.all():
+                kc, fs = pick(k0), pick(fw)
+            else:
+                kc = np.where(wi, pick(k0), _clip(lo_i - 1, 0, pick(count) - 4))
+                fs = np.where(wi, pick(fw), np.nan)
+                m_all = np.flatnonzero(~wi)
+                for j in range(4):  # outside the window: the bracket's two rows are known from the search
+                    im = i[m_all]
+                    kj = kc[m_all] + j
+                    known_lo, known_hi = kj == lo[im], kj == hi[im]
+                    fs[j, m_all[known_lo]], fs[j, m_all[known_hi]] = f_lo[im[known_lo]], f_hi[im[known_hi]]
+                    m = m_all[~known_lo & ~known_hi]
+                    if m.size:
+                        im = i[m]
+                        fs[j, m] = self._row_residual(first[im] + kc[m] + j, u[im], sweep[im], seg[im], near[im])
+            t, dp = _cubic_root(fs, (lo_i - kc).astype(float), slope=True)
             # the ray at t: ln d is smooth in the row index (rows uniform in rho, ln d ~ rho next to
             # the critical angle), so the cubic through the four rows' ln d gives d and dd/dt
-            ld = self.row_ld.take(first[i] + kc + np.arange(4)[:, None])
+            r0 = fst_i + kc
+            ld = self.row_ld.take(r0 + np.arange(4)[:, None])
             p, dp_ld = _cubic_at(ld, t)
             d0 = np.exp(p)
             dd_dt = d0 * dp_ld
-            d_a, d_b = self.row_d.take(first[i] + lo[i]), self.row_d.take(first[i] + hi[i])
+            d_a, d_b = self.row_d.take(fst_i + lo_i), self.row_d.take(fst_i + pick(hi))
             d0 = np.clip(d0, np.minimum(d_a, d_b), np.maximum(d_a, d_b))
             # the cubic's slope as df/dd: the first step is Newton's with it
             slope = dp / dd_dt
-            d[i], ok = self._secant(si, u[i], sweep[i], d0, d_a, d_b, near[i], slope=slope)
+            d[i], ok = self._secant(pick(seg), pick(u), pick(sweep), d0, d_a, d_b, pick(near), slope=slope)
             inner[i[~ok]] = False
         e = np.flatnonzero(~none & ~inner)
         if e.size:
