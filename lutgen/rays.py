@@ -34,12 +34,15 @@ ordered by xi from 0 to pi in four segments (outward rays that cross the photon 
 inward turning rays, inward rays that cross it; the turning rays are of kind ``T`` for an observer
 outside the photon sphere and ``I`` inside it), the radius a ray has reached after sweeping the
 target's angle, less the target's radius, changes sign exactly once: at the connecting ray (rays
-that escaped before count as below, rays that fell in as above). A point's segment is found from the
-signs at the segments' ends, its ray bracketed between two of the table's rows (1-D lookups along
-rows: four rows about the ray chosen by a per-radius seed index, a search over the rows (several
-per pass) where they do not bracket it) and found by a Newton step with the slope of the rows'
-cubic, then secant steps where needed, in d = |xi - crit| with the bicubic interpolation (:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius costs a few 1-D
-arrays (its own phase on each ray, the seed index), not a table build. docs/inside.md describes it with its figures.
+that escaped before count as below, rays that fell in as above). A point's ray is bracketed between
+two of the table's rows (1-D lookups along rows): four rows about the ray, in the segment a per-radius
+seed index over the whole sky chooses, bracket it wherever f changes sign among them (a sign change
+anywhere is the one); elsewhere the point's segment follows from the signs at the segments' ends and
+a search over its rows (several per pass) brackets it. The ray is then found by a Newton step with
+the slope of the rows' cubic, and secant steps where needed, in d = |xi - crit| with the bicubic
+interpolation (:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius
+costs a few 1-D arrays (its own phase on each ray, the seed index), not a table build. docs/inside.md
+describes it with its figures.
 """
 from __future__ import annotations
 
@@ -436,7 +439,9 @@ SEARCH_MAX_K = 63
 """The most rows per point in one pass of that search."""
 
 INDEX_SWEEPS = 33
-"""Angles of the seed index (uniform over [0, 2 pi], see :meth:`RayMap._setup_index`)."""
+"""Angles of the seed index (uniform over [0, 2 pi], see :meth:`RayMap._setup_index`): each costs set-up
+time per radius; fewer leave more points outside the window of four rows (to the segment tests and
+the search)."""
 
 INDEX_ROW_STEP = 8
 """The seed index holds every this-many-th row of a segment (and its last)."""
@@ -550,6 +555,7 @@ class RayMap:
         self.s_side = np.array([sp[3] for sp in specs])
         self.s_far = np.array([sp[4] for sp in specs])
         self.c2, self.sin2c = 2.0 * xi_c, sin_c * sin_c
+        self.solved = self.windowed = 0  # points solved, and of those bracketed by the seed's window
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # one for all set-up steps
             self._setup_nodes()
             self._setup_rows()
@@ -991,12 +997,13 @@ class RayMap:
         """{xi, dt, ux, uy} of the connecting rays of orders ``order`` (array of 1 and 2) to points
         (r, phi) (1-D, valid). Every point goes through the same vectorised steps:
 
-        1. its segment: the first whose end towards larger xi has f >= 0 (f changes sign once along
-           the rays ordered by xi);
-        2. the four rows about the root that the seed index gives (:meth:`_index_rows`; 1-D lookups
-           along each row) bracket it between neighbouring rows where f changes sign among them;
-           elsewhere a search over the segment's rows does (K-section, SEARCH_BUDGET; or the last
-           row and the far end, pi/2);
+        1. the four rows about the root in the segment that the seed index gives (:meth:`_seed`;
+           1-D lookups along each row) bracket it between neighbouring rows where f changes sign among
+           them (f changes sign once along the rays ordered by xi, over all segments: such a change
+           is the root's);
+        2. elsewhere its segment (the first whose end towards larger xi has f >= 0), then a search
+           over the segment's rows (K-section, SEARCH_BUDGET; from what the window showed when the
+           seed's segment was that one), or the last row and the far end, pi/2, bracket it;
         3. between two rows, the cubic through f on four rows gives a start and a slope; a Newton step
            with them and the bicubic interpolation ends where it is shorter than NEWTON_DONE, else
            secant steps converge (d = |xi - crit| to TOL_D); in the end intervals, and where the
@@ -1026,6 +1033,8 @@ class RayMap:
             lo[at], hi[at], f_lo[at], f_hi[at] = k0[at] + j, k0[at] + j + 1, fw[j, at], fw[j + 1, at]
             window |= at
         rest = np.flatnonzero(~window)
+        self.solved += n
+        self.windowed += n - rest.size
         if rest.size:
             # 2. elsewhere the segment from the signs at the segments' ends (the first whose end towards
             # larger xi has f >= 0); in the seed's segment the search over its rows starts from what the
