@@ -982,6 +982,9 @@ class RayMap:
         for i, order in enumerate(orders):
             got = {}
             for q in quantities:
+                if m == r.size:  # every point valid: the solve's values as they are
+                    got[q] = res[q][i * m:(i + 1) * m].reshape(shape)
+                    continue
                 v = np.full(r.size, np.nan)
                 v[idx] = res[q][i * m:(i + 1) * m]
                 got[q] = v.reshape(shape)
