@@ -716,17 +716,23 @@ class RayMap:
         row_kind = np.concatenate([np.full(self.r_count[i], self.s_kind[i]) for i in range(self.n_seg)
                                    if twin[i] == i])
         self.row_uscale = np.where(row_kind == 0, 1.0 / self.row_b, 1.0)
-        # the ray tangent at the observer (pi/2, the far end of the turning segments) as a row
-        self.tan = None
-        if self.n_seg == 4:
+        # made when first needed (points outside the seed's window; next to the observer): the ray
+        # tangent at the observer as a row, the table's error at the observer on each row
+        self._tan = self._eps = None
+
+    @property
+    def tan(self):
+        """The ray tangent at the observer (pi/2, the far end of the turning segments) as a row (a dict;
+        None with two segments); made on first use."""
+        if self._tan is None and self.n_seg == 4:
+            fl = self.flat
             i = 1
             d_far = self.s_far[i] - FAR_GAP_T
-            rho_t = self._rho(np.array([i]), np.array([d_far]))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rho_t = self._rho(np.array([i]), np.array([d_far]))
             kc = self.s_kind[i]
             n_c = fl.n_cols
-            kind = np.full(n_c, kc)
-            b = _b_of(kind[:1], rho_t)[0]
-            st_ln = [(self.flat.start, 0), (self.flat.length, 0)]
+            b = _b_of(np.array([kc]), rho_t)[0]
             g = np.clip((rho_t[0] - fl.rho0[kc]) / fl.step, 0.0, fl.n_rows[kc] - 1)
             i0, w = _cubic_stencil(np.array([g]), fl.n_rows[kc])
             rows_t = i0[0] + fl.offset[kc] + np.arange(4)
@@ -735,14 +741,22 @@ class RayMap:
             st = float(w @ fl.start[rows_t]) * sc
             ln = float(w @ fl.length[rows_t]) * sc
             u_rows = fl.u.reshape(-1, n_c)[rows_t]
-            self.tan = dict(u=w @ u_rows, b=b, start=st, length=ln, kind=kc,
-                            theta=self.node_theta[(i + 1) * self.n_z - 1])
-        # the table's error at the observer on each row (subtracted next to the observer)
-        all_rows = np.arange(self.row_g.size)
-        seg_of_row = np.concatenate([np.full(self.r_count[i], i) for i in range(self.n_seg) if self._twins()[i] == i])
-        self.row_eps = np.zeros(all_rows.size)
-        self.row_eps = self._row_residual(all_rows, np.full(all_rows.size, self.uo), np.zeros(all_rows.size),
-                                          seg_of_row)
+            self._tan = dict(u=w @ u_rows, b=b, start=st, length=ln, kind=kc,
+                             theta=self.node_theta[(i + 1) * self.n_z - 1])
+        return self._tan
+
+    @property
+    def row_eps(self) -> np.ndarray:
+        """The table's error at the observer on each row (u on the row at the observer's phase, less
+        uo): subtracted next to the observer; made on first use."""
+        if self._eps is None:
+            all_rows = np.arange(self.row_g.size)
+            seg_of_row = np.concatenate([np.full(self.r_count[i], i) for i in range(self.n_seg)
+                                         if self._twins()[i] == i])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                self._eps = self._row_residual(all_rows, np.full(all_rows.size, self.uo), np.zeros(all_rows.size),
+                                               seg_of_row)
+        return self._eps
 
     def _setup_index(self):
         """The seed index: the table's u along every INDEX_ROW_STEP-th row of every segment (and each
