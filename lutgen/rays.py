@@ -614,6 +614,9 @@ class RayMap:
         self.s_zlo, self.s_zhi = np.empty(self.n_seg), np.empty(self.n_seg)
         uo = self.uo
         twin = self._twins()
+        # every segment's ends in d in one call: the label RHO_MIN + 0.5, and RHO_MAX_P for kind P
+        ends = self._d_of_rho(np.repeat(np.arange(self.n_seg), 2),
+                              np.tile([RHO_MIN + 0.5, RHO_MAX_P], self.n_seg)).reshape(-1, 2)
         for i in range(self.n_seg):
             if twin[i] < i:  # the same rays as an earlier segment, traced the other way: same phases
                 j = twin[i]
@@ -621,12 +624,8 @@ class RayMap:
                 th_all.append(th_all[j])
                 self.s_zlo[i], self.s_zhi[i] = self.s_zlo[j], self.s_zhi[j]
                 continue
-            seg = np.array([i])
-            d_lo = self._d_of_rho(seg, np.array([RHO_MIN + 0.5]))[0]
-            if self.s_kind[i] == 1:
-                d_hi = self._d_of_rho(seg, np.array([RHO_MAX_P]))[0]
-            else:
-                d_hi = self.s_far[i] - FAR_GAP_T
+            d_lo = ends[i, 0]
+            d_hi = ends[i, 1] if self.s_kind[i] == 1 else self.s_far[i] - FAR_GAP_T
             far = self.s_far[i]
             z = np.linspace(math.log(d_lo / (far - d_lo)), math.log(d_hi / (far - d_hi)), n)
             d = far / (1.0 + np.exp(-z))
