@@ -50,6 +50,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.special import elliprf
 
 from . import orbit as _orb
 from .lut import QUANTITIES, Lookup, _cubic_stencil
@@ -142,6 +143,27 @@ def _reference_u(kind, rho) -> np.ndarray:
 
 
 _sweep_inner = _orb.sweep_inner
+
+
+def _crossing_phase(orb, uo) -> np.ndarray:
+    """The angle orbits of kind P (complex roots, ``orb`` from :func:`_orbits`) sweep from the photon
+    sphere to inverse radius ``uo``: lutgen.orbit.sweep(orb, uo) - sweep(orb, 2/3) with the same
+    operations on the same numbers (Legendre's form of Carlson's R_F), the terms that do not depend
+    on u formed once and no masks (every P orbit has complex roots)."""
+    a, me1, n = orb.e1, orb.m - orb.e1, orb.n
+    big_a = np.sqrt(me1 ** 2 + n ** 2)
+    k2c = n ** 2 / (2.0 * big_a * (big_a + me1))
+    x = np.array([[uo], [_orb.U_PHOTON]]) - a  # (2, N): the observer, the photon sphere
+    cphi = (big_a - x) / (big_a + x)
+    sphi = 2.0 * np.sqrt(big_a * x) / (big_a + x)
+    c2 = cphi ** 2
+    half = sphi * elliprf(c2, c2 + k2c * sphi ** 2, 1.0)
+    neg = np.flatnonzero(cphi.reshape(-1) < 0.0)
+    if neg.size:
+        k_neg = np.broadcast_to(k2c, cphi.shape).reshape(-1).take(neg)
+        half.reshape(-1)[neg] = 2.0 * elliprf(0.0, k_neg, 1.0) - half.reshape(-1).take(neg)
+    out = half / np.sqrt(big_a)
+    return out[0] - out[1]
 
 
 def row_ranges(kind, rho):
@@ -634,9 +656,7 @@ class RayMap:
             orb = _orbits(name, rho)
             x = self.s_crit[i] + self.s_side[i] * d
             if name == "P":
-                # the swept angle from the photon sphere to the observer: both ends in one call
-                f_ends = _orb.sweep(orb, np.array([[uo], [_orb.U_PHOTON]]) * np.ones(n))
-                theta = f_ends[0] - f_ends[1]
+                theta = _crossing_phase(orb, uo)  # the swept angle from the photon sphere to the observer
             else:
                 p_uo = uo * uo * (1.0 - uo) * (np.cos(x) / np.sin(x)) ** 2  # P(uo), no cancellation
                 if name == "T":
