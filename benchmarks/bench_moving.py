@@ -245,8 +245,8 @@ def report(opt, shots, frames, acc):
               "radius with its table already made (the family's; below 1.6 r_s the orbit table's). First pass: "
               "nothing built or cached before (the orbit table itself is built once per process, part of no "
               "frame here: its build is the row above). Ratios frame by frame against the static camera, timed "
-              f"beside each frame (best of {BEST_OF}; ONE_TABLE's first pass too, each time with a new RayMap, its second "
-              "pass with the one made before; EVERY_DISTANCE's first pass once: its tables are then built).", "",
+              f"beside each frame (best of {BEST_OF}; ONE_TABLE's first pass too, each time with a new RayMap, its "
+              "second pass with the one made before; EVERY_DISTANCE's first pass once: its tables are then built).", "",
               "| shot | mode | first pass median [ms] | max [ms] | first / static: median | max | second / static: "
               "median | max | exact tables built |", "|---|---|---|---|---|---|---|---|---|"]
     for name, d in shots.items():
@@ -263,7 +263,8 @@ def report(opt, shots, frames, acc):
                   / shots["descent 6 to 1.05 r_s"]["static"],
                   shots["descent 6 to 1.05 r_s"]["ONE_TABLE", "first"] / shots["descent 6 to 1.05 r_s"]["static"])),
               "", "ONE_TABLE's seed index (one per radius, over the whole sky): its window of four rows bracketed "
-              + " and ".join(f"{100 * d['window']:.1f}% of the points solved in the {name}" for name, d in shots.items())
+              + " and ".join(f"{100 * d['window']:.1f}% of the points solved in the {name}"
+                             for name, d in shots.items())
               + " (the others: the segments' ends, then a search over the rows).",
               "", END]
     return "\n".join(lines) + "\n"

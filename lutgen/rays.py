@@ -1026,8 +1026,9 @@ class RayMap:
 
     def solve(self, r, phi, order, quantities=QUANTITIES) -> dict:
         """{xi, dt, ux, uy} of the connecting rays of orders ``order`` (array of 1 and 2) to points
-        (r, phi) (1-D, valid; ux, uy only where ``quantities`` asks for either): see :meth:`_solve` (under one np.errstate: the steps divide by zero and
-        meet NaN by design, e.g. at rows' ends and for rays that escaped)."""
+        (r, phi) (1-D, valid; ux, uy only where ``quantities`` asks for either): see :meth:`_solve`
+        (under one np.errstate: the steps divide by zero and meet NaN by design, e.g. at rows' ends and
+        for rays that escaped)."""
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             return self._solve(r, phi, order, "ux" in quantities or "uy" in quantities)
 
