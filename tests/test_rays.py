@@ -271,3 +271,22 @@ def test_rays_past_the_periapsis_next_to_the_observer(r_obs):
     assert np.max(np.abs(got.xi - c.xi)) < 2e-6
     assert np.max(np.abs(got.dt / c.dt - 1.0)) < 5e-6
     assert np.max(np.abs(got.ux - c.ux)) < 1e-4 and np.max(np.abs(got.uy - c.uy)) < 1e-4
+
+
+def test_quantities_asked_for():
+    """Without ux, uy asked for, the solve skips the tangents: xi and dt bit-identical to a full lookup's,
+    the tangents absent; every point valid or not, the values where they belong."""
+    rng = np.random.default_rng(23)
+    r, p = _targets(rng, 9.0, 500)
+    r = np.concatenate([r, [0.5, np.nan]])  # two invalid points (inside r_min, NaN)
+    p = np.concatenate([p, [1.0, 1.0]])
+    m = rays.RayMap(9.0)
+    full = m.lookup_orders(r, p)
+    some = m.lookup_orders(r, p, quantities=("xi", "dt"))
+    for o in (1, 2):
+        assert some[o].ux is None and some[o].uy is None
+        for q in ("xi", "dt"):
+            assert np.array_equal(getattr(full[o], q), getattr(some[o], q), equal_nan=True), (o, q)
+        assert np.isnan(full[o].xi[-2:]).all() and np.isfinite(full[o].xi[:-2]).all()
+    valid = m.lookup_orders(r[:-2], p[:-2], quantities=("dt",))  # every point valid: the solve's arrays
+    assert np.array_equal(valid[2].dt, full[2].dt[:-2])
