@@ -24,7 +24,7 @@ tables in memory) and a static camera at each frame's radius (its table made bef
 where the add-on uses the orbit table in every mode, the orbit table's RayMap). Modes as the add-on's
 ``lut_mode``: EVERY_DISTANCE (the family; the orbit table below 1.6 r_s) and ONE_TABLE (the orbit
 table for every radius). All figures of one run; the ratios are frame by frame (first pass / static).
-The static camera and ONE_TABLE are timed best of 3 (BEST_OF) (ONE_TABLE's first pass with a new RayMap each
+The static camera and ONE_TABLE are timed best of 5 (BEST_OF) (ONE_TABLE's first pass with a new RayMap each
 time, so both are first passes); EVERY_DISTANCE's first pass once (the second time its tables exist).
 
 Usage: ./dev python benchmarks/bench_moving.py [--frames N] [--write]   (--write: its section of
@@ -53,7 +53,7 @@ from provenance import code_version  # noqa: E402
 OUT = os.path.join(os.path.dirname(__file__), "..", "docs", "tables.md")
 BEGIN, END = "<!-- bench_moving: begin -->", "<!-- bench_moving: end -->"
 FAMILY_MIN = 1.6  # as grlens_addon.blender.lutcache.FAMILY_MIN (the add-on is not imported here: bpy)
-BEST_OF = 3  # the static camera's and ONE_TABLE's frames: the best of this many (the VM is shared)
+BEST_OF = 5  # the static camera's and ONE_TABLE's frames: the best of this many (the VM is shared)
 
 
 def options(rng):
