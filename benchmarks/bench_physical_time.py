@@ -223,8 +223,8 @@ def main(out_path):
                                       CAM.frustum_planes())
                 runs[name].append(time.perf_counter() - t0)
         times = {name: float(np.min(r)) for name, r in runs.items()}
-        per_tri = {n: times[n] / tris[n] for n in times}
-        per_px = {n: times[n] / pixels[n] for n in times}
+        per_tri = {n: times[n] / tris[n] for n in CAMERAS}
+        per_px = {n: times[n] / pixels[n] for n in CAMERAS}
         cost.append(f"| {angle} | {1e3 * times['at rest']:.1f} | {1e3 * times['out']:.1f} | {1e3 * times['in']:.1f} | "
                     f"{max(times['out'], times['in']) / times['at rest']:.2f} | "
                     f"{tris['at rest']} / {tris['out']} / {tris['in']} | "

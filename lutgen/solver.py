@@ -638,21 +638,27 @@ def _refine(r_obs, r, phi, order, xi):
         s_psi = np.clip(np.sin(xi) / (k_o * uo) * g, 0.0, 1.0)
     psi = np.arcsin(s_psi)
     q = _label_of_angle(np.where(inward, psi, xi), p_max)
-    f = _family_sweep(uo, u, q) - target
-    two = np.flatnonzero(inward & (np.pi - psi < p_max))
-    if two.size:  # the ray after the periapsis, where the family has one: the nearer sweep wins
-        q_t = _label_of_angle(np.pi - psi[two], p_max[two])
-        f_t = _family_sweep(uo, u[two], q_t) - target[two]
-        better = np.abs(f_t) < np.abs(f[two])
-        q[two[better]], f[two[better]] = q_t[better], f_t[better]
     h = _REFINE_STEP * np.maximum(q, 1e-3)
-    f_h = _family_sweep(uo, u, q + h) - target
+    # one evaluation of the sweep (a few numpy calls whatever the size: small frames pay per call) at
+    # the label, a step beside it, and for a target inside the observer's radius the same for the ray
+    # after the periapsis, where the family has one: the nearer sweep wins
+    two = np.flatnonzero(inward & (np.pi - psi < p_max))
+    q_t = _label_of_angle(np.pi - psi[two], p_max[two])
+    h_t = _REFINE_STEP * np.maximum(q_t, 1e-3)
+    n, m = q.size, two.size
+    sweeps = _family_sweep(uo, np.concatenate([u, u, u[two], u[two]]), np.concatenate([q, q + h, q_t, q_t + h_t]))
+    f, f_h = sweeps[:n] - target, sweeps[n:2 * n] - target
+    if m:
+        f_t, f_th = sweeps[2 * n:2 * n + m] - target[two], sweeps[2 * n + m:] - target[two]
+        better = np.abs(f_t) < np.abs(f[two])
+        pick = two[better]
+        q[pick], h[pick], f[pick], f_h[pick] = q_t[better], h_t[better], f_t[better], f_th[better]
     with np.errstate(divide="ignore", invalid="ignore"):
         q_new = np.maximum(q - f * h / (f_h - f), 0.0)
     q_new = np.where(np.isfinite(q_new), q_new, q)
-    # secant steps through the last two iterates until a step is below rounding (then the error left
-    # is about that step squared): one more for nearly every point (the table's guesses); next to the
-    # photon sphere (periapses at ~1.5 r_s) the sweep curves strongly in q and needs a few
+    # secant steps through the last two iterates until a step is small: one more for nearly every
+    # point (the table's guesses); next to the photon sphere (periapses at ~1.5 r_s) the sweep curves
+    # strongly in q and needs a few
     todo = np.arange(q.size)
     q_prev, f_prev = q, f
     for _ in range(_REFINE_ITERATIONS):
@@ -661,7 +667,9 @@ def _refine(r_obs, r, phi, order, xi):
             q_next = np.maximum(q_new[todo] - f_new * (q_new[todo] - q_prev) / (f_new - f_prev), 0.0)
         ok = np.isfinite(q_next) & (f_new != f_prev)
         q_next = np.where(ok, q_next, q_new[todo])
-        going = ok & (np.abs(q_next - q_new[todo]) > 1e-13 * np.maximum(q_next, 1e-3))
+        # a secant step leaves an error of about the curvature times this step times the last one:
+        # below 1e-9 (relative) that is far below rounding
+        going = ok & (np.abs(q_next - q_new[todo]) > 1e-9 * np.maximum(q_next, 1e-3))
         # a step that stalls far from the target (a guess beyond the critical ray, clipped there) is
         # not converged: the last step left about its residual squared, so that must be small
         stalled = ~going & ~(np.abs(f_new) <= 1e-6)
