@@ -290,3 +290,21 @@ def test_quantities_asked_for():
         assert np.isnan(full[o].xi[-2:]).all() and np.isfinite(full[o].xi[:-2]).all()
     valid = m.lookup_orders(r[:-2], p[:-2], quantities=("dt",))  # every point valid: the solve's arrays
     assert np.array_equal(valid[2].dt, full[2].dt[:-2])
+
+
+def test_per_radius_shortcuts_equal_the_general_forms():
+    """The set-up's and the solve's shortcuts give the general closed forms' numbers bit for bit: the
+    crossing rays' phase at the observer (lutgen.orbit.sweep at the observer less at the photon sphere,
+    both sides of the photon sphere and beyond pi/2 in Legendre's amplitude), and the turning orbits'
+    reference points (the roots of _orbits)."""
+    rho = np.linspace(rays.RHO_MIN, rays.RHO_MAX_P, 2000)
+    orb = rays._orbits("P", rho)
+    for r_obs in (1.001, 1.2, 1.5, 3.0, 1e4, 1e7):
+        uo = 1.0 / r_obs
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ends = O.sweep(orb, np.array([[uo], [O.U_PHOTON]]) * np.ones(rho.size))
+            assert np.array_equal(rays._crossing_phase(orb, uo), ends[0] - ends[1], equal_nan=True), r_obs
+    for kind, mx in (("T", rays.RHO_MAX_T), ("I", rays.RHO_MAX_I)):
+        rho = np.linspace(rays.RHO_MIN, mx, 2000)
+        o = rays._orbits(kind, rho)
+        assert np.array_equal(rays._reference_u(kind, rho), o.e2 if kind == "T" else o.e3), kind
