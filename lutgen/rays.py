@@ -1081,9 +1081,13 @@ class RayMap:
             ur, sr, nr = u.take(rest), sweep.take(rest), near.take(rest)
             s_rest = np.full(rest.size, ns - 1)
             if ns == 4:  # the ray tangent at the observer first, then one end on its side: two tests
-                low = self._tangent_residual(ur, sr, self.s_dir[1]) >= 0.0
+                f_tan = np.full(n, np.nan)  # kept for the end intervals of segment 1 (same direction)
+                f_tan[rest] = self._tangent_residual(ur, sr, self.s_dir[1])
+                low = f_tan.take(rest) >= 0.0
                 for i, side in ((0, low), (2, ~low)):
                     at = np.flatnonzero(side)
+                    if not at.size:  # no point on this side: no call (its fixed cost saved)
+                        continue
                     f = self._row_residual(np.full(at.size, self.r_first[i]), ur[at], sr[at], np.full(at.size, i),
                                            nr[at])
                     s_rest[at] = np.where(f >= 0.0, i, i + 1)
@@ -1172,7 +1176,14 @@ class RayMap:
             f_a, f_b = f_lo[e], f_hi[e]
             tan = np.flatnonzero((hi[e] >= count[e]) & (self.s_kind.take(seg[e]) != 1))
             if tan.size and self.tan is not None:  # the far end is the ray tangent at the observer: its f
-                f_b[tan] = self._tangent_residual(u[e[tan]], sweep[e[tan]], self.s_dir.take(seg[e[tan]]))
+                # (segment 1's points have it from the segment test, same direction; the others' is made)
+                et = e[tan]
+                known = seg.take(et) == 1
+                f_b[tan[known]] = f_tan.take(et[known])
+                todo = ~known
+                if todo.any():
+                    f_b[tan[todo]] = self._tangent_residual(u[et[todo]], sweep[et[todo]],
+                                                            self.s_dir.take(seg[et[todo]]))
             # in these intervals f is smooth in d: regula falsi for a start, then secant steps
             d0 = d_a - f_a * (d_b - d_a) / (f_b - f_a)
             lo_d, hi_d = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
