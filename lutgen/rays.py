@@ -462,6 +462,12 @@ SEARCH_MAX_K, at least 1: bisection), so that a few points take two or three pas
 SEARCH_MAX_K = 63
 """The most rows per point in one pass of that search."""
 
+PROBE_STEPS = np.array([1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256, 384, 512, 768, 1024, 1536])
+"""The first pass of that search for points whose window lay on one side of the root (in the right
+segment): rows this many rows beyond the window's last row towards the root (growing by at most 3/2,
+so the second pass, a K-section of the bracket found, ends it). Most roots lie a row or two beyond
+the window: one pass."""
+
 INDEX_SWEEPS = 33
 """Angles of the seed index (uniform over [0, 2 pi], see :meth:`RayMap._setup_index`): each costs set-up
 time per radius; fewer leave more points outside the window of four rows (to the segment tests and
@@ -1104,19 +1110,35 @@ class RayMap:
             at_first = start[k0[start] == 0]
             hi[at_first], f_lo[at_first] = 1, fw[0, at_first]
             f_hi[at_first] = fw[1, at_first]
+            # the first pass of the search probes rows at growing distances from the window's side
+            # (the root is most often a row or two beyond it)
+            side = np.zeros(n, dtype=np.int8)
+            side[last], side[start] = 1, -1
             if ro.size:  # another segment: all its rows
                 seg[ro] = s_rest[~same]
                 first[ro], count[ro], orient[ro] = (self.r_first.take(seg[ro]), self.r_count.take(seg[ro]),
                                                     self.s_side.take(seg[ro]))
                 hi[ro], f_hi[ro] = count[ro], orient[ro] * np.inf
+        probe = rest.size > 0 and SEARCH_BUDGET > 1
         while True:  # a K-section search: K rows per point and pass, as many as SEARCH_BUDGET allows
             o = np.flatnonzero(hi - lo > 1)
             if not o.size:
                 break
-            n_k = int(min(max(SEARCH_BUDGET // o.size, 1), SEARCH_MAX_K))
             lo_o, hi_o = lo.take(o), hi.take(o)
+            gap = hi_o - lo_o
+            # no more rows per point than the widest bracket holds inside (a pass over few points
+            # would otherwise repeat rows)
+            n_k = int(min(max(SEARCH_BUDGET // o.size, 1), SEARCH_MAX_K, gap.max() - 1))
+            sd = side.take(o) if probe else None
+            probe = False
+            if sd is not None and sd.any():  # the first pass: PROBE_STEPS.size rows per point
+                n_k = PROBE_STEPS.size
             # rows lo + (hi - lo) j / (K + 1), j = 1..K, inside (lo, hi) (bisection for K = 1)
-            mid = lo_o + ((hi_o - lo_o)[None, :] * np.arange(1, n_k + 1)[:, None]) // (n_k + 1)
+            mid = lo_o + (gap[None, :] * np.arange(1, n_k + 1)[:, None]) // (n_k + 1)
+            if sd is not None and sd.any():  # from the window's side: rows PROBE_STEPS beyond it
+                cols = np.flatnonzero(sd)
+                steps = PROBE_STEPS[:, None]
+                mid[:, cols] = np.where(sd.take(cols) > 0, lo_o.take(cols) + steps, hi_o.take(cols) - steps[::-1])
             mid = np.minimum(np.maximum(mid, lo_o + 1), hi_o - 1)
             f = self._row_residual(first.take(o) + mid, u.take(o), sweep.take(o), seg.take(o), near.take(o))
             below = orient.take(o) * f < 0.0  # true on a prefix of the K rows (f changes sign once)
@@ -1145,15 +1167,19 @@ class RayMap:
                 kc = np.where(wi, pick(k0), _clip(lo_i - 1, 0, pick(count) - 4))
                 fs = np.where(wi, pick(fw), np.nan)
                 m_all = np.flatnonzero(~wi)
+                need_j, need_m = [], []
                 for j in range(4):  # outside the window: the bracket's two rows are known from the search
                     im = i[m_all]
                     kj = kc[m_all] + j
                     known_lo, known_hi = kj == lo[im], kj == hi[im]
                     fs[j, m_all[known_lo]], fs[j, m_all[known_hi]] = f_lo[im[known_lo]], f_hi[im[known_hi]]
                     m = m_all[~known_lo & ~known_hi]
-                    if m.size:
-                        im = i[m]
-                        fs[j, m] = self._row_residual(first[im] + kc[m] + j, u[im], sweep[im], seg[im], near[im])
+                    need_j.append(np.full(m.size, j))
+                    need_m.append(m)
+                nj, nm = np.concatenate(need_j), np.concatenate(need_m)
+                if nm.size:  # the other two rows of every such point in one call
+                    im = i[nm]
+                    fs[nj, nm] = self._row_residual(first[im] + kc[nm] + nj, u[im], sweep[im], seg[im], near[im])
             t, dp = _cubic_root(fs, (lo_i - kc).astype(float), slope=True)
             # the ray at t: ln d is smooth in the row index (rows uniform in rho, ln d ~ rho next to
             # the critical angle), so the cubic through the four rows' ln d gives d and dd/dt

@@ -216,8 +216,9 @@ def test_exact_connect_inside_photon_sphere_against_dop853(r_obs):
 @pytest.mark.parametrize("r_obs", [20.0, 1.2])
 def test_row_search_passes_give_the_bisections_bracket(r_obs, monkeypatch):
     """The search over a segment's rows (points outside the seed index's window) takes up to
-    SEARCH_MAX_K rows per point and pass; it ends at the same bracket as bisection (SEARCH_BUDGET = 1),
-    so the rays are bit-identical, and it takes fewer passes."""
+    SEARCH_MAX_K rows per point and pass (the first pass PROBE_STEPS beyond the window where it lay
+    on one side of the root); it ends at the same bracket as bisection (SEARCH_BUDGET = 1), so the
+    rays are bit-identical, and it takes fewer passes."""
     rng = np.random.default_rng(11)
     r, p = _targets(rng, r_obs, 300)
     ok = r >= 1.05
@@ -242,6 +243,48 @@ def test_row_search_passes_give_the_bisections_bracket(r_obs, monkeypatch):
     for o in (1, 2):
         for q in ("xi", "dt", "ux", "uy"):
             assert np.array_equal(getattr(got[o], q), getattr(bisect[o], q), equal_nan=True), (o, q)
+
+
+@pytest.mark.parametrize("r_obs", [20.0, 2.0])
+def test_row_search_probes_from_a_window_off_the_root(r_obs, monkeypatch):
+    """Windows moved off the root by 2 to 600 rows either way (in the seed's segment): the first pass
+    probes rows PROBE_STEPS beyond the window's side, the next a K-section of the bracket found; the
+    rays are bit-identical to bisection's (SEARCH_BUDGET = 1), in fewer passes than plain K-sections."""
+    rng = np.random.default_rng(5)
+    r, p = _targets(rng, r_obs, 400)
+    ok = r >= 1.05
+    r, p = r[ok], p[ok]
+    real_seed = rays.RayMap._seed
+    shift = rng.choice([-600, -40, -7, -2, 2, 5, 13, 90, 600], r.size * 2)
+
+    def moved(self, u, sweep):
+        seg, row = real_seed(self, u, sweep)
+        return seg, np.clip(row + shift[:row.size], 0.0, self.r_count.take(seg) - 1.0)
+
+    monkeypatch.setattr(rays.RayMap, "_seed", moved)
+    calls = []
+    real = rays.RayMap._row_residual
+
+    def counting(self, row, *a, **k):
+        calls.append(np.shape(row))
+        return real(self, row, *a, **k)
+
+    monkeypatch.setattr(rays.RayMap, "_row_residual", counting)
+    m = rays.RayMap(r_obs)
+    got = m.lookup_orders(r, p)
+    assert m.windowed < 0.5 * m.solved
+    assert any(len(c) == 2 and c[0] == len(rays.PROBE_STEPS) for c in calls)  # a probe pass
+    probed = len(calls)
+    monkeypatch.setattr(rays, "PROBE_STEPS", np.array([1]))  # a probe of one row, then K-sections
+    calls.clear()
+    plain = m.lookup_orders(r, p)
+    assert len(calls) >= probed
+    monkeypatch.setattr(rays, "SEARCH_BUDGET", 1)
+    bisect = m.lookup_orders(r, p)
+    for o in (1, 2):
+        for q in ("xi", "dt", "ux", "uy"):
+            assert np.array_equal(getattr(got[o], q), getattr(bisect[o], q), equal_nan=True), (o, q)
+            assert np.array_equal(getattr(plain[o], q), getattr(bisect[o], q), equal_nan=True), (o, q)
 
 
 def test_no_valid_point():
