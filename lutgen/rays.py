@@ -1078,6 +1078,7 @@ class RayMap:
             lo[at], hi[at], f_lo[at], f_hi[at] = k0[at] + j, k0[at] + j + 1, fw[j, at], fw[j + 1, at]
             window |= at
         rest = np.flatnonzero(~window)
+        moved = np.zeros(n, dtype=bool)  # points whose segment is not the seed's (their window is not theirs)
         self.solved += n
         self.windowed += n - rest.size
         if rest.size:
@@ -1115,6 +1116,7 @@ class RayMap:
             side = np.zeros(n, dtype=np.int8)
             side[last], side[start] = 1, -1
             if ro.size:  # another segment: all its rows
+                moved[ro] = True
                 seg[ro] = s_rest[~same]
                 first[ro], count[ro], orient[ro] = (self.r_first.take(seg[ro]), self.r_count.take(seg[ro]),
                                                     self.s_side.take(seg[ro]))
@@ -1214,7 +1216,39 @@ class RayMap:
             d0 = d_a - f_a * (d_b - d_a) / (f_b - f_a)
             lo_d, hi_d = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
             d0 = np.where(np.isfinite(d0) & (d0 > lo_d) & (d0 < hi_d), d0, 0.5 * (d_a + d_b))
-            d[e], ok = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6)
+            slope = None
+            end = np.flatnonzero((hi[e] >= count[e] - 2) & turning.take(e) & (count[e] >= 4))
+            if end.size and self.tan is not None:
+                # next to the ray tangent at the observer: the cubic in d through f on the segment's last
+                # three rows and on that ray gives a start and a slope (Newton's step, as between rows)
+                ee = e[end]
+                f_t = np.where(hi[ee] >= count[ee], f_b.take(end), np.nan)
+                miss = np.flatnonzero(np.isnan(f_t))
+                if miss.size:
+                    em = ee[miss]
+                    f_t[miss] = self._tangent_residual(u[em], sweep[em], self.s_dir.take(seg[em]))
+                last3 = first[ee] + count[ee] - 3 + np.arange(3)[:, None]
+                fn = np.full((4, end.size), np.nan)
+                fn[3] = f_t
+                # the rows' f where known: the window's (in the seed's segment), the bracket's ends
+                loc = count[ee] - 3 + np.arange(3)[:, None]  # (3, m) local rows
+                jw = loc - k0[ee]
+                inw = ~moved[ee] & (jw >= 0) & (jw <= 3)
+                fn[:3][inw] = fw[jw[inw], np.broadcast_to(ee, loc.shape)[inw]]
+                for f_known, at in ((f_lo, lo), (f_hi, hi)):
+                    hit = np.isnan(fn[:3]) & (loc == at[ee])
+                    fn[:3][hit] = np.broadcast_to(f_known[ee], loc.shape)[hit]
+                jm, om = np.nonzero(np.isnan(fn[:3]))
+                if om.size:
+                    eo = ee[om]
+                    fn[jm, om] = self._row_residual(last3[jm, om], u[eo], sweep[eo], seg[eo], near[eo])
+                dn = np.concatenate([self.row_d.take(last3), far_d.take(end)[None]])
+                x, dp = _cubic_root_nodes(dn, fn, d0.take(end), lo_d.take(end), hi_d.take(end))
+                good = np.isfinite(x) & np.isfinite(dp) & (dp != 0.0)
+                d0[end[good]] = x[good]
+                slope = np.full(e.size, np.nan)  # no slope: the plain secant start (see _secant)
+                slope[end[good]] = dp[good]
+            d[e], ok = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6, slope=slope)
             rest = np.flatnonzero(~ok)
             if rest.size:
                 er = e[rest]
@@ -1232,7 +1266,7 @@ class RayMap:
             x_prev = d0 + 1e-7 * (hi - lo)
             f_prev = self._residual(seg, x_prev, u, sweep, near=near)
             x = d0
-        else:
+        else:  # (a NaN slope: no Newton step, the second point as without a slope)
             x_prev = d0
             f_prev = self._residual(seg, d0, u, sweep, near=near)
             x = d0 - f_prev / slope
@@ -1330,6 +1364,27 @@ def _cubic_at(fs, t):
     t1 = t - 1.0
     q = c + (t - 2.0) * e
     return f0 + t * (a + t1 * q), a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e
+
+
+def _cubic_root_nodes(dn, fn, x0, lo, hi, steps=3):
+    """(root, slope there) of the cubic through (dn[j], fn[j]), j = 0..3 (arrays (4, N), distinct
+    nodes in any order): Newton from x0, kept inside [lo, hi]. Divided differences, Newton form."""
+    d0, d1, d2, d3 = dn
+    f0, f1, f2, f3 = fn
+    c01, c12, c23 = (f1 - f0) / (d1 - d0), (f2 - f1) / (d2 - d1), (f3 - f2) / (d3 - d2)
+    c012, c123 = (c12 - c01) / (d2 - d0), (c23 - c12) / (d3 - d1)
+    c3 = (c123 - c012) / (d3 - d0)
+    x = x0
+    for i in range(steps + 1):
+        a, b, c = x - d0, x - d1, x - d2
+        q = c012 + c * c3
+        p = f0 + a * (c01 + b * q)
+        dp = c01 + b * q + a * (q + b * c3)
+        if i == steps:
+            break
+        x_new = x - p / dp
+        x = np.where(np.isfinite(x_new), np.clip(x_new, lo, hi), x)
+    return x, dp
 
 
 def _cubic_root(fs, t0, slope=False):
