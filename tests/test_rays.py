@@ -361,8 +361,10 @@ def test_cubic_root_through_uneven_nodes():
     dn = np.sort(rng.uniform(0.1, 1.0, (4, 50)), axis=0)
     roots = rng.uniform(dn[1], dn[2])
     fn = (dn - roots) * (1.0 + 0.3 * (dn - roots) + 0.2 * (dn - roots) ** 2)
-    x, dp = rays._cubic_root_nodes(dn, fn, 0.5 * (dn[1] + dn[2]), dn[1], dn[2])
+    x, dp = rays._cubic_root_nodes(dn, fn, 0.5 * (dn[1] + dn[2]), dn[1], dn[2], steps=8)
+    x3, _ = rays._cubic_root_nodes(dn, fn, 0.5 * (dn[1] + dn[2]), dn[1], dn[2])
+    assert np.abs(x3 - roots).max() < 1e-6  # the default three Newton steps from the middle
     for i in range(50):
         c = np.polyfit(dn[:, i], fn[:, i], 3)
-        assert abs(x[i] - roots[i]) < 1e-10  # three Newton steps from the middle
+        assert abs(x[i] - roots[i]) < 1e-12
         assert abs(dp[i] - np.polyval(np.polyder(c), x[i])) < 1e-9
