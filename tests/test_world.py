@@ -827,11 +827,11 @@ def _shift_reference(c, beta, r_obs, colour=True, beaming=True, gravity=True):
 
 
 def _matrices_of(px):
-    """(n, 3, 3) the matrices that the sky-shift group computes from texels ``px`` (2, n, 4)."""
+    """(n, 3, 3) the matrices that the sky-shift group applies, from its texels ``px`` (2, n, 4): two
+    columns and the row sum."""
     t = np.empty((px.shape[1], 3, 3))
-    t[:, 0, 0], t[:, 0, 1], t[:, 1, 0], t[:, 1, 1] = px[0].T
-    t[:, 2, 0], t[:, 2, 1] = px[1, :, 0], px[1, :, 1]
-    t[:, :, 2] = px[1, :, 2, None] - t[:, :, 0] - t[:, :, 1]
+    t[:, :, 0], t[:, :, 1] = px[0, :, :3], px[1, :, :3]
+    t[:, :, 2] = px[0, :, 3, None] - t[:, :, 0] - t[:, :, 1]
     return t
 
 
@@ -890,7 +890,7 @@ def test_the_sky_shift_tables_are_written_when_the_camera_changes_and_read_per_e
     for engine, source in (("CYCLES", "shift B"), (eevee, "shift B closest"), ("CYCLES", "shift B")):
         scene.render.engine = engine
         world.update(scene)
-        assert shift.nodes["shift B entries"].inputs[0].links[0].from_node.name == source, engine
+        assert shift.nodes["column 1"].inputs[0].links[0].from_node.name == source, engine
 
 
 def test_check_frame_of_a_moving_camera_checks_its_aberrated_sky(tmp_path):

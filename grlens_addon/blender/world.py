@@ -279,14 +279,13 @@ def _build_shift_group(name: str) -> bpy.types.NodeTree:
     into it per frame.
 
     Per sample: u = 0.5 + c (n - 1) / (2 n) (one multiply-add: texel centres at c = -1 .. 1); two
-    'Linear' lookups of the tables "shift A" (T00, T01, T10, T11 in RGBA) and "shift B" (T20, T21, s)
-    at u; each row of T sums to s (white stays white, s times brighter), so channel i of the result is
-    T_i0 (R - B) + T_i1 (G - B) + s B: two subtractions and a product shared by the rows, two
-    multiply-adds per row, a maximum with 0 per row (negative channels of out-of-gamut colours
-    clipped, as "grlens Shift by g" does), one Combine Color. Float math nodes only besides the two
-    lookups (a vector node or a third lookup costs Cycles more per sample than a few float ones:
-    ``./dev bench physical_time_sky --profile``). The c-indexed table serves Eevee too: c changes
-    slowly across the image, so a GPU sampler's filtering of it is harmless."""
+    'Linear' lookups at u of the tables "shift A" (T's first column and s in RGBA) and "shift B" (its
+    second column); each row of T sums to s (white stays white, s times brighter), so the result is
+    column 0 times (R - B) plus column 1 times (G - B) plus s B: two subtractions and a product on
+    floats, two vector multiply-adds, a vector maximum with 0 (negative channels of out-of-gamut colours
+    clipped, as "grlens Shift by g" does). Nine nodes and the lookups (``./dev bench physical_time_sky
+    --profile`` measures each). Eevee reads the tables by closest-texel pairs mixed in math nodes
+    (:func:`_use_shift_lookup`)."""
     tree = bpy.data.node_groups.new(name, "ShaderNodeTree")
     tree.interface.new_socket(name="Color", in_out="INPUT", socket_type="NodeSocketColor").default_value = \
         (1.0, 1.0, 1.0, 1.0)
@@ -294,7 +293,7 @@ def _build_shift_group(name: str) -> bpy.types.NodeTree:
     tree.interface.new_socket(name="Color", in_out="OUTPUT", socket_type="NodeSocketColor")
     N, L = tree.nodes, tree.links
     gin, gout = N.new("NodeGroupInput"), N.new("NodeGroupOutput")
-    gout.location = (1400, 0)
+    gout.location = (1600, 0)
     u = _math(N, "MULTIPLY_ADD", x=200, label="u")
     L.new(gin.outputs["Doppler cos"], u.inputs[0])
     u.inputs[1].default_value = (SHIFT_SIZE - 1) / (2.0 * SHIFT_SIZE)
@@ -319,7 +318,6 @@ def _build_shift_group(name: str) -> bpy.types.NodeTree:
         n.inputs[1].default_value = 1.0 / SHIFT_SIZE
         n.inputs[2].default_value = (0.5 + k) / SHIFT_SIZE
         uk.append(n.outputs[0])
-    entries = []
     for k, name_k in enumerate(SHIFT_LOOKUPS):
         image = _new_table_image(f"{name} {name_k[-1]}", SHIFT_SIZE)
         tex = _table_lookup(N, name_k, image, "Linear", (400, -300 * k))
@@ -339,13 +337,8 @@ def _build_shift_group(name: str) -> bpy.types.NodeTree:
         L.new(w.outputs[0], mix.inputs[0])
         L.new(pair[0].outputs["Color"], mix.inputs[6])
         L.new(pair[1].outputs["Color"], mix.inputs[7])
-        sep = N.new("ShaderNodeSeparateColor")
-        sep.name = name_k + " entries"
-        sep.location = (600, -300 * k)
-        L.new(tex.outputs["Color"], sep.inputs[0])
-        entries += [sep.outputs[0], sep.outputs[1], sep.outputs[2]]
         if k == 0:
-            amix = N.new("ShaderNodeMix")  # the alpha channel's entry, 'closest'
+            amix = N.new("ShaderNodeMix")  # s, the alpha channel, 'closest'
             amix.name = name_k + " alpha closest"
             amix.data_type = "FLOAT"
             amix.clamp_factor = False
@@ -353,48 +346,48 @@ def _build_shift_group(name: str) -> bpy.types.NodeTree:
             L.new(w.outputs[0], amix.inputs[0])
             L.new(pair[0].outputs["Alpha"], amix.inputs[2])
             L.new(pair[1].outputs["Alpha"], amix.inputs[3])
-            entries.append(tex.outputs["Alpha"])
-    t00, t01, t10, t11, t20, t21, s_ = entries
     col = N.new("ShaderNodeSeparateColor")
     col.location = (600, 300)
     L.new(gin.outputs["Color"], col.inputs[0])
     r, g, b = col.outputs[0], col.outputs[1], col.outputs[2]
-
-    def op(kind, a, b_, c=None, x=800):
-        n = _math(N, kind, x=x)
-        for i, v in enumerate((a, b_, c)):
-            if v is not None:
-                L.new(v, n.inputs[i])
-        return n.outputs[0]
-
-    d0, d1, base = op("SUBTRACT", r, b), op("SUBTRACT", g, b), op("MULTIPLY", s_, b)
-    comb = N.new("ShaderNodeCombineColor")
-    comb.location = (1200, 0)
-    for i, (ti0, ti1) in enumerate(((t00, t01), (t10, t11), (t20, t21))):
-        inner = op("MULTIPLY_ADD", ti1, d1, base, x=900)
-        inner.node.name = f"row {i} inner"
-        row = op("MULTIPLY_ADD", ti0, d0, inner, x=1000)
-        clip = _math(N, "MAXIMUM", x=1100)
-        L.new(row, clip.inputs[0])
-        clip.inputs[1].default_value = 0.0
-        L.new(clip.outputs[0], comb.inputs[i])
-    L.new(comb.outputs[0], gout.inputs["Color"])
+    d0, d1 = _math(N, "SUBTRACT", x=800), _math(N, "SUBTRACT", x=800)
+    for d, x in ((d0, r), (d1, g)):
+        L.new(x, d.inputs[0])
+        L.new(b, d.inputs[1])
+    base = _math(N, "MULTIPLY", x=800)
+    base.name = "s B"
+    L.new(N[SHIFT_LOOKUPS[0]].outputs["Alpha"], base.inputs[0])
+    L.new(b, base.inputs[1])
+    inner = _vmath(N, "MULTIPLY_ADD", 1000)  # column 1 (G - B) + s B
+    inner.name = "column 1"
+    L.new(N[SHIFT_LOOKUPS[1]].outputs["Color"], inner.inputs[0])
+    L.new(d1.outputs[0], inner.inputs[1])
+    L.new(base.outputs[0], inner.inputs[2])
+    outer = _vmath(N, "MULTIPLY_ADD", 1200)  # + column 0 (R - B)
+    outer.name = "column 0"
+    L.new(N[SHIFT_LOOKUPS[0]].outputs["Color"], outer.inputs[0])
+    L.new(d0.outputs[0], outer.inputs[1])
+    L.new(inner.outputs["Vector"], outer.inputs[2])
+    clip = _vmath(N, "MAXIMUM", 1400)
+    clip.name = "clip"
+    L.new(outer.outputs["Vector"], clip.inputs[0])
+    clip.inputs[1].default_value = (0.0, 0.0, 0.0)
+    L.new(clip.outputs["Vector"], gout.inputs["Color"])
     return tree
 
 
 def _use_shift_lookup(tree, kind: str) -> bool:
-    """Feed the sky-shift group's entries from its 'linear' lookups (Cycles) or its 'closest' pairs
-    mixed in math nodes (Eevee: a GPU sampler's mipmaps average the table over many texels where c
-    changes by several texels per pixel, and the rows' large entries of opposite sign turn that into
-    errors of 0.5 in colour), as :func:`_use_lookup` for the escape table. Relinks only when that
-    changes. Returns whether it relinked."""
+    """Take the sky-shift group's table entries from its 'linear' lookups (Cycles) or from its
+    'closest' pairs mixed in math nodes (Eevee: a GPU sampler's mipmaps average the table over many
+    texels where c changes by several texels per pixel, and T's large entries of opposite sign turn
+    that into errors of 0.5 in colour), as :func:`_use_lookup` for the escape table. Relinks only when
+    that changes. Returns whether it relinked."""
     nodes, links = tree.nodes, tree.links
-    wanted = [(nodes[n + " entries"].inputs[0],
-               nodes[n].outputs["Color"] if kind == "linear" else nodes[n + " closest"].outputs[2])
-              for n in SHIFT_LOOKUPS]
-    a = SHIFT_LOOKUPS[0]
-    wanted.append((nodes["row 1 inner"].inputs[0],
-                   nodes[a].outputs["Alpha"] if kind == "linear" else nodes[a + " alpha closest"].outputs[0]))
+    a, b = SHIFT_LOOKUPS
+    linear = kind == "linear"
+    wanted = ((nodes["column 0"].inputs[0], nodes[a].outputs["Color"] if linear else nodes[a + " closest"].outputs[2]),
+              (nodes["column 1"].inputs[0], nodes[b].outputs["Color"] if linear else nodes[b + " closest"].outputs[2]),
+              (nodes["s B"].inputs[0], nodes[a].outputs["Alpha"] if linear else nodes[a + " alpha closest"].outputs[0]))
     changed = False
     for sock, src in wanted:
         if sock.is_linked and sock.links[0].from_socket == src:
@@ -414,8 +407,9 @@ def sky_shift_pixels(beta: float, r_obs: float, doppler_colour=True, beaming=Tru
     reaches it with g = g_motion g_gravity, g_motion = 1 / (gamma (1 + |beta| c)) (the same as
     gamma (1 + beta . D_static)) and g_gravity = 1 / sqrt(1 - r_s / r_obs). The hue is shifted by
     g_hue = g_motion^[doppler_colour] g_gravity^[gravity], the brightness by g_bright (beaming in place of
-    doppler_colour): T = core.spectrum.shifted_matrices(ln g_hue, ln g_bright). Texels: A = (T00, T01,
-    T10, T11), B = (T20, T21, s, 1), s = g_bright^5 (each row of T sums to s)."""
+    doppler_colour): T = core.spectrum.shifted_matrices(ln g_hue, ln g_bright). Texels: A = (T00, T10,
+    T20, s), B = (T01, T11, T21, 1): T's first two columns and s = g_bright^5 (each row of T sums to s,
+    which gives the third column)."""
     from ..core import spectrum
 
     c = np.linspace(-1.0, 1.0, SHIFT_SIZE)
@@ -427,8 +421,10 @@ def sky_shift_pixels(beta: float, r_obs: float, doppler_colour=True, beaming=Tru
     ln_bright = ln_motion * float(beaming) + ln_grav
     t = spectrum.shifted_matrices(ln_hue, ln_bright)
     px = np.empty((2, SHIFT_SIZE, 4), np.float32)
-    px[0] = np.stack([t[:, 0, 0], t[:, 0, 1], t[:, 1, 0], t[:, 1, 1]], -1)
-    px[1] = np.stack([t[:, 2, 0], t[:, 2, 1], np.exp(5.0 * ln_bright), np.ones_like(c)], -1)
+    px[0, :, :3] = t[:, :, 0]
+    px[0, :, 3] = np.exp(5.0 * ln_bright)
+    px[1, :, :3] = t[:, :, 1]
+    px[1, :, 3] = 1.0
     return px.reshape(2, -1)
 
 
@@ -597,7 +593,7 @@ def _shift_ok(group) -> bool:
     holder = group.nodes.get(SHIFT_HOLDER)
     tree = holder.node_tree if holder is not None else None
     return tree is not None and all(k in tree.nodes for n in SHIFT_LOOKUPS
-                                    for k in (n, n + " spare", n + " 0", n + " 1", n + " closest", n + " entries"))
+                                    for k in (n, n + " spare", n + " 0", n + " 1", n + " closest"))
 
 
 def _group_ok(group) -> bool:
