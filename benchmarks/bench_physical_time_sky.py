@@ -203,14 +203,11 @@ def _cuts(grp, shift):
     return {
         "the inverse aberration but its dot product (3 nodes)": [(grp, sock, d) for sock in world._direction_inputs(grp)],
         "its normalization (1 vector node)": [(grp, sock, raw) for sock in world._direction_inputs(grp)],
-        "the clip of negative channels (1 vector node)": [(shift, out.inputs["Color"], s["column 0"].outputs[0])],
-        "lookup B (1 image node)": [(shift, s["column 1"].inputs[0], None)],
-        "lookup A (1 image node)": [(shift, s["column 0"].inputs[0], None), (shift, s["s B"].inputs[0], None)],
-        "both lookups and u (3 nodes)": [(shift, s["column 0"].inputs[0], None), (shift, s["s B"].inputs[0], None),
-                                         (shift, s["column 1"].inputs[0], None)],
-        "the colour's separation and the float math (4 nodes)": [(shift, s["column 0"].inputs[1], None),
-                                                                (shift, s["column 1"].inputs[1], None),
-                                                                (shift, s["column 1"].inputs[2], None)],
+        "the clip of negative channels (1 vector node)": [(shift, out.inputs["Color"], s["Combine XYZ"].outputs[0])],
+        "lookup 2 (1 image node)": [(shift, s["row 2"].inputs[0], None)],
+        "lookups 1 and 2 (2 image nodes)": [(shift, s["row 1"].inputs[0], None), (shift, s["row 2"].inputs[0], None)],
+        "the three lookups and u (4 nodes)": [(shift, s[f"row {k}"].inputs[0], None) for k in range(3)],
+        "dot product 2 (1 vector node; its row's lookup unused)": [(shift, s["Combine XYZ"].inputs[2], None)],
     }
 
 

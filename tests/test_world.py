@@ -827,12 +827,10 @@ def _shift_reference(c, beta, r_obs, colour=True, beaming=True, gravity=True):
 
 
 def _matrices_of(px):
-    """(n, 3, 3) the matrices that the sky-shift group applies, from its texels ``px`` (2, n, 4): two
-    columns and the row sum."""
-    t = np.empty((px.shape[1], 3, 3))
-    t[:, :, 0], t[:, :, 1] = px[0, :, :3], px[1, :, :3]
-    t[:, :, 2] = px[0, :, 3, None] - t[:, :, 0] - t[:, :, 1]
-    return t
+    """(n, 3, 3) the matrices that the sky-shift group applies, from its texels ``px`` (3, n, 4): one
+    row per table."""
+    assert np.all(px[:, :, 3] == 1)
+    return np.swapaxes(px[:, :, :3], 0, 1)
 
 
 @pytest.mark.parametrize("beta, tol", [(0.0, 3e-4), (0.3, 3e-4), (0.7, 3e-4), (0.9, 4e-3)])
@@ -847,7 +845,7 @@ def test_the_sky_shift_tables_against_the_exact_shift(beta, tol):
     n = world.SHIFT_SIZE
     c = np.linspace(-1, 1, n)
     for switches in ((True, True, True), (True, False, True), (False, True, True), (True, True, False)):
-        px = world.sky_shift_pixels(beta, 20.0, *switches).reshape(2, n, 4).astype(np.float64)
+        px = world.sky_shift_pixels(beta, 20.0, *switches).reshape(3, n, 4).astype(np.float64)
         want, g_b = _shift_reference(c, beta, 20.0, *switches)
         err = np.abs(_matrices_of(px) - want).max((1, 2)) / g_b ** 5
         assert err.max() < 2e-4, (switches, err.max())
@@ -874,23 +872,23 @@ def test_the_sky_shift_tables_are_written_when_the_camera_changes_and_read_per_e
     _moving(scene, cam, shift_colours=True)
     grp = world._group_node(w.node_tree).node_tree
     shift = grp.nodes[world.SHIFT_HOLDER].node_tree
-    before = shift.nodes["shift A"].image
+    before = shift.nodes["shift 0"].image
     world.set_sky_shift(grp, scene, 20.0, 0.5)
     assert not world.set_sky_shift(grp, scene, 20.0, 0.5)
     assert world.set_sky_shift(grp, scene, 20.0, 0.6)
     scene.grlens.use_beaming = False
     assert world.set_sky_shift(grp, scene, 20.0, 0.6)
-    a = shift.nodes["shift A"].image
-    assert a == shift.nodes["shift A 0"].image == shift.nodes["shift A 1"].image != shift.nodes["shift A spare"].image
+    a = shift.nodes["shift 0"].image
+    assert a == shift.nodes["shift 0 0"].image == shift.nodes["shift 0 1"].image != shift.nodes["shift 0 spare"].image
     px = np.empty(4 * world.SHIFT_SIZE, np.float32)
     a.pixels.foreach_get(px)
     np.testing.assert_array_equal(px, world.sky_shift_pixels(0.6, 20.0, True, False, True)[0])
     assert before is not None
     eevee = "BLENDER_EEVEE" if bpy.app.version >= (5, 0, 0) else "BLENDER_EEVEE_NEXT"
-    for engine, source in (("CYCLES", "shift B"), (eevee, "shift B closest"), ("CYCLES", "shift B")):
+    for engine, source in (("CYCLES", "shift 1"), (eevee, "shift 1 closest"), ("CYCLES", "shift 1")):
         scene.render.engine = engine
         world.update(scene)
-        assert shift.nodes["column 1"].inputs[0].links[0].from_node.name == source, engine
+        assert shift.nodes["row 1"].inputs[0].links[0].from_node.name == source, engine
 
 
 def test_check_frame_of_a_moving_camera_checks_its_aberrated_sky(tmp_path):

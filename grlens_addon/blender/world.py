@@ -60,8 +60,9 @@ TABLE_PREFIX = "grlens Sky Table"
 SHIFT_PREFIX = "grlens Sky Shift"
 SHIFT_HOLDER = "sky shift group"
 """The lensed-sky group's unlinked group node that holds the world's sky-shift group."""
-SHIFT_LOOKUPS = ("shift A", "shift B")
-"""The sky-shift group's two table lookups (each with an unlinked "<name> spare" beside it)."""
+SHIFT_LOOKUPS = ("shift 0", "shift 1", "shift 2")
+"""The sky-shift group's table lookups, one per row of the matrix (each with an unlinked "<name> spare"
+beside it, and "<name> 0", "<name> 1" for Eevee)."""
 SHIFT_SIZE = 1024
 """Texels of the sky-shift tables: the matrix at cos = -1 .. 1 (the ray's direction against the
 camera's velocity, in the camera's frame), evenly."""
@@ -278,14 +279,14 @@ def _build_shift_group(name: str) -> bpy.types.NodeTree:
     every part of the shift (the camera's motion, gravity, the colour switches, the brightness) folded
     into it per frame.
 
-    Per sample: u = 0.5 + c (n - 1) / (2 n) (one multiply-add: texel centres at c = -1 .. 1); two
-    'Linear' lookups at u of the tables "shift A" (T's first column and s in RGBA) and "shift B" (its
-    second column); each row of T sums to s (white stays white, s times brighter), so the result is
-    column 0 times (R - B) plus column 1 times (G - B) plus s B: two subtractions and a product on
-    floats, two vector multiply-adds, a vector maximum with 0 (negative channels of out-of-gamut colours
-    clipped, as "grlens Shift by g" does). Nine nodes and the lookups (``./dev bench physical_time_sky
-    --profile`` measures each). Eevee reads the tables by closest-texel pairs mixed in math nodes
-    (:func:`_use_shift_lookup`)."""
+    Per sample, nine nodes: u = 0.5 + c (n - 1) / (2 n) (one multiply-add: texel centres at
+    c = -1 .. 1); three 'Linear' lookups at u of the tables "shift 0" .. "shift 2" (T's rows); three dot
+    products of the rows with the colour; one Combine XYZ; one vector maximum with 0 (negative channels
+    of out-of-gamut colours clipped, as "grlens Shift by g" does). Cycles spends about the same per node
+    whatever it does (its per-node overhead dominates: ``./dev bench physical_time_sky --instructions``),
+    so the count is what is kept small: two lookups and the row sums (each row sums to the brightness
+    factor) would need the colour's channels apart and float-to-vector conversions, thirteen nodes. Eevee
+    reads the tables by closest-texel pairs mixed in math nodes (:func:`_use_shift_lookup`)."""
     tree = bpy.data.node_groups.new(name, "ShaderNodeTree")
     tree.interface.new_socket(name="Color", in_out="INPUT", socket_type="NodeSocketColor").default_value = \
         (1.0, 1.0, 1.0, 1.0)
@@ -318,6 +319,8 @@ def _build_shift_group(name: str) -> bpy.types.NodeTree:
         n.inputs[1].default_value = 1.0 / SHIFT_SIZE
         n.inputs[2].default_value = (0.5 + k) / SHIFT_SIZE
         uk.append(n.outputs[0])
+    comb = N.new("ShaderNodeCombineXYZ")
+    comb.location = (1200, 0)
     for k, name_k in enumerate(SHIFT_LOOKUPS):
         image = _new_table_image(f"{name} {name_k[-1]}", SHIFT_SIZE)
         tex = _table_lookup(N, name_k, image, "Linear", (400, -300 * k))
@@ -337,59 +340,31 @@ def _build_shift_group(name: str) -> bpy.types.NodeTree:
         L.new(w.outputs[0], mix.inputs[0])
         L.new(pair[0].outputs["Color"], mix.inputs[6])
         L.new(pair[1].outputs["Color"], mix.inputs[7])
-        if k == 0:
-            amix = N.new("ShaderNodeMix")  # s, the alpha channel, 'closest'
-            amix.name = name_k + " alpha closest"
-            amix.data_type = "FLOAT"
-            amix.clamp_factor = False
-            amix.location = (800, -1800)
-            L.new(w.outputs[0], amix.inputs[0])
-            L.new(pair[0].outputs["Alpha"], amix.inputs[2])
-            L.new(pair[1].outputs["Alpha"], amix.inputs[3])
-    col = N.new("ShaderNodeSeparateColor")
-    col.location = (600, 300)
-    L.new(gin.outputs["Color"], col.inputs[0])
-    r, g, b = col.outputs[0], col.outputs[1], col.outputs[2]
-    d0, d1 = _math(N, "SUBTRACT", x=800), _math(N, "SUBTRACT", x=800)
-    for d, x in ((d0, r), (d1, g)):
-        L.new(x, d.inputs[0])
-        L.new(b, d.inputs[1])
-    base = _math(N, "MULTIPLY", x=800)
-    base.name = "s B"
-    L.new(N[SHIFT_LOOKUPS[0]].outputs["Alpha"], base.inputs[0])
-    L.new(b, base.inputs[1])
-    inner = _vmath(N, "MULTIPLY_ADD", 1000)  # column 1 (G - B) + s B
-    inner.name = "column 1"
-    L.new(N[SHIFT_LOOKUPS[1]].outputs["Color"], inner.inputs[0])
-    L.new(d1.outputs[0], inner.inputs[1])
-    L.new(base.outputs[0], inner.inputs[2])
-    outer = _vmath(N, "MULTIPLY_ADD", 1200)  # + column 0 (R - B)
-    outer.name = "column 0"
-    L.new(N[SHIFT_LOOKUPS[0]].outputs["Color"], outer.inputs[0])
-    L.new(d0.outputs[0], outer.inputs[1])
-    L.new(inner.outputs["Vector"], outer.inputs[2])
+        dot = _vmath(N, "DOT_PRODUCT", 1000)
+        dot.name = f"row {k}"
+        dot.location.y = -300 * k
+        L.new(tex.outputs["Color"], dot.inputs[0])
+        L.new(gin.outputs["Color"], dot.inputs[1])
+        L.new(dot.outputs["Value"], comb.inputs[k])
     clip = _vmath(N, "MAXIMUM", 1400)
     clip.name = "clip"
-    L.new(outer.outputs["Vector"], clip.inputs[0])
+    L.new(comb.outputs[0], clip.inputs[0])
     clip.inputs[1].default_value = (0.0, 0.0, 0.0)
     L.new(clip.outputs["Vector"], gout.inputs["Color"])
     return tree
 
 
 def _use_shift_lookup(tree, kind: str) -> bool:
-    """Take the sky-shift group's table entries from its 'linear' lookups (Cycles) or from its
-    'closest' pairs mixed in math nodes (Eevee: a GPU sampler's mipmaps average the table over many
-    texels where c changes by several texels per pixel, and T's large entries of opposite sign turn
-    that into errors of 0.5 in colour), as :func:`_use_lookup` for the escape table. Relinks only when
-    that changes. Returns whether it relinked."""
+    """Take the sky-shift group's rows from its 'linear' lookups (Cycles) or from its 'closest' pairs
+    mixed in math nodes (Eevee: a GPU sampler's mipmaps average the table over many texels where c
+    changes by several texels per pixel, and T's large entries of opposite sign turn that into errors
+    of 0.5 in colour), as :func:`_use_lookup` for the escape table. Relinks only when that changes.
+    Returns whether it relinked."""
     nodes, links = tree.nodes, tree.links
-    a, b = SHIFT_LOOKUPS
-    linear = kind == "linear"
-    wanted = ((nodes["column 0"].inputs[0], nodes[a].outputs["Color"] if linear else nodes[a + " closest"].outputs[2]),
-              (nodes["column 1"].inputs[0], nodes[b].outputs["Color"] if linear else nodes[b + " closest"].outputs[2]),
-              (nodes["s B"].inputs[0], nodes[a].outputs["Alpha"] if linear else nodes[a + " alpha closest"].outputs[0]))
     changed = False
-    for sock, src in wanted:
+    for k, name in enumerate(SHIFT_LOOKUPS):
+        sock = nodes[f"row {k}"].inputs[0]
+        src = nodes[name].outputs["Color"] if kind == "linear" else nodes[name + " closest"].outputs[2]
         if sock.is_linked and sock.links[0].from_socket == src:
             continue
         for lk in list(sock.links):
@@ -400,16 +375,15 @@ def _use_shift_lookup(tree, kind: str) -> bool:
 
 
 def sky_shift_pixels(beta: float, r_obs: float, doppler_colour=True, beaming=True, gravity=True) -> np.ndarray:
-    """(2, SHIFT_SIZE * 4) float32: the texels of the tables "shift A" and "shift B" for a camera at
+    """(3, SHIFT_SIZE * 4) float32: the texels of the tables "shift 0" .. "shift 2" for a camera at
     ``r_obs`` (r_s) moving with speed ``beta`` (units of c, in its local static frame; 0: at rest) and the
     scene's colour switches. Entry j is for c_j = -1 + 2 j / (SHIFT_SIZE - 1), the camera-frame cosine of
     its ray direction D against n = -beta / |beta|: light from the sky (emitted at rest at infinity)
     reaches it with g = g_motion g_gravity, g_motion = 1 / (gamma (1 + |beta| c)) (the same as
     gamma (1 + beta . D_static)) and g_gravity = 1 / sqrt(1 - r_s / r_obs). The hue is shifted by
     g_hue = g_motion^[doppler_colour] g_gravity^[gravity], the brightness by g_bright (beaming in place of
-    doppler_colour): T = core.spectrum.shifted_matrices(ln g_hue, ln g_bright). Texels: A = (T00, T10,
-    T20, s), B = (T01, T11, T21, 1): T's first two columns and s = g_bright^5 (each row of T sums to s,
-    which gives the third column)."""
+    doppler_colour): T = core.spectrum.shifted_matrices(ln g_hue, ln g_bright). Table i holds row i of
+    T in its colour channels (alpha 1)."""
     from ..core import spectrum
 
     c = np.linspace(-1.0, 1.0, SHIFT_SIZE)
@@ -420,12 +394,9 @@ def sky_shift_pixels(beta: float, r_obs: float, doppler_colour=True, beaming=Tru
     ln_hue = ln_motion * float(doppler_colour) + ln_grav
     ln_bright = ln_motion * float(beaming) + ln_grav
     t = spectrum.shifted_matrices(ln_hue, ln_bright)
-    px = np.empty((2, SHIFT_SIZE, 4), np.float32)
-    px[0, :, :3] = t[:, :, 0]
-    px[0, :, 3] = np.exp(5.0 * ln_bright)
-    px[1, :, :3] = t[:, :, 1]
-    px[1, :, 3] = 1.0
-    return px.reshape(2, -1)
+    px = np.ones((3, SHIFT_SIZE, 4), np.float32)
+    px[:, :, :3] = np.swapaxes(t, 0, 1)
+    return px.reshape(3, -1)
 
 
 def write_shift_table(group, beta: float, r_obs: float, switches) -> bool:
