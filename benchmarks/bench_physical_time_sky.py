@@ -15,7 +15,8 @@ Prints
   default importance map (whose bake evaluates the world shader once per map texel), best of 3;
 * a realistic scene: the ``orbit`` sample scene (sample_scenes/orbit.py: a camera on the circular orbit
   at 6 r_s, 0.32 c, looking at the thin disc and the sphere in front of the procedural star field) at
-  frame 1, 320x180, 16 samples: the render with the sky as the moving camera sees it (inverse
+  frame 1, 320x180, 16 samples (adaptive sampling off, here and above: every case takes all its
+  samples): the render with the sky as the moving camera sees it (inverse
   aberration and colour shift) against the same image meshes under the sky of a camera at rest
   (grlens' handlers detached so that the meshes stay; the world's aberration and shift unlinked),
   alternated, best of 5.
@@ -100,6 +101,7 @@ def renders(repeats=5, sky="noise", sampling="NONE"):
     Blender's default, its map evaluates the world shader too)."""
     scene, cam = bench_sky.scene_with_sky(sky=sky)
     scene.world.cycles.sampling_method = sampling
+    scene.cycles.use_adaptive_sampling = False  # every case takes all its samples (the pictures differ a little)
     cam.animation_data_clear()
     cam.location = (40.0, 0.5, 0.5)
     cam.keyframe_insert("location", frame=1)
@@ -135,6 +137,7 @@ def realistic(repeats=5):
     r.engine = "CYCLES"
     r.resolution_x, r.resolution_y, r.resolution_percentage = 320, 180, 100
     scene.cycles.samples = 16
+    scene.cycles.use_adaptive_sampling = False  # the two skies differ: adaptive sampling would stop at other counts
     scene.cycles.use_denoising = False
     scene.cycles.device = "CPU"
     status = scene.grlens.world_status
@@ -235,6 +238,7 @@ def _moving_scene(samples=16, threads=0):
     scene, cam = bench_sky.scene_with_sky()
     scene.world.cycles.sampling_method = "NONE"
     scene.cycles.samples = samples
+    scene.cycles.use_adaptive_sampling = False
     if threads:
         scene.render.threads_mode = "FIXED"
         scene.render.threads = threads
