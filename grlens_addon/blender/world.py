@@ -907,8 +907,8 @@ SKY_SWITCHES = ("use_doppler_colour", "use_beaming", "use_gravitational_shift")
 
 def _hook_sky_shift(world, group_node, on: bool) -> None:
     """With ``on`` (physical time, a colour switch on), every Background node of the user's tree takes
-    its colour through a "grlens Shift by g" node (marked ``grlens_own == "sky shift"``) fed by the sky
-    group's ln g outputs, its Color input recorded as the lensed world records inputs (so
+    its colour through a group node of the world's sky-shift group (:func:`_build_shift_group`, marked
+    ``grlens_own == "sky shift"``) fed by the lensed-sky group's ``Doppler cos``, its Color input recorded as the lensed world records inputs (so
     :func:`restore` puts it back); without, those nodes are taken out again and the colours relinked.
     An unlinked colour is copied into the shift node (again whenever it changes)."""
     tree = world.node_tree
