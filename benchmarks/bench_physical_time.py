@@ -281,7 +281,7 @@ def main(out_path):
         "## Saturated colours", "",
         "A shifted colour is M(g) rgb (core.spectrum): the colour of the smoothest spectrum of rgb, shifted. A "
         "saturated colour's smoothest spectrum dips below zero, so its shift can leave the gamut: a channel "
-        "becomes negative. \"grlens Shift by g\" (surfaces and the sky) clips negative channels to 0 and leaves "
+        "becomes negative. \"grlens Shift by g\" (surfaces) and the sky's shift group clip negative channels to 0 and leave "
         "the others as they are; channels above 1 are kept (scene-linear light, for the view transform). The "
         "choice: a renderer cannot emit negative light, and clipping one channel keeps the hue of the others, "
         "where pulling the colour towards grey at equal luminance would wash every channel out; the price is "
