@@ -1047,12 +1047,15 @@ class RayMap:
            them (f changes sign once along the rays ordered by xi, over all segments: such a change
            is the root's);
         2. elsewhere its segment (the first whose end towards larger xi has f >= 0), then a search
-           over the segment's rows (K-section, SEARCH_BUDGET; from what the window showed when the
-           seed's segment was that one), or the last row and the far end, pi/2, bracket it;
+           over the segment's rows (K-section, SEARCH_BUDGET; when the seed's segment was that one, a
+           first pass of rows PROBE_STEPS beyond the window's side), or the last row and the far end,
+           pi/2, bracket it;
         3. between two rows, the cubic through f on four rows gives a start and a slope; a Newton step
            with them and the bicubic interpolation ends where it is shorter than NEWTON_DONE, else
-           secant steps converge (d = |xi - crit| to TOL_D); in the end intervals, and where the
-           secant steps do not converge, the Anderson-Bjorck variant of regula falsi in d does."""
+           secant steps converge (d = |xi - crit| to TOL_D); in the end intervals next to the ray
+           tangent at the observer the start and slope come from the cubic in d through f on the
+           segment's last three rows and on that ray (:func:`_cubic_root_nodes`); where the secant
+           steps do not converge, the Anderson-Bjorck variant of regula falsi in d does."""
         n = r.size
         u = 1.0 / r
         sweep = np.where(order == 1, phi, 2.0 * math.pi - phi)
