@@ -97,6 +97,74 @@ def test_closed_volume_from_shared_normals():
         assert visibility.is_closed_outward(pts, t) is want and given is want
 
 
+def test_block_passes_are_the_plain_arithmetic_to_the_bit(monkeypatch):
+    """The dense passes in blocks (frame.edge_lengths, visibility's normals and back-face masks) give
+    exactly what the plain whole-array arithmetic gives (observer_view.chord_length, silhouette.normals,
+    the corner-by-corner n . d test), NaN and degenerate triangles included, whatever the block size;
+    their checkpoint is called between blocks."""
+    from grlens_addon.core import frame as F
+    from grlens_addon.core import observer_view
+
+    rng = np.random.default_rng(5)
+    pts = rng.normal(size=(3000, 3)) * 4.0
+    pts[7] = np.nan
+    tris = rng.integers(0, len(pts), (9000, 3))
+    tris[:5, 1] = tris[:5, 0]  # degenerate
+    d = rng.normal(size=(len(pts), 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    d[11] = np.nan
+    ev = rng.integers(0, len(pts), (7000, 2))
+    for block in (1000, 1 << 15):
+        monkeypatch.setattr(F, "EDGE_BLOCK", block)
+        monkeypatch.setattr(visibility, "TRI_BLOCK", block)
+        calls = []
+        chord, length = F.edge_lengths([d, pts], ev, lambda: calls.append(1))
+        assert len(calls) == (len(ev) - 1) // block
+        np.testing.assert_array_equal(chord, observer_view.chord_length(d[ev[:, 1]], d[ev[:, 0]]))
+        assert np.array_equal(length, observer_view.row_norm(pts[ev[:, 1]] - pts[ev[:, 0]]), equal_nan=True)
+        raw, unit = visibility._normals_in_blocks(pts, tris, lambda: calls.append(2))
+        want = visibility.silhouette.normals(pts, tris)
+        assert np.array_equal(raw, want, equal_nan=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            want_unit = want / observer_view.row_norm(want)[:, None]
+        assert np.array_equal(unit, want_unit, equal_nan=True)
+        away = visibility._away_in_blocks(unit, tris, d)
+        with np.errstate(invalid="ignore"):
+            dots = np.stack([np.einsum("fx,fx->f", unit, d[tris[:, k]]) for k in range(3)], axis=1)
+        np.testing.assert_array_equal(away, (dots < -visibility.B.BACK_FACE_MARGIN).all(axis=1))
+        assert 0 < away.sum() < len(tris)
+
+
+def test_cleaning_shortcuts_keep_what_the_full_tests_keep():
+    """frame.clean_source's shortcuts (every index in range, every coordinate finite: two reductions)
+    drop exactly the triangles the full per-corner tests drop, and the edges kept per topology are
+    found again for an equal index array only."""
+    from grlens_addon.core import frame as F
+
+    pts, tris = uv_sphere(24, 12, 1.0)
+    for bad_pts, bad_tris, n_bad in ((None, None, 0), ({3: np.inf}, None, 6), (None, {(4, 1): -1}, 1),
+                                     (None, {(5, 2): len(pts)}, 1), ({0: np.nan}, {(6, 0): len(pts) + 3}, 25)):
+        p, t = pts.copy(), tris.copy()
+        for i, v in (bad_pts or {}).items():
+            p[i, 0] = v
+        for (i, k), v in (bad_tris or {}).items():
+            t[i, k] = v
+        cleaned, dropped = F.clean_source(pipeline.SourceMesh(p, t, np.zeros((len(t), 3, 2))))
+        ok = np.array([all(0 <= v < len(p) for v in row) and len(set(row)) == 3
+                       and all(np.isfinite(p[v]).all() for v in row) for row in t])
+        assert dropped == int((~ok).sum()) and (dropped > 0) == (n_bad > 0), (bad_pts, bad_tris)
+        np.testing.assert_array_equal(cleaned.tris, t[ok])
+    uv = np.zeros((len(tris), 3, 2))
+    uv[2, 1, 0] = np.nan
+    cleaned, _ = F.clean_source(pipeline.SourceMesh(pts, tris, uv))
+    assert np.isfinite(cleaned.corner_uv).all() and cleaned.corner_uv[2, 1, 0] == 0.0
+    a = F._edges_of(tris)
+    assert F._edges_of(tris.copy()) is a
+    other = tris.copy()
+    other[0] = other[0, ::-1]
+    assert F._edges_of(other) is not a
+
+
 def test_image_edges_upload_into_a_valid_blender_mesh(table):
     """The edges written by upload.upload are a valid mesh for Blender (validate() changes nothing)
     and the ones Blender finds itself."""

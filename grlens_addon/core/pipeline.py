@@ -93,13 +93,21 @@ class _Steps:
         self.total = sum(v for k, v in w.items() if k not in self.PER_ORDER) + n_orders * sum(
             w[k] for k in self.PER_ORDER)
         self.done = 0.0
+        self.stage = ""
 
     def __call__(self, stage: str) -> None:
         """Before ``stage``: report the fraction done and check for cancellation; count its share."""
         if self.progress is None:
             return
+        self.stage = stage
         self.progress(stage, min(self.done / self.total, 1.0))
         self.done += STAGE_WEIGHTS.get(stage, 0.0)
+
+    def inside(self) -> None:
+        """A cancellation point inside the stage running (Frame.checkpoint: between the blocks or
+        passes of a long stage); the fraction stays."""
+        if self.progress is not None:
+            self.check(self.stage)
 
     def check(self, stage: str) -> None:
         """A cancellation point inside a stage's share (the fraction stays)."""
@@ -129,6 +137,8 @@ def build_images(src: SourceMesh, scene: Scene, lut, settings: Settings, light: 
     returned then, and nothing the caller holds has changed (the stages build new arrays)."""
     frame = frame_context(scene, lut, settings, light, frustum_planes)
     steps = _Steps(progress, len(frame.orders))
+    if progress is not None:
+        frame.check = steps.inside  # cancellation inside long stages too (Frame.checkpoint)
     st = run_stages(frame, src, steps)
     if st.source.empty:
         steps.finish()
