@@ -104,9 +104,15 @@ def timed_build(run):
     t0 = time.perf_counter()
     out = pipeline.build_images(src, scene, lut, settings, None, planes, progress=pipeline.Progress(hook))
     t1 = time.perf_counter()
-    stages = {}
-    for (ta, name, _), (tb, _, _) in zip(marks, marks[1:]):
-        stages[name] = stages.get(name, 0.0) + tb - ta
+    stages = {}  # (stage, occurrence: the order's pass for per-order stages) -> s
+    seen = {}
+    last = None
+    for (ta, name, fr), (tb, _, _) in zip(marks, marks[1:]):
+        if (name, fr) != last:  # (checkpoints inside a stage repeat its name and fraction)
+            seen[name] = seen.get(name, 0) + 1
+        last = (name, fr)
+        key = (name, seen[name])
+        stages[key] = stages.get(key, 0.0) + tb - ta
     off = max(abs(fr - (t - t0) / (t1 - t0)) for t, _, fr in marks)
     return out, t1 - t0, stages, off
 
@@ -138,17 +144,18 @@ def main(argv=None):
         best = min(rows, key=lambda r: r[1])
         out = best[0]
         tris = " / ".join(f"{len(out[o].tris):,}" for o in sorted(out))
-        print(f"frame {run[0]}: build_images median {np.median([r[1] for r in rows]):.3f} s, best {best[1]:.3f} s; "
-              f"image triangles {tris}; progress vs time, largest difference {100 * best[3]:.0f} %")
-        total = best[1]
-        print("| stage | best run [s] | share | STAGE_WEIGHTS share |")
+        total = float(np.median([r[1] for r in rows]))
+        print(f"frame {run[0]}: build_images median {total:.3f} s, best {best[1]:.3f} s; image triangles {tris}; "
+              f"progress vs time, largest difference {100 * np.median([r[3] for r in rows]):.0f} % (median)")
+        print("| stage (pass) | median [s] | share of the median build | STAGE_WEIGHTS share |")
         print("|---|---|---|---|")
         from grlens_addon.core import pipeline
 
         steps = pipeline._Steps(None, len(out))
-        for name, t in best[2].items():
-            w = pipeline.STAGE_WEIGHTS.get(name, 0.0) * (len(out) if name in steps.PER_ORDER else 1) / steps.total
-            print(f"| {name} | {t:.3f} | {100 * t / total:.0f} % | {100 * w:.0f} % |")
+        for key in rows[0][2]:
+            t = float(np.median([r[2].get(key, 0.0) for r in rows]))
+            w = pipeline.STAGE_WEIGHTS.get(key[0], 0.0) / steps.total
+            print(f"| {key[0]} ({key[1]}) | {t:.3f} | {100 * t / total:.1f} % | {100 * w:.1f} % |")
         for o, img in out.items():
             for k, v in vars(img).items():
                 if isinstance(v, np.ndarray):

@@ -118,11 +118,11 @@ def test_block_passes_are_the_plain_arithmetic_to_the_bit(monkeypatch):
         monkeypatch.setattr(F, "EDGE_BLOCK", block)
         monkeypatch.setattr(visibility, "TRI_BLOCK", block)
         calls = []
-        chord, length = F.edge_lengths([d, pts], ev, lambda: calls.append(1))
+        chord, length = F.edge_lengths([d, pts], ev, lambda q: calls.append(q))
         assert len(calls) == (len(ev) - 1) // block
         np.testing.assert_array_equal(chord, observer_view.chord_length(d[ev[:, 1]], d[ev[:, 0]]))
         assert np.array_equal(length, observer_view.row_norm(pts[ev[:, 1]] - pts[ev[:, 0]]), equal_nan=True)
-        raw, unit = visibility._normals_in_blocks(pts, tris, lambda: calls.append(2))
+        raw, unit = visibility._normals_in_blocks(pts, tris, lambda q: calls.append(q))
         want = visibility.silhouette.normals(pts, tris)
         assert np.array_equal(raw, want, equal_nan=True)
         with np.errstate(invalid="ignore", divide="ignore"):

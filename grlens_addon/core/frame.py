@@ -109,11 +109,12 @@ class Frame:
     light: Light | None = None
     check: object = field(default=None, repr=False)
 
-    def checkpoint(self) -> None:
+    def checkpoint(self, part: float | None = None) -> None:
         """A cancellation point inside a stage: calls ``check`` (set by pipeline.build_images: the build's
-        progress, which raises pipeline.Cancelled once the build was cancelled), if any."""
+        progress, which raises pipeline.Cancelled once the build was cancelled), if any, with ``part``
+        (0 to 1: about how far through the stage its work is; None: not known)."""
         if self.check is not None:
-            self.check()
+            self.check(part)
 
     @property
     def orders(self) -> tuple:
@@ -192,11 +193,11 @@ def prepare_source(frame: Frame, src: SourceMesh, origin=None, n_bad: int = 0) -
     out.edges = _edges_of(mesh.tris)
     out.plane = mapping.plane_coordinates(mesh.positions, scene)
     out.axis_xyz = observer_view.axis_coordinates(mesh.positions, scene.camera, scene.hole)
-    frame.checkpoint()
+    frame.checkpoint(0.5)
     # one pass over the edges for two measures: the chords of the undistorted view and the lengths (BU)
     chord, out.edge_length = edge_lengths(
         [observer_view.unit_directions(mesh.positions, scene.camera, scene.view_beta), mesh.positions],
-        out.edges.verts, frame.checkpoint)
+        out.edges.verts, lambda q: frame.checkpoint(0.5 + 0.35 * q))
     out.circumference = circumference_from_edges(chord, out.edges.of_tri)
     out.near_axis = observer_view.near_axis(mesh.positions, mesh.tris, scene.camera, scene.hole, axis_xyz=out.axis_xyz)
     return out
@@ -294,7 +295,7 @@ def edge_lengths(columns, edge_verts, checkpoint=None) -> list:
     of each edge's end points (``edge_verts`` (E, 2)), as :func:`chord_lengths` (the same arithmetic:
     |v[b] - v[a]| by observer_view.chord_length), for all arrays in one pass over the edges: the end
     points' rows of every array are gathered together, in blocks of EDGE_BLOCK edges. ``checkpoint``:
-    None, or called between blocks (it may raise to stop)."""
+    None, or called between blocks with the fraction of the edges done (it may raise to stop)."""
     k = len(columns)
     stacked = np.concatenate([np.asarray(c, np.float64).reshape(-1, 3) for c in columns], axis=1) if k > 1 else \
         np.asarray(columns[0], np.float64).reshape(-1, 3)
@@ -303,7 +304,7 @@ def edge_lengths(columns, edge_verts, checkpoint=None) -> list:
     a_idx, b_idx = edge_verts[:, 0], edge_verts[:, 1]
     for s in range(0, n_e, EDGE_BLOCK):
         if checkpoint is not None and s:
-            checkpoint()
+            checkpoint(s / n_e)
         e = min(s + EDGE_BLOCK, n_e)
         w = stacked.take(b_idx[s:e], axis=0)
         w -= stacked.take(a_idx[s:e], axis=0)
@@ -344,8 +345,8 @@ def map_source(frame: Frame, source: Source) -> SourceImages:
     tangents when pieces are measured on screen (visibility needs the directions in which the rays
     leave the vertices: one lookup for both)."""
     images = frame.map.images(source.positions, frame.orders, source.plane, tangents=frame.budget.active)
-    frame.checkpoint()
+    frame.checkpoint(0.75)  # (the table's lookups are about three quarters of the stage)
     chord = dict(zip(frame.orders, edge_lengths([images[o].direction for o in frame.orders], source.edges.verts,
-                                                 frame.checkpoint)))
+                                                 lambda q: frame.checkpoint(0.75 + 0.2 * q))))
     circ = {o: circumference_from_edges(chord[o], source.edges.of_tri) for o in frame.orders}
     return SourceImages(images, chord, circ, frame.scene)

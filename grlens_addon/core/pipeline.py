@@ -44,14 +44,16 @@ class Cancelled(Exception):
     returns nothing, so no partial image exists."""
 
 
-STAGE_WEIGHTS = {"prepare": 0.18, "map": 0.25, "visibility": 0.02, "patches": 0.01, "probes": 0.08,
-                 "plan": 0.15, "cut": 0.03, "cull": 0.04, "refine": 0.03, "assemble": 0.02}
+STAGE_WEIGHTS = {"prepare": 0.07, "map": 0.20, "visibility": 0.01, "patches": 0.005, "probes": 0.12,
+                 "plan": 0.175, "cut": 0.01, "cull": 0.015, "refine": 0.005, "assemble": 0.075}
 """Share of a build's time each stage takes (per order for plan, cut, cull, refine and assemble), for
-the progress fractions: about the shares measured on closed UV spheres of 200k and 1M triangles
-beside the hole at 1920x1080, both orders, to the viewport's tolerance (the shares move with the
-view and the tolerance: benchmarks/bench_background.py prints how far the fraction strays from the
-time). Only the fractions' spacing depends on them; the first split beside the axis (when there is
-one) runs map and visibility again within their shares."""
+the progress fractions: about the mean of the median shares measured on closed UV spheres of 200k and
+1M triangles beside the hole at 1920x1080, both orders, to the viewport's tolerance
+(benchmarks/profile_dense.py --preview prints them; the shares move with the view, the tolerance and
+the mesh: probes take a quarter of the 200k sphere's build and 1 % of the 1M one's;
+benchmarks/bench_background.py prints how far the fraction strays from the time). Only the
+fractions' spacing depends on them; the first split beside the axis (when there is one) runs map and
+visibility again within their shares."""
 
 
 class Progress:
@@ -92,22 +94,24 @@ class _Steps:
         w = STAGE_WEIGHTS
         self.total = sum(v for k, v in w.items() if k not in self.PER_ORDER) + n_orders * sum(
             w[k] for k in self.PER_ORDER)
-        self.done = 0.0
+        self.done = self.start = 0.0
         self.stage = ""
 
     def __call__(self, stage: str) -> None:
         """Before ``stage``: report the fraction done and check for cancellation; count its share."""
         if self.progress is None:
             return
-        self.stage = stage
+        self.stage, self.start = stage, self.done
         self.progress(stage, min(self.done / self.total, 1.0))
         self.done += STAGE_WEIGHTS.get(stage, 0.0)
 
-    def inside(self) -> None:
+    def inside(self, part: float | None = None) -> None:
         """A cancellation point inside the stage running (Frame.checkpoint: between the blocks or
-        passes of a long stage); the fraction stays."""
+        passes of a long stage), reporting the fraction at the stage's start, or ``part`` (0 to 1) of
+        the way through its share."""
         if self.progress is not None:
-            self.check(self.stage)
+            part = 0.0 if part is None else min(max(float(part), 0.0), 1.0)
+            self.progress(self.stage, min((self.start + part * (self.done - self.start)) / self.total, 1.0))
 
     def check(self, stage: str) -> None:
         """A cancellation point inside a stage's share (the fraction stays)."""

@@ -47,7 +47,7 @@ class Sight:
         winding; silhouette.normals), once: the closed surface's volume and the back faces share them."""
         if self._raw is None:
             self._raw, self._normals = _normals_in_blocks(self.source.positions, self.source.tris,
-                                                          self.frame.checkpoint)
+                                                          lambda q: self.frame.checkpoint())
         return self._raw
 
     def leaving(self, vertices, order) -> np.ndarray:
@@ -78,7 +78,8 @@ class Sight:
             for o in orders:
                 if o not in self._away:
                     self.leaving(np.zeros(0, np.int64), o)
-                    self._away[o] = _away_in_blocks(self._normals, src.tris, self._d[o], self.frame.checkpoint)
+                    self._away[o] = _away_in_blocks(self._normals, src.tris, self._d[o],
+                                                    lambda q: self.frame.checkpoint())
                 a = self._away[o].take(tri_idx)
                 away = a if away is None else away & a
             return away if away is not None else np.zeros(len(tri_idx), bool)
@@ -194,12 +195,12 @@ def _normals_in_blocks(points, tris, checkpoint=None):
     """((T, 3) geometric normals (p1 - p0) x (p2 - p0) (BU^2; silhouette.normals), (T, 3) the same
     normalised (NaN for a degenerate triangle)) of the triangles ``tris`` of ``points``, in one pass
     over blocks of TRI_BLOCK triangles (the corners gathered once per block). ``checkpoint``: None, or
-    called between blocks."""
+    called between blocks with the fraction of the triangles done."""
     n_t = len(tris)
     raw, unit = np.empty((n_t, 3)), np.empty((n_t, 3))
     for s in range(0, n_t, TRI_BLOCK):
         if checkpoint is not None and s:
-            checkpoint()
+            checkpoint(s / n_t)
         e = min(s + TRI_BLOCK, n_t)
         raw[s:e] = silhouette.normals(points, tris[s:e])
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -211,17 +212,19 @@ def _away_in_blocks(unit_normals, tris, directions, checkpoint=None) -> np.ndarr
     """(T,) bool: the triangles ``tris`` whose unit normals ``unit_normals`` (T, 3) are turned away
     from the unit leaving ``directions`` (N, 3) of all three corners by more than BACK_FACE_MARGIN
     (n . d < -margin; NaN, no ray: not turned away), in blocks of TRI_BLOCK triangles. ``checkpoint``:
-    None, or called between blocks."""
+    None, or called between blocks with the fraction of the triangles done."""
     n_t = len(tris)
     away = np.empty(n_t, bool)
     for s in range(0, n_t, TRI_BLOCK):
         if checkpoint is not None and s:
-            checkpoint()
+            checkpoint(s / n_t)
         e = min(s + TRI_BLOCK, n_t)
-        d = directions.take(tris[s:e], axis=0)  # (b, 3 corners, 3)
+        n, t = unit_normals[s:e], tris[s:e]
         with np.errstate(invalid="ignore"):
-            dots = np.einsum("fx,fcx->fc", unit_normals[s:e], d)
-        np.all(dots < -B.BACK_FACE_MARGIN, axis=1, out=away[s:e])
+            a = np.einsum("fx,fx->f", n, directions.take(t[:, 0], axis=0)) < -B.BACK_FACE_MARGIN
+            for k in (1, 2):
+                a &= np.einsum("fx,fx->f", n, directions.take(t[:, k], axis=0)) < -B.BACK_FACE_MARGIN
+        away[s:e] = a
     return away
 
 
