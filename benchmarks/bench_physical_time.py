@@ -15,14 +15,13 @@ inwards ("in", radial part reversed).
   rest; and per image triangle and per covered pixel (the reference's pixels of both orders), so
   that what a moving camera costs for being in motion shows apart from what it costs for showing
   more (a magnified view has more pixels, so more pieces).
-* An exactness step for 1 + z (the direction solved exactly for the final image vertices): the cost
-  of lutgen.connect (the exact solver) on the moving camera's image vertices, and of one evaluation
-  of the closed-form swept angle for as many rays (lutgen.orbit.orbit_from_b and sweep at both ends),
-  against the frame: a Newton step on xi needs at least the branch test, the angle and its
-  derivative, i.e. three or more such evaluations.
+* Exact 1 + z (pipeline Settings.exact_redshift: each kept vertex's direction refined to its exact
+  connecting ray, lutgen.solver.refine_xi): its 1 + z error, and the frame's cost with it, over the
+  same moving frame without it and over the camera at rest.
 
 Usage: ./dev python benchmarks/bench_physical_time.py [output.md]   (default docs/physical_time.md)
 """
+import dataclasses
 import math
 import os
 import sys
@@ -39,7 +38,6 @@ import bench_accuracy as BA  # noqa: E402
 from provenance import code_version  # noqa: E402
 from grlens_addon.core import budget, frame_check, mapping, observer_view, pipeline, raytrace, spectrum  # noqa: E402
 from lutgen import LUTFamily, connect  # noqa: E402
-from lutgen import orbit as lut_orbit  # noqa: E402
 
 R_OBS = 20.0
 CAM = raytrace.Camera.look_at([R_OBS, 0.0, 0.0], [0.0, 0.0, 0.0], math.radians(100), 480, 270)
@@ -86,24 +84,6 @@ def _best(fn, n=5):
         fn()
         out.append(time.perf_counter() - t0)
     return min(out)
-
-
-def _exactness_cost(images, scene):
-    """(vertices, s for lutgen.connect on the image vertices, s for one closed-form swept angle per
-    vertex's ray: orbit_from_b and the sweep at the observer's and the vertex's radius)."""
-    planes = {o: mapping.plane_coordinates(img.source_position, scene) for o, img in images.items()}
-    n = sum(len(p.r) for p in planes.values())
-    t_connect = _best(lambda: [connect(R_OBS, p.r, p.phi, o) for o, p in planes.items()], 3)
-    b = np.concatenate([connect(R_OBS, p.r, p.phi, o).b for o, p in planes.items()])
-    u = 1.0 / np.concatenate([p.r for p in planes.values()])
-    ok = np.isfinite(b) & (b > 0)
-    b, u = b[ok], u[ok]
-
-    def one_sweep():
-        orb = lut_orbit.orbit_from_b(b)
-        return lut_orbit.sweep(orb, u) - lut_orbit.sweep(orb, np.full(len(u), 1.0 / R_OBS))
-
-    return n, t_connect, _best(one_sweep) * n / max(len(b), 1)
 
 
 ANGLES = (45, 170, 179, 180)
@@ -185,12 +165,15 @@ def _reading(st, tol):
              "the table's direction error (about 1.6e-7 rad here) times beta; given a direction the formula is exact "
              "to rounding (tests/test_moving_observer.py). On the Einstein rings' vertices it is within "
              f"{span([v['zon'] for v in st.values()], '{:.1e}')}: they are drawn off the ring by the chord outset "
-             "that makes the ring's polygon cross it, and shifted as drawn. 1e-9 is not reached: an exactness "
-             "step (a Newton step on xi for the final image vertices) needs the branch test, the swept angle and its "
-             "derivative, each at least one closed-form swept angle per vertex, "
-             f"{span([v['sweep'] for v in st.values()])} "
-             f"of a frame here, and the exact solver costs {span([v['conn'] for v in st.values()])} frames: against a "
-             "moving frame's budget of 1.2 resting frames it is not taken.")
+             "that makes the ring's polygon cross it, and shifted as drawn. With `Settings.exact_redshift` (the core's "
+             "option; the add-on leaves it off: Blender stores the attribute in float32, whose rounding, 6e-8, is "
+             "that error's size) every kept vertex's direction is first refined to its exact connecting ray (a secant "
+             "iteration on the closed-form swept angle from the table's guess, two to three evaluations per vertex), "
+             f"and 1 + z is within {span([v['zexact'] for v in st.values()], '{:.1e}')} "
+             f"(on the rings {span([v['zexact_ring'] for v in st.values()], '{:.1e}')}: each drawn ring vertex keeps "
+             "its azimuth and goes back onto the ring), for "
+             f"{span([v['exact_over_out'] for v in st.values()])} times the moving frame without it "
+             f"({span([v['exact_over_rest'] for v in st.values()])} times the camera at rest's).")
     if over:
         text += (" Next to the Einstein ring single pixels of the moving cameras' images are placed beyond the "
                  f"{tol:g} px tolerance (" + "; ".join(f"{a} degrees: out {v['out']:.2f} px, in {v['in']:.2f} px, "
@@ -205,6 +188,7 @@ def main(out_path):
     warnings.simplefilter("ignore", RuntimeWarning)
     table = LUTFamily().at(R_OBS)
     settings = BA.make_settings(CAM)
+    exact_settings = dataclasses.replace(settings, exact_redshift=True)
     rows, cost, exact, st = [], [], [], {}
     for angle in ANGLES:
         src = BA.sphere_scene(angle)[0]
@@ -229,29 +213,34 @@ def main(out_path):
                 cells += [f"{m['covered_ref']}", f"{m['mismatch']}", f"{sp.get('p99', float('nan')):.3f}",
                           f"{sp.get('max', float('nan')):.3f}"]
             rows.append(f"| {angle} | {name} | " + " | ".join(cells) + f" | {z99:.1e} | {zmax:.1e} | {zring:.1e} |")
-        runs = {name: [] for name in CAMERAS}
-        for _ in range(REPEATS):  # the three cameras in turn, so that a busy moment of the machine hits all
-            for name, scene in scenes.items():
+        exact_z = [_redshift_error(pipeline.build_images(src, scenes[n], table, exact_settings, None,
+                                                         CAM.frustum_planes()), scenes[n]) for n in ("out", "in")]
+        runs = {name: [] for name in (*CAMERAS, "out exact")}
+        for _ in range(REPEATS):  # the cameras in turn, so that a busy moment of the machine hits all
+            for name, scene in (*scenes.items(), ("out exact", scenes["out"])):
                 t0 = time.perf_counter()
-                pipeline.build_images(src, scene, table, settings, None, CAM.frustum_planes())
+                pipeline.build_images(src, scene, table, exact_settings if name == "out exact" else settings, None,
+                                      CAM.frustum_planes())
                 runs[name].append(time.perf_counter() - t0)
         times = {name: float(np.min(r)) for name, r in runs.items()}
-        per_tri = {n: times[n] / tris[n] for n in times}
-        per_px = {n: times[n] / pixels[n] for n in times}
+        per_tri = {n: times[n] / tris[n] for n in CAMERAS}
+        per_px = {n: times[n] / pixels[n] for n in CAMERAS}
         cost.append(f"| {angle} | {1e3 * times['at rest']:.1f} | {1e3 * times['out']:.1f} | {1e3 * times['in']:.1f} | "
                     f"{max(times['out'], times['in']) / times['at rest']:.2f} | "
                     f"{tris['at rest']} / {tris['out']} / {tris['in']} | "
                     f"{per_tri['out'] / per_tri['at rest']:.2f} / {per_tri['in'] / per_tri['at rest']:.2f} | "
                     f"{pixels['at rest']} / {pixels['out']} / {pixels['in']} | "
                     f"{per_px['out'] / per_px['at rest']:.2f} / {per_px['in'] / per_px['at rest']:.2f} |")
-        n, t_conn, t_sweep = _exactness_cost(out_images, scenes["out"])
-        exact.append(f"| {angle} | {n} | {1e3 * times['out']:.1f} | "
-                     f"{1e3 * t_conn:.1f} ({t_conn / times['out']:.2f}x) | "
-                     f"{1e3 * t_sweep:.2f} ({t_sweep / times['out']:.2f}x) |")
+        n = sum(len(img.positions) for img in out_images.values())
+        t_ex = times["out exact"]
+        exact.append(f"| {angle} | {n} | {1e3 * times['out']:.1f} | {1e3 * t_ex:.1f} | {t_ex / times['out']:.2f} | "
+                     f"{t_ex / times['at rest']:.2f} | {max(z[1] for z in exact_z):.1e} | "
+                     f"{np.nanmax([z[2] for z in exact_z]):.1e} |")
         st[angle] = dict(ratio=max(times["out"], times["in"]) / times["at rest"], tris=tris,
                          per_tri=(per_tri["out"] / per_tri["at rest"], per_tri["in"] / per_tri["at rest"]),
-                         zoff=np.nanmax(zoff), zon=np.nanmax(zon), conn=t_conn / times["out"],
-                         sweep=t_sweep / times["out"], screen=screen)
+                         zoff=np.nanmax(zoff), zon=np.nanmax(zon), exact_over_out=t_ex / times["out"],
+                         exact_over_rest=t_ex / times["at rest"], zexact=max(z[1] for z in exact_z),
+                         zexact_ring=np.nanmax([z[2] for z in exact_z]), screen=screen)
         print(rows[-3:], cost[-1], exact[-1], flush=True)
     band = _tighter_band(table, settings)
     text = "\n".join([
@@ -272,11 +261,12 @@ def main(out_path):
         "triangle, or per pixel, over the camera at rest's, out / in):", "",
         "| orbit angle (deg) | at rest | out | in | ratio per frame | image triangles | ratio per triangle | "
         "covered pixels | ratio per pixel |", "|---|---|---|---|---|---|---|---|---|", *cost, "",
-        "An exactness step for 1 + z, for the `out` camera's image vertices (ms, and over its frame): the exact "
-        "solver `lutgen.connect`, and one evaluation of the closed-form swept angle per vertex's ray (a Newton "
-        "step on xi needs the branch test, the angle and its derivative: three or more of these):", "",
-        "| orbit angle (deg) | image vertices | frame (ms) | lutgen.connect | one swept angle |",
-        "|---|---|---|---|---|", *exact, "",
+        "Exact 1 + z (`Settings.exact_redshift`: the kept vertices' directions refined to their exact connecting "
+        "rays, `lutgen.solver.refine_xi`), for the `out` camera: image vertices, its frame without and with it "
+        "(ms, best of the same runs), with it over without it and over the camera at rest, and the largest "
+        "relative error of 1 + z of both moving cameras with it, off the axis and on the Einstein rings:", "",
+        "| orbit angle (deg) | image vertices | frame (ms) | with exact 1 + z (ms) | over without | over at rest | "
+        "1+z max | 1+z max on the ring |", "|---|---|---|---|---|---|---|---|", *exact, "",
         _reading(st, settings.max_error_px), "",
         f"The same next to the ring with the band four times tighter (budget.PATCH_BAND_FACTOR = "
         f"{TIGHT_BAND:g} instead of {budget.PATCH_BAND_FACTOR:g}, for every camera; not the add-on's setting): "

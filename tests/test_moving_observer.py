@@ -177,3 +177,58 @@ def test_a_moving_cameras_axis_patch_is_sized_by_the_ring_it_sees(table):
         n = faces(beta)
         assert (scale < 1) == (sign < 0)
         assert n <= rest * max(1.0, 1.2 * scale) ** 2, (sign, n, rest, scale)
+
+
+@pytest.mark.parametrize("angle", [45, 170, 180])
+def test_exact_redshift_gives_1_plus_z_to_1e_9_with_exact_velocities(table, angle):
+    """Settings.exact_redshift: each image vertex's 1 + z from its exact connecting ray
+    (lutgen.solver.refine_xi) within 1e-9 relative of the exact value (the Lorentz matrix acting on
+    lutgen.connect's direction), Einstein-ring vertices included (180 degrees: their 1 + z is the
+    source point's own); the geometry is the same as without it. Without it the table's direction
+    error (about 1e-7 rad, times beta) shows."""
+    src = BA.sphere_scene(angle)[0]
+    moving = mapping.Scene(CAM.position, np.zeros(3), 1.0, beta=BETA)
+    settings = BA.make_settings(CAM)
+    plain = pipeline.build_images(src, moving, table, settings)
+    settings.exact_redshift = True
+    exact_imgs = pipeline.build_images(src, moving, table, settings)
+    worst_plain = 0.0
+    for order in (1, 2):
+        img = exact_imgs[order]
+        np.testing.assert_array_equal(img.positions, plain[order].positions)
+        np.testing.assert_array_equal(img.tris, plain[order].tris)
+        plane = mapping.plane_coordinates(img.source_position, moving)
+        # a point on the axis has a ring of images: a drawn ring vertex keeps its drawn azimuth
+        drawn = observer_view.unaberrate(_directions(img, moving), BETA)
+        e2_drawn = observer_view.ray_planes(drawn, moving.e1)[3] * (1.0 if order == 1 else -1.0)
+        on_axis = plane.r * np.sin(plane.phi) < 1e-6
+        e2 = np.where(on_axis[:, None], e2_drawn, plane.e2)
+        d_static = observer_view.view_directions(connect(R_OBS, plane.r, plane.phi, order).xi, e2, moving.e1,
+                                                 order)
+        e_moving = (np.column_stack([np.ones(len(d_static)), -d_static]) @ _boost(BETA).T)[:, 0]
+        r = np.linalg.norm(img.source_position, axis=1)
+        exact = np.sqrt((1 - 1 / R_OBS) / (1 - 1 / r)) / e_moving
+        np.testing.assert_allclose(img.redshift, exact, rtol=1e-9)
+        if angle == 180:
+            assert on_axis.sum() > 50  # the rings' vertices are checked too
+        worst_plain = max(worst_plain, np.max(np.abs(plain[order].redshift / exact - 1)))
+    assert worst_plain > 1e-9
+
+
+def test_exact_redshift_of_a_thin_disc_seen_by_a_moving_camera(table):
+    disc = frame.DiscEmitter(axis=np.array([0.0, 0.1, 1.0]))
+    a = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    pts = np.concatenate([np.column_stack([rr * np.cos(a), rr * np.sin(a), -0.1 * rr * np.sin(a)])
+                          for rr in np.linspace(3.2, 12, 12)])
+    moving = mapping.Scene(CAM.position, np.zeros(3), 1.0, beta=BETA)
+    mp = mapping.Mapper(moving, table)
+    for order in (1, 2):
+        img = mp.images(pts, (order,))[order]
+        ok = img.valid
+        got = assemble.image_redshift(moving, pts[ok], img.direction[ok], disc, exact_order=order)
+        conn = connect(R_OBS, img.plane.r[ok], img.plane.phi[ok], order)
+        d_static = observer_view.view_directions(conn.xi, img.plane.e2[ok], moving.e1, order)
+        static_z = thin_disc.vertex_redshift_from_direction(pts[ok], np.zeros(3), CAM.position, 1.0, disc.axis,
+                                                            d_static, disc.prograde)
+        e_moving = (np.column_stack([np.ones(ok.sum()), -d_static]) @ _boost(BETA).T)[:, 0]
+        np.testing.assert_allclose(got, static_z / e_moving, rtol=1e-9)

@@ -47,6 +47,7 @@ class Settings:
     pixel_angle: float | None = None  # radians per pixel on the view sphere (caps subdivision)
     max_error_px: float | None = 0.25  # the error budget's tolerance, pixels (with pixel_angle; see budget.py)
     max_triangles: int = 1_000_000  # image triangles of one object (all orders) the refine step may make
+    exact_redshift: bool = False  # 1 + z from exact connecting rays (to ~1e-12), not the table's (~1e-7 * beta)
 
 
 @dataclass

@@ -86,6 +86,28 @@ def place_images(xi, dt, e2, scene, order):
     return direction, distance, position, finite
 
 
+def exact_view_directions(directions, points, scene, order) -> np.ndarray:
+    """(N, 3) the static observer's unit ``directions`` (N, 3) of the images of ``order`` (1 or 2) of
+    the source ``points`` (N, 3; BU) of ``scene`` (camera, hole (3,; BU), r_s (BU), e1, r_obs (r_s)),
+    with their angle xi from e1 made exact: the table's interpolated xi (about 1e-7 rad off) refined to
+    the connecting ray's own (lutgen.solver.refine_xi, to about 1e-12 rad); each direction keeps its
+    azimuth about e1 (an Einstein ring's drawn vertices, set off the ring on purpose, go back onto it:
+    the point's own image). NaN rows stay NaN."""
+    d = np.asarray(directions, dtype=np.float64)
+    rel = (np.asarray(points, dtype=np.float64) - scene.hole) / scene.r_s
+    e1 = scene.e1
+    along = rel @ e1
+    r = row_norm(rel)
+    phi = np.arctan2(row_norm(rel - along[:, None] * e1), along)
+    xi_drawn, _, _, e2 = ray_planes(np.where(np.isfinite(d), d, e1), e1)
+    from lutgen.solver import refine_xi
+    xi = refine_xi(scene.r_obs, r, phi, order, xi_drawn)
+    # ray_planes' e2 is on the drawn direction's side: cos(xi) e1 + sin(xi) e2 for either order
+    out = np.cos(xi)[:, None] * e1 + np.sin(xi)[:, None] * e2
+    out[~np.isfinite(d).all(axis=1)] = np.nan
+    return out
+
+
 def ray_planes(directions, e1):
     """The inverse of :func:`view_directions` for rays leaving the observer in world ``directions``
     (M, 3; any length, normalised here): (xi (M,) radians from ``e1`` (3,), cos xi, sin xi (M,), e2
