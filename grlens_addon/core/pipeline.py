@@ -40,8 +40,9 @@ __all__ = ["SourceMesh", "Settings", "Light", "DiscEmitter", "ImageMesh", "clean
 
 
 class Cancelled(Exception):
-    """A build was stopped between two stages by its progress hook (:class:`Progress.cancel`); it
-    returns nothing, so no partial image exists."""
+    """A build was stopped by its progress hook (:class:`Progress.cancel`), between two stages or at a
+    checkpoint inside a long one (frame.Frame.checkpoint); it returns nothing, so no partial image
+    exists."""
 
 
 STAGE_WEIGHTS = {"prepare": 0.07, "map": 0.20, "visibility": 0.01, "patches": 0.005, "probes": 0.12,
@@ -61,8 +62,9 @@ class Progress:
     watches it (thread-safe: a lock-free read of two fields, a threading.Event).
 
     The core calls it between stages, ``progress(stage, fraction)`` with the stage about to run and
-    the fraction of the build done (0 to 1, never decreasing); it raises :class:`Cancelled` there once
-    :meth:`cancel` was called. ``callback(stage, fraction)``, if given, is called at each step too (in
+    the fraction of the build done (0 to 1, never decreasing), and inside long stages between the
+    blocks of their passes (the stage running, the fraction within its share); it raises
+    :class:`Cancelled` there once :meth:`cancel` was called. ``callback(stage, fraction)``, if given, is called at each step too (in
     the building thread)."""
 
     def __init__(self, callback=None):
@@ -137,7 +139,8 @@ def build_images(src: SourceMesh, scene: Scene, lut, settings: Settings, light: 
 
     ``progress``: None, or a callable ``progress(stage, fraction)`` (e.g. a :class:`Progress`) called
     before every stage with its name and the fraction of the build done (non-decreasing, 0 to 1;
-    ("done", 1.0) last); it may raise (:class:`Cancelled`) to stop the build there: nothing is
+    ("done", 1.0) last), and again inside long stages (the same name, a fraction within the stage's
+    share: Frame.checkpoint); it may raise (:class:`Cancelled`) to stop the build there: nothing is
     returned then, and nothing the caller holds has changed (the stages build new arrays)."""
     frame = frame_context(scene, lut, settings, light, frustum_planes)
     steps = _Steps(progress, len(frame.orders))
