@@ -201,3 +201,55 @@ def test_image_edges_upload_into_a_valid_blender_mesh(table):
         bpy.data.meshes.remove(theirs)
     finally:
         bpy.data.meshes.remove(me)
+
+
+def test_gather_reuses_what_it_derived_from_equal_arrays_only():
+    """gather.mesh_part reuses the triangle corners, UVs and normals it derived from a mesh whose
+    arrays are equal to those read just before (an object that only moves), and derives them again
+    (the same as a first read) as soon as positions, UVs or the topology differ; the world normals are
+    reused for the same local normals and the same linear part of the matrix only."""
+    bpy = pytest.importorskip("bpy")
+    import bmesh
+
+    from grlens_addon.blender import gather
+
+    me = bpy.data.meshes.new("gather reuse")
+    bm = bmesh.new()
+    bm.loops.layers.uv.new("UVMap")
+    bmesh.ops.create_uvsphere(bm, u_segments=16, v_segments=8, radius=1.0, calc_uvs=True)
+    bm.to_mesh(me)
+    bm.free()
+    try:
+        def fresh():
+            gather._KNOWN.clear()
+            return gather.mesh_part(me)
+
+        first = fresh()
+        again = gather.mesh_part(me)
+        assert again.tris is first.tris and again.corner_uv is first.corner_uv
+        assert again.corner_normals is first.corner_normals
+        me.vertices[20].co.x += 0.3  # a quad folded or not: the corners are derived again
+        moved = gather.mesh_part(me)
+        assert moved.tris is not first.tris
+        want = fresh()
+        np.testing.assert_array_equal(moved.tris, want.tris)
+        np.testing.assert_array_equal(moved.corner_normals, want.corner_normals)
+        me.uv_layers.active.uv[5].vector = (0.25, 0.75)
+        changed = gather.mesh_part(me)
+        assert changed.corner_uv is not want.corner_uv
+        np.testing.assert_array_equal(changed.corner_uv, fresh().corner_uv)
+        assert (changed.corner_uv == [0.25, 0.75]).all(axis=-1).any()
+        rot = np.array([[0.0, -2.0, 0.0], [2.0, 0.0, 0.0], [0.0, 0.0, 2.0]])
+        n1 = gather._world_normals(first.corner_normals, rot)
+        assert gather._world_normals(first.corner_normals, rot.copy()) is n1
+        n2 = gather._world_normals(first.corner_normals, np.diag([1.0, 2.0, 3.0]))
+        assert n2 is not n1
+        inv_t = np.linalg.inv(np.diag([1.0, 2.0, 3.0])).T
+        direct = first.corner_normals @ inv_t.T
+        direct /= np.linalg.norm(direct, axis=-1, keepdims=True)
+        np.testing.assert_allclose(n2, direct, atol=1e-15)
+        np.testing.assert_allclose(np.linalg.norm(n1, axis=-1), 1.0, atol=1e-15)
+    finally:
+        bpy.data.meshes.remove(me)
+        gather._KNOWN.clear()
+        gather._LAST_NORMALS.clear()

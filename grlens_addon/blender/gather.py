@@ -259,6 +259,33 @@ def _rows_times(a, m) -> np.ndarray:
     return (a.reshape(-1, 3) @ m).reshape(a.shape)
 
 
+_LAST_NORMALS: list = []
+"""[(local corner normals, linear part of the matrix (bytes), world normals)] of the last objects
+placed: an object that only moves (its matrix's linear part and its mesh's normals the same, the
+normals' array reused by mesh_part) keeps its world normals."""
+
+
+def _world_normals(local, lin) -> np.ndarray:
+    """Unit world corner normals of the ``local`` ones (T, 3, 3) under the linear part ``lin`` (3, 3)
+    of an object's matrix (not mirroring): by the inverse transpose, normalised (one factor for a
+    rotation and uniform scale); the last few results are kept (_LAST_NORMALS)."""
+    key = np.ascontiguousarray(lin, dtype=np.float64).tobytes()
+    for entry in _LAST_NORMALS:
+        if entry[0] is local and entry[1] == key:
+            return entry[2]
+    inv = _inverse(lin[None])[0]
+    gram = inv @ inv.T
+    scale = np.trace(gram) / 3.0
+    if scale > 0 and np.allclose(gram, scale * np.eye(3), rtol=0.0, atol=1e-9 * scale):
+        # rotation and uniform scale: unit normals stay unit after one factor
+        nrm = _rows_times(local, inv / np.sqrt(scale))
+    else:
+        nrm = _unit_rows(_rows_times(local, inv))  # the inverse transpose, on rows
+    _LAST_NORMALS.insert(0, (local, key, nrm))
+    del _LAST_NORMALS[_KNOWN_SIZE:]
+    return nrm
+
+
 def _placed(part: Part, matrices: np.ndarray, with_normals: bool):
     """World positions (K V, 3), triangles (K T, 3), corner UVs, corner normals (unit) of ``part``
     placed by the (K, 4, 4) ``matrices``; triangles of mirroring matrices (negative determinant) are
@@ -271,14 +298,7 @@ def _placed(part: Part, matrices: np.ndarray, with_normals: bool):
         if np.linalg.det(m[:3, :3]) >= 0:
             nrm = None
             if with_normals and part.corner_normals is not None:
-                inv = _inverse(m[:3, :3][None])[0]
-                gram = inv @ inv.T
-                scale = np.trace(gram) / 3.0
-                if scale > 0 and np.allclose(gram, scale * np.eye(3), rtol=0.0, atol=1e-9 * scale):
-                    # rotation and uniform scale: unit normals stay unit after one factor
-                    nrm = _rows_times(part.corner_normals, inv / np.sqrt(scale))
-                else:
-                    nrm = _unit_rows(_rows_times(part.corner_normals, inv))  # the inverse transpose, on rows
+                nrm = _world_normals(part.corner_normals, m[:3, :3])
             return pos, part.tris, part.corner_uv, nrm
     else:
         pos = (np.einsum("kij,vj->kvi", lin, part.co) + matrices[:, None, :3, 3]).reshape(-1, 3)
