@@ -165,6 +165,27 @@ def test_cleaning_shortcuts_keep_what_the_full_tests_keep():
     assert F._edges_of(other) is not a
 
 
+@pytest.mark.parametrize("name", ["sphere 180 (patches)", "floor (cut, strips)", "sphere 45"])
+def test_float32_uvs_give_the_same_image_uvs(table, name):
+    """UVs given in float32 (as Blender stores them and the gather passes them on) give the same image
+    UVs as the same values in float64: taken as they are for whole source triangles, interpolated in
+    float64 for cut pieces and patch faces."""
+    src = SCENES[name]()
+    if src.corner_uv is None:
+        rng = np.random.default_rng(3)
+        src.corner_uv = rng.random((len(src.tris), 3, 2))
+    uv32 = np.asarray(src.corner_uv, np.float32)
+    settings = BA.make_settings(CAM)
+    a = pipeline.build_images(pipeline.SourceMesh(src.positions, src.tris, uv32.astype(np.float64)), SCENE, table,
+                              settings, frustum_planes=CAM.frustum_planes())
+    b = pipeline.build_images(pipeline.SourceMesh(src.positions, src.tris, uv32), SCENE, table, settings,
+                              frustum_planes=CAM.frustum_planes())
+    for o in a:
+        np.testing.assert_array_equal(a[o].tris, b[o].tris)
+        np.testing.assert_array_equal(a[o].corner_uv, b[o].corner_uv)
+        assert b[o].corner_uv.dtype in (np.float32, np.float64)
+
+
 def test_image_edges_upload_into_a_valid_blender_mesh(table):
     """The edges written by upload.upload are a valid mesh for Blender (validate() changes nothing)
     and the ones Blender finds itself."""

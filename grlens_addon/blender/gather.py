@@ -55,7 +55,8 @@ def may_have_instances(obj) -> bool:
 @dataclass
 class Part:
     """One evaluated mesh in its object's local space (BU): co (V, 3), tris (T, 3) vertex indices,
-    corner_uv (T, 3, 2) or None, material (T,) slot indices, corner_normals (T, 3, 3) (local, not
+    corner_uv (T, 3, 2) or None (float32, as Blender stores them: the core carries them so, the upload
+    writes them so), material (T,) slot indices, corner_normals (T, 3, 3) (local, not
     normalised) or None, materials: its slots' materials (original data-blocks or None), and its
     loose vertices and edges (in no face)."""
 
@@ -191,8 +192,7 @@ def _mesh_part(me, materials, with_normals, co32, co, tri_poly, corner_vert, cou
     if me.uv_layers.active is not None:
         uv = np.empty(2 * n_l, dtype=np.float32)
         me.uv_layers.active.uv.foreach_get("vector", uv)
-        corner_uv = _known("uv", (loops, uv), lambda: uv.reshape(-1, 2).take(loops, axis=0).reshape(-1, 3, 2)
-                           .astype(np.float64))
+        corner_uv = _known("uv", (loops, uv), lambda: uv.reshape(-1, 2).take(loops, axis=0).reshape(-1, 3, 2))
     normals = None
     if with_normals:
         cn = np.empty(3 * n_l, dtype=np.float32)

@@ -24,8 +24,9 @@ from .budget import Budget
 class SourceMesh:
     """Evaluated source geometry in world space.
 
-    positions (N, 3) BU; tris (T, 3) vertex indices; corner_uv (T, 3, 2) or None; material (T,) slot
-    indices; corner_normals (T, 3, 3) unit normals in world space or None.
+    positions (N, 3) BU; tris (T, 3) vertex indices; corner_uv (T, 3, 2) or None (float64, or float32 as
+    Blender stores them: a whole source triangle's image keeps them as they are, interpolated ones
+    are computed in float64); material (T,) slot indices; corner_normals (T, 3, 3) unit normals in world space or None.
     """
 
     positions: np.ndarray
@@ -251,7 +252,9 @@ def _finite_or_zero(a):
     must not reach an image mesh; a zero normal receives no GR irradiance). Copies only if needed."""
     if a is None:
         return None
-    a = np.asarray(a, dtype=np.float64)
+    a = np.asarray(a)
+    if a.dtype != np.float32:  # (float32 UVs, as Blender stores them, stay so: exact in float64 arithmetic)
+        a = np.asarray(a, dtype=np.float64)
     if np.isfinite(np.add.reduce(a, axis=None)):  # (one reduction: a NaN or infinity anywhere makes it so)
         return a
     bad = ~np.isfinite(a)
