@@ -7,8 +7,9 @@ scene: ``bpy.ops.grlens.demo_scene``, 1920x1080, the sphere's frames, the render
 viewport's with ``--preview``) into an .npz (``--capture``, default /tmp/grlens_dense_<size>_<frames>.npz,
 reused if present); the core then runs bpy-free on them, with the family's table for the camera's
 radius (lutgen.LUTFamily, the add-on's default). Stage times come from the progress hook
-(pipeline.Progress is called before every stage): time from one call to the next, per stage name,
-and how far the progress fraction was from the fraction of the build's time gone at each call.
+(pipeline.Progress is called before every stage and inside long ones): time from one stage's call
+to the next stage's, per stage and pass, and how far the progress fraction shown (from one call to
+the next) strays from the fraction of the build's time gone.
 
 Usage: ./dev python benchmarks/profile_dense.py [--size 1M] [--frames 30] [--repeat 3] [--preview]
        [--cprofile N] [--dump FILE] [--compare A B] [--write]
@@ -104,16 +105,14 @@ def timed_build(run):
     t0 = time.perf_counter()
     out = pipeline.build_images(src, scene, lut, settings, None, planes, progress=pipeline.Progress(hook))
     t1 = time.perf_counter()
-    stages = {}  # (stage, occurrence: the order's pass for per-order stages) -> s
-    seen = {}
-    last = None
-    for (ta, name, fr), (tb, _, _) in zip(marks, marks[1:]):
-        if (name, fr) != last:  # (checkpoints inside a stage repeat its name and fraction)
-            seen[name] = seen.get(name, 0) + 1
-        last = (name, fr)
-        key = (name, seen[name])
-        stages[key] = stages.get(key, 0.0) + tb - ta
-    off = max(abs(fr - (t - t0) / (t1 - t0)) for t, _, fr in marks)
+    stages = {}  # stage -> s (all its passes: both orders' for the per-order stages)
+    for (ta, name, _), (tb, _, _) in zip(marks, marks[1:]):
+        stages[name] = stages.get(name, 0.0) + tb - ta
+    # the fraction shown from one call to the next against the time's fraction (largest just before a
+    # call, where the previous fraction has been shown longest)
+    times = [(t - t0) / (t1 - t0) for t, _, _ in marks] + [1.0]
+    shown = [0.0] + [fr for _, _, fr in marks]
+    off = max(max(abs(a - tt), abs(b - tt)) for a, b, tt in zip(shown, shown[1:] + [1.0], times))
     return out, t1 - t0, stages, off
 
 
@@ -149,7 +148,7 @@ def main(argv=None):
         total = float(np.median([r[1] for r in rows]))
         print(f"frame {run[0]}: build_images median {total:.3f} s, best {best[1]:.3f} s; image triangles {tris}; "
               f"progress vs time, largest difference {100 * np.median([r[3] for r in rows]):.0f} % (median)")
-        print("| stage (pass) | median [s] | share of the median build | STAGE_WEIGHTS share |")
+        print("| stage | median [s] | share of the median build | STAGE_WEIGHTS share |")
         print("|---|---|---|---|")
         from grlens_addon.core import pipeline
 
@@ -157,8 +156,8 @@ def main(argv=None):
         table = []
         for key in rows[0][2]:
             t = float(np.median([r[2].get(key, 0.0) for r in rows]))
-            w = pipeline.STAGE_WEIGHTS.get(key[0], 0.0) / steps.total
-            table.append(f"| {key[0]} ({key[1]}) | {t:.3f} | {100 * t / total:.1f} % | {100 * w:.1f} % |")
+            w = pipeline.STAGE_WEIGHTS.get(key, 0.0) * (len(out) if key in steps.PER_ORDER else 1) / steps.total
+            table.append(f"| {key} | {t:.3f} | {100 * t / total:.1f} % | {100 * w:.1f} % |")
             print(table[-1])
         if args.write and run is runs[0]:
             write(table, run[0], total, tris, args)
@@ -198,9 +197,9 @@ def write(table, frame, total, tris, args):
             f"Where the core's time goes (`./dev python benchmarks/profile_dense.py --write`: bench_dense's "
             f"{args.size} sphere, frame {frame}, the {'viewport' if args.preview else 'render'} tolerance, "
             f"pipeline.build_images bpy-free on the inputs captured from Blender; medians of {args.repeat} builds, "
-            f"{total:.2f} s, image triangles {tris}; per stage and pass, the time from its progress call "
-            "to the next):", "",
-            "| stage (pass) | median [s] | share of the median build | STAGE_WEIGHTS share |",
+            f"{total:.2f} s, image triangles {tris}; per stage, the time from its progress call to the "
+            "next stage's):", "",
+            "| stage (both orders' passes) | median [s] | share of the median build | STAGE_WEIGHTS share |",
             "|---|---|---|---|", *table, "", END]
     with open(OUT, "w") as f:
         f.write(head + "\n".join(body) + tail)

@@ -135,6 +135,29 @@ def test_block_passes_are_the_plain_arithmetic_to_the_bit(monkeypatch):
         assert 0 < away.sum() < len(tris)
 
 
+def test_the_map_in_chunks_is_one_call_to_the_bit(table, monkeypatch):
+    """frame.images_in_chunks (a dense mesh's vertices and edge midpoints in calls of MAP_CHUNK points,
+    a checkpoint between calls) gives exactly the values of one call, tangents and plane included."""
+    from grlens_addon.core import frame as F
+
+    src = _dense_sphere(60)
+    fr = F.frame_context(SCENE, table, BA.make_settings(CAM), None, CAM.frustum_planes())
+    plane = mapping.plane_coordinates(src.positions, SCENE)
+    whole = fr.map.images(src.positions, fr.orders, plane, tangents=True)
+    calls = []
+    fr.check = calls.append
+    monkeypatch.setattr(F, "MAP_CHUNK", 3000)
+    for given in (plane, None):
+        calls.clear()
+        parts = F.images_in_chunks(fr, src.positions, given, True, (0.0, 0.5))
+        assert len(calls) == (len(src.positions) - 1) // 3000 and all(0 < c < 0.5 for c in calls)
+        for o in fr.orders:
+            for name in ("position", "direction", "distance", "valid", "xi", "dt", "ux", "uy"):
+                assert np.array_equal(getattr(parts[o], name), getattr(whole[o], name), equal_nan=True), name
+            for name in ("r", "phi", "e2", "on_axis"):
+                assert np.array_equal(getattr(parts[o].plane, name), getattr(plane, name)), name
+
+
 def test_cleaning_shortcuts_keep_what_the_full_tests_keep():
     """frame.clean_source's shortcuts (every index in range, every coordinate finite: two reductions)
     drop exactly the triangles the full per-corner tests drop, and the edges kept per topology are

@@ -12,6 +12,7 @@ Units: positions in Blender units (BU), angles in radians; r in units of r_s.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -288,6 +289,44 @@ def chord_lengths(directions, edge_verts) -> np.ndarray:
                                 directions.take(edge_verts[:, 0], axis=0))
 
 
+MAP_CHUNK = 1 << 16
+"""Points per call of the table for a dense mesh's vertices and edge midpoints (:func:`images_in_chunks`:
+a cancellation point and the progress between calls; each point's values do not depend on the
+others)."""
+
+
+def images_in_chunks(frame: Frame, points, plane=None, tangents: bool = False, part=(0.0, 1.0)) -> dict:
+    """frame.map.images of ``points`` (N, 3; BU) for every order of the frame (``plane``: their
+    mapping.PlaneCoordinates, or None; ``tangents``: the rays' tangents too), in calls of MAP_CHUNK
+    points with frame.checkpoint between them, reporting the way through the stage from part[0] to
+    part[1] (the same values as one call: the map is per point)."""
+    n = len(points)
+    if n <= MAP_CHUNK:
+        return frame.map.images(points, frame.orders, plane, tangents=tangents)
+    parts = []
+    for s in range(0, n, MAP_CHUNK):
+        if s:
+            frame.checkpoint(part[0] + (part[1] - part[0]) * s / n)
+        e = min(s + MAP_CHUNK, n)
+        sub = None if plane is None else mapping.PlaneCoordinates(
+            r=plane.r[s:e], phi=plane.phi[s:e], e2=plane.e2[s:e], on_axis=plane.on_axis[s:e])
+        parts.append(frame.map.images(points[s:e], frame.orders, sub, tangents=tangents))
+    out = {}
+    for o in frame.orders:
+        values = {}
+        for f in dataclasses.fields(mapping.Images):
+            got = [getattr(p[o], f.name) for p in parts]
+            if f.name == "plane":
+                values[f.name] = plane if plane is not None else mapping.PlaneCoordinates(
+                    *(np.concatenate([getattr(g, k) for g in got]) for k in ("r", "phi", "e2", "on_axis")))
+            elif all(isinstance(g, np.ndarray) for g in got):
+                values[f.name] = np.concatenate(got)
+            else:
+                values[f.name] = got[0]  # (None)
+        out[o] = mapping.Images(**values)
+    return out
+
+
 EDGE_BLOCK = 1 << 15
 """Edges per block of :func:`edge_lengths` (their end points' rows stay in the cache between the
 gather and the arithmetic; a cancellation point between blocks)."""
@@ -348,7 +387,7 @@ def map_source(frame: Frame, source: Source) -> SourceImages:
     """The map stage for the source's vertices: their images of every order of the frame, with the rays'
     tangents when pieces are measured on screen (visibility needs the directions in which the rays
     leave the vertices: one lookup for both)."""
-    images = frame.map.images(source.positions, frame.orders, source.plane, tangents=frame.budget.active)
+    images = images_in_chunks(frame, source.positions, source.plane, frame.budget.active, (0.0, 0.75))
     frame.checkpoint(0.75)  # (the table's lookups are about three quarters of the stage)
     chord = dict(zip(frame.orders, edge_lengths([images[o].direction for o in frame.orders], source.edges.verts,
                                                  lambda q: frame.checkpoint(0.75 + 0.2 * q))))

@@ -45,8 +45,8 @@ class Cancelled(Exception):
     exists."""
 
 
-STAGE_WEIGHTS = {"prepare": 0.07, "map": 0.20, "visibility": 0.01, "patches": 0.005, "probes": 0.12,
-                 "plan": 0.175, "cut": 0.01, "cull": 0.015, "refine": 0.005, "assemble": 0.075}
+STAGE_WEIGHTS = {"prepare": 0.06, "map": 0.20, "visibility": 0.01, "patches": 0.005, "probes": 0.12,
+                 "plan": 0.17, "cut": 0.01, "cull": 0.015, "refine": 0.005, "assemble": 0.07}
 """Share of a build's time each stage takes (per order for plan, cut, cull, refine and assemble), for
 the progress fractions: about the mean of the median shares measured on closed UV spheres of 200k and
 1M triangles beside the hole at 1920x1080, both orders, to the viewport's tolerance
