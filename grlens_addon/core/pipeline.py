@@ -45,13 +45,15 @@ class Cancelled(Exception):
     exists."""
 
 
-STAGE_WEIGHTS = {"prepare": 0.06, "map": 0.20, "visibility": 0.01, "patches": 0.005, "probes": 0.12,
-                 "plan": 0.17, "cut": 0.01, "cull": 0.015, "refine": 0.005, "assemble": 0.07}
+STAGE_WEIGHTS = {"prepare": 0.05, "map": 0.26, "visibility": 0.01, "patches": 0.005, "probes": 0.21,
+                 "plan": 0.15, "cut": 0.005, "cull": 0.015, "refine": 0.005, "assemble": 0.06}
 """Share of a build's time each stage takes (per order for plan, cut, cull, refine and assemble), for
-the progress fractions: about the mean of the median shares measured on closed UV spheres of 200k and
-1M triangles beside the hole at 1920x1080, both orders, to the viewport's tolerance
-(benchmarks/profile_dense.py --preview prints them; the shares move with the view, the tolerance and
-the mesh: probes take a quarter of the 200k sphere's build and 1 % of the 1M one's;
+the progress fractions: the shares that keep the fraction shown closest to the time on closed UV
+spheres of 200k and 1M triangles beside the hole at 1920x1080, both orders, to the viewport's
+tolerance, the larger of the two differences made smallest (from the median shares
+benchmarks/profile_dense.py --preview prints; the shares move with the view, the tolerance and
+the mesh: probes take a quarter of the 200k sphere's build and 1 % of the 1M one's, assembly 4 % and
+a quarter;
 benchmarks/bench_background.py prints how far the fraction strays from the time). Only the
 fractions' spacing depends on them; the first split beside the axis (when there is one) runs map and
 visibility again within their shares."""
