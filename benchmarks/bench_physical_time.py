@@ -179,7 +179,13 @@ def _reading(st, tol):
                  f"{tol:g} px tolerance (" + "; ".join(f"{a} degrees: out {v['out']:.2f} px, in {v['in']:.2f} px, "
                                                         f"at rest {v['at rest']:.2f} px" for a, v in over.items())
                  + "), where the patch's innermost circle leaves a band to the ring drawn by pieces spanning it "
-                 "(budget.PATCH_BAND_FACTOR; the table below).")
+                 "(budget.PATCH_BAND_FACTOR). Every point of that band lies within the innermost circle's radius of "
+                 "the axis crossing, a point whose image is the whole ring: a piece with corners on the ring (all "
+                 "of them that one point) and on the circle gives the points inside it the azimuth of its circle "
+                 "corners, so a pixel whose centre falls in the band shows the texture of the crossing's "
+                 "neighbourhood at an azimuth up to one of the patch's azimuth steps off. A narrower band (the table "
+                 "below) lets fewer pixel centres fall in it, but does not bound the error of those that do, and its "
+                 "innermost circle then meets the ring's outset; so the band stays as it is.")
     return text
 SKY_BEGIN, SKY_END = "<!-- bench_physical_time_sky: begin -->", "<!-- bench_physical_time_sky: end -->"
 
@@ -275,7 +281,7 @@ def main(out_path):
         "## Saturated colours", "",
         "A shifted colour is M(g) rgb (core.spectrum): the colour of the smoothest spectrum of rgb, shifted. A "
         "saturated colour's smoothest spectrum dips below zero, so its shift can leave the gamut: a channel "
-        "becomes negative. \"grlens Shift by g\" (surfaces and the sky) clips negative channels to 0 and leaves "
+        "becomes negative. \"grlens Shift by g\" (surfaces) and the sky's shift group clip negative channels to 0 and leave "
         "the others as they are; channels above 1 are kept (scene-linear light, for the view transform). The "
         "choice: a renderer cannot emit negative light, and clipping one channel keeps the hue of the others, "
         "where pulling the colour towards grey at equal luminance would wash every channel out; the price is "

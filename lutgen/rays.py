@@ -34,12 +34,15 @@ ordered by xi from 0 to pi in four segments (outward rays that cross the photon 
 inward turning rays, inward rays that cross it; the turning rays are of kind ``T`` for an observer
 outside the photon sphere and ``I`` inside it), the radius a ray has reached after sweeping the
 target's angle, less the target's radius, changes sign exactly once: at the connecting ray (rays
-that escaped before count as below, rays that fell in as above). A point's segment is found from the
-signs at the segments' ends, its ray bracketed between two of the table's rows (1-D lookups along
-rows: four rows about the ray chosen by a per-radius seed index, a search over the rows (several
-per pass) where they do not bracket it) and found by a Newton step with the slope of the rows'
-cubic, then secant steps where needed, in d = |xi - crit| with the bicubic interpolation (:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius costs a few 1-D
-arrays (its own phase on each ray, the seed index), not a table build. docs/inside.md describes it with its figures.
+that escaped before count as below, rays that fell in as above). A point's ray is bracketed between
+two of the table's rows (1-D lookups along rows): four rows about the ray, in the segment a per-radius
+seed index over the whole sky chooses, bracket it wherever f changes sign among them (a sign change
+anywhere is the one); elsewhere the point's segment follows from the signs at the segments' ends and
+a search over its rows (several per pass) brackets it. The ray is then found by a Newton step with
+the slope of the rows' cubic, and secant steps where needed, in d = |xi - crit| with the bicubic
+interpolation (:meth:`RayMap.solve`). No table depends on the observer: a camera at a new radius
+costs a few 1-D arrays (its own phase on each ray, the seed index), not a table build. docs/inside.md
+describes it with its figures.
 """
 from __future__ import annotations
 
@@ -47,6 +50,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.special import elliprf
 
 from . import orbit as _orb
 from .lut import QUANTITIES, Lookup, _cubic_stencil
@@ -119,7 +123,47 @@ def _orbits(kind, rho) -> _orb.Orbit:
     return orb
 
 
+def _reference_u(kind, rho) -> np.ndarray:
+    """u at the reference point of turning orbits of kind "T" (the periapsis, e2) or "I" (the apoapsis,
+    e3) with labels rho: the same numbers as :func:`_orbits`'s roots, only the one needed."""
+    rho = np.asarray(rho, dtype=float)
+    far = rho > 0.0
+    x = np.exp(rho)
+    y = 4.0 * x / (1.0 + x)
+    sigma = 4.0 * np.sin(np.arcsin(np.minimum(0.5 * np.sqrt(y), 1.0)) / 3.0) ** 2
+    e1 = (sigma - 1.0) / 3.0
+    one_m = 1.0 - e1
+    delta = np.sqrt(one_m * sigma)
+    e2 = -2.0 * e1 * one_m / (one_m + delta)
+    out = e2 if kind == "T" else e2 + delta
+    if far.any():  # far orbits: orbit_from_b polishes e1 (~ -1/b)
+        ob = _orb.orbit_from_b(impact_parameter(kind, rho[far]))
+        out[far] = ob.e2 if kind == "T" else ob.e3
+    return out
+
+
 _sweep_inner = _orb.sweep_inner
+
+
+def _crossing_phase(orb, uo) -> np.ndarray:
+    """The angle orbits of kind P (complex roots, ``orb`` from :func:`_orbits`) sweep from the photon
+    sphere to inverse radius ``uo``: lutgen.orbit.sweep(orb, uo) - sweep(orb, 2/3) with the same
+    operations on the same numbers (Legendre's form of Carlson's R_F), the terms that do not depend
+    on u formed once and no masks (every P orbit has complex roots)."""
+    a, me1, n = orb.e1, orb.m - orb.e1, orb.n
+    big_a = np.sqrt(me1 ** 2 + n ** 2)
+    k2c = n ** 2 / (2.0 * big_a * (big_a + me1))
+    x = np.array([[uo], [_orb.U_PHOTON]]) - a  # (2, N): the observer, the photon sphere
+    cphi = (big_a - x) / (big_a + x)
+    sphi = 2.0 * np.sqrt(big_a * x) / (big_a + x)
+    c2 = cphi ** 2
+    half = sphi * elliprf(c2, c2 + k2c * sphi ** 2, 1.0)
+    neg = np.flatnonzero(cphi.reshape(-1) < 0.0)
+    if neg.size:
+        k_neg = np.broadcast_to(k2c, cphi.shape).reshape(-1).take(neg)
+        half.reshape(-1)[neg] = 2.0 * elliprf(0.0, k_neg, 1.0) - half.reshape(-1).take(neg)
+    out = half / np.sqrt(big_a)
+    return out[0] - out[1]
 
 
 def row_ranges(kind, rho):
@@ -287,7 +331,7 @@ class Kind:
         j0, wc = _cubic_stencil(cc, n_c)
         flat = data.reshape(-1)
         base = i0 * n_c + j0
-        return _gather(flat, base, wr, wc, n_c) + _linear_tail(flat, base, n_c, c, cc, wr)
+        return _linear_tail(flat, base, n_c, c, cc, wr, _gather(flat, base, wr, wc, n_c))
 
 
 def build_kind(name, rho_max, step=DEFAULT_STEP, n_cols=DEFAULT_COLUMNS, rho_min=RHO_MIN) -> Kind:
@@ -396,8 +440,10 @@ SECANT_DONE = 1e-6
 """A secant step shorter than this relative to d ends the iteration (the error left is of order its
 square times the curvature: below 1e-11 relative)."""
 
-CUBIC_STEPS = 3
-"""Newton steps on the cubic through four rows (from the linear interpolation: converged after three)."""
+CUBIC_STEPS = 2
+"""Newton steps on the cubic through four rows (from the linear interpolation; quadratic convergence):
+two leave its root far closer than the cubic itself is to the bicubic interpolation, which the Newton
+step that follows corrects (with three, the same rays to 1e-12 on the bench's frames)."""
 
 NEWTON_DONE = 1e-6
 """A first (Newton) step, with the slope of the cubic through four rows, shorter than this relative to d
@@ -416,11 +462,17 @@ SEARCH_MAX_K, at least 1: bisection), so that a few points take two or three pas
 SEARCH_MAX_K = 63
 """The most rows per point in one pass of that search."""
 
-INDEX_SWEEPS = 65
-"""Angles of the seed index (uniform over [0, 2 pi], see :meth:`RayMap._setup_index`)."""
+INDEX_SWEEPS = 33
+"""Angles of the seed index (uniform over [0, 2 pi], see :meth:`RayMap._setup_index`): each costs set-up
+time per radius; fewer leave more points outside the window of four rows (to the segment tests and
+the search)."""
 
 INDEX_ROW_STEP = 8
 """The seed index holds every this-many-th row of a segment (and its last)."""
+
+INDEX_SHIFT = 4.0
+"""The seed index's angles follow one another in one sorted array, each shifted by this much more than
+the one before (its values, u clipped to [-1, 2], span less)."""
 
 _KINDS = ("T", "P", "I")
 
@@ -453,8 +505,8 @@ class _Flat:
 
 def _b_of(kind, rho):
     """b of labels rho of kind codes ``kind`` (0 T, 1 P, 2 I)."""
-    x = np.exp(rho)
-    return np.where(kind == 1, B_C / np.sqrt(1.0 + x), B_C * np.sqrt(1.0 + x))
+    q = np.sqrt(1.0 + np.exp(rho))
+    return np.where(kind == 1, B_C / q, B_C * q)
 
 
 def _scale(kind, b):
@@ -473,17 +525,18 @@ def _gather(flat, base, wr, wc, n_c):
     return v
 
 
-def _linear_tail(flat, base, n_c, c, cc, wr):
-    """The linear continuation beyond a row's range: slope (per column) times the excess."""
+def _linear_tail(flat, base, n_c, c, cc, wr, v):
+    """``v`` (N,; the interpolated values, changed in place and returned) plus the linear continuation
+    beyond a row's range where c (the fractional column) was clipped to cc: slope (per column) times
+    the excess. ``wr``: the rows' weights (4, N), or None for one row."""
     out = np.flatnonzero(c != cc)
-    v = np.zeros(c.size)
     if out.size:
         dw = _derivative_weights(cc[out], n_c)
         slope = np.zeros(out.size)
-        for i in range(wr.shape[0]):
+        for i in range(1 if wr is None else wr.shape[0]):
             for j in range(4):
-                slope += (wr[i, out] if wr.shape[0] > 1 else 1.0) * dw[j] * flat.take(base[out] + (i * n_c + j))
-        v[out] = slope * (c[out] - cc[out])
+                slope += (1.0 if wr is None else wr[i, out]) * dw[j] * flat.take(base[out] + (i * n_c + j))
+        v[out] += slope * (c[out] - cc[out])
     return v
 
 
@@ -526,22 +579,23 @@ class RayMap:
         self.s_side = np.array([sp[3] for sp in specs])
         self.s_far = np.array([sp[4] for sp in specs])
         self.c2, self.sin2c = 2.0 * xi_c, sin_c * sin_c
-        self._setup_nodes()
-        self._setup_rows()
-        self._setup_index()
+        self.solved = self.windowed = 0  # points solved, and of those bracketed by the seed's window
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # one for all set-up steps
+            self._setup_nodes()
+            self._setup_rows()
+            self._setup_index()
 
     # ---- per segment 1-D arrays -------------------------------------------------------------------
     def _rho(self, seg, d):
         """Labels of the rays d = |xi - crit| of segments ``seg`` (arrays)."""
         kind = self.s_kind.take(seg)
         c2 = self.c2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            # T, I: (b/b_c)^2 - 1 = sin(d) sin(2 xi_c + d) / sin^2 xi_c;
-            # P: (b_c/b)^2 - 1 = sin(d) sin(2 xi_c - d) / sin^2(xi_c - d)
-            turning = kind != 1
-            s2 = np.sin(np.where(turning, c2 + d, c2 - d))
-            den = np.where(turning, self.sin2c, np.sin(0.5 * c2 - d) ** 2)
-            return np.log(np.sin(d) * s2 / den)
+        # T, I: (b/b_c)^2 - 1 = sin(d) sin(2 xi_c + d) / sin^2 xi_c;
+        # P: (b_c/b)^2 - 1 = sin(d) sin(2 xi_c - d) / sin^2(xi_c - d)
+        turning = kind != 1
+        s2 = np.sin(np.where(turning, c2 + d, c2 - d))
+        den = np.where(turning, self.sin2c, np.sin(0.5 * c2 - d) ** 2)
+        return np.log(np.sin(d) * s2 / den)
 
     def _d_of_rho(self, seg, rho):
         """Inverse of :meth:`_rho` (each kind's closed form on its own points only)."""
@@ -550,22 +604,21 @@ class RayMap:
         out = np.empty(rho.shape)
         c = self.xi_c
         p = kind == 1
-        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            if p.any():
-                # P: sin d = sin c e^rho / ((sqrt(cos^2 c + e^rho) + cos c) sqrt(1 + e^rho))
-                x = np.exp(rho[p])
-                sd = math.sin(c) * x / ((np.sqrt(math.cos(c) ** 2 + x) + math.cos(c)) * np.sqrt(1.0 + x))
-                out[p] = np.arcsin(np.minimum(sd, 1.0))
-            if not p.all():
-                # T, I: cos(2c + 2d) = cos 2c - 2 X, X = e^rho sin^2 c (Newton next to the critical angle)
-                xx = np.exp(rho[~p]) * self.sin2c
-                d_t = np.where(xx > 1e-6,
-                               0.5 * (np.arccos(np.clip(math.cos(self.c2) - 2.0 * xx, -1.0, 1.0)) - self.c2),
-                               xx / math.sin(self.c2))
-                for _ in range(3):
-                    s_d, s_cd = np.sin(d_t), np.sin(self.c2 + d_t)
-                    d_t = d_t - (s_d * s_cd - xx) / (np.cos(d_t) * s_cd + s_d * np.cos(self.c2 + d_t))
-                out[~p] = d_t
+        if p.any():
+            # P: sin d = sin c e^rho / ((sqrt(cos^2 c + e^rho) + cos c) sqrt(1 + e^rho))
+            x = np.exp(rho[p])
+            sd = math.sin(c) * x / ((np.sqrt(math.cos(c) ** 2 + x) + math.cos(c)) * np.sqrt(1.0 + x))
+            out[p] = np.arcsin(np.minimum(sd, 1.0))
+        if not p.all():
+            # T, I: cos(2c + 2d) = cos 2c - 2 X, X = e^rho sin^2 c (Newton next to the critical angle)
+            xx = np.exp(rho[~p]) * self.sin2c
+            d_t = np.where(xx > 1e-6,
+                           0.5 * (np.arccos(np.clip(math.cos(self.c2) - 2.0 * xx, -1.0, 1.0)) - self.c2),
+                           xx / math.sin(self.c2))
+            for _ in range(3):
+                s_d, s_cd = np.sin(d_t), np.sin(self.c2 + d_t)
+                d_t = d_t - (s_d * s_cd - xx) / (np.cos(d_t) * s_cd + s_d * np.cos(self.c2 + d_t))
+            out[~p] = d_t
         return out
 
     def _twins(self):
@@ -583,6 +636,9 @@ class RayMap:
         self.s_zlo, self.s_zhi = np.empty(self.n_seg), np.empty(self.n_seg)
         uo = self.uo
         twin = self._twins()
+        # every segment's ends in d in one call: the label RHO_MIN + 0.5, and RHO_MAX_P for kind P
+        ends = self._d_of_rho(np.repeat(np.arange(self.n_seg), 2),
+                              np.tile([RHO_MIN + 0.5, RHO_MAX_P], self.n_seg)).reshape(-1, 2)
         for i in range(self.n_seg):
             if twin[i] < i:  # the same rays as an earlier segment, traced the other way: same phases
                 j = twin[i]
@@ -590,12 +646,8 @@ class RayMap:
                 th_all.append(th_all[j])
                 self.s_zlo[i], self.s_zhi[i] = self.s_zlo[j], self.s_zhi[j]
                 continue
-            seg = np.array([i])
-            d_lo = self._d_of_rho(seg, np.array([RHO_MIN + 0.5]))[0]
-            if self.s_kind[i] == 1:
-                d_hi = self._d_of_rho(seg, np.array([RHO_MAX_P]))[0]
-            else:
-                d_hi = self.s_far[i] - FAR_GAP_T
+            d_lo = ends[i, 0]
+            d_hi = ends[i, 1] if self.s_kind[i] == 1 else self.s_far[i] - FAR_GAP_T
             far = self.s_far[i]
             z = np.linspace(math.log(d_lo / (far - d_lo)), math.log(d_hi / (far - d_hi)), n)
             d = far / (1.0 + np.exp(-z))
@@ -603,18 +655,15 @@ class RayMap:
             name = _KINDS[self.s_kind[i]]
             orb = _orbits(name, rho)
             x = self.s_crit[i] + self.s_side[i] * d
-            with np.errstate(invalid="ignore", divide="ignore"):
-                if name == "P":
-                    # the swept angle from the photon sphere to the observer: both ends in one call
-                    f_ends = _orb.sweep(orb, np.array([[uo], [_orb.U_PHOTON]]) * np.ones(n))
-                    theta = f_ends[0] - f_ends[1]
+            if name == "P":
+                theta = _crossing_phase(orb, uo)  # the swept angle from the photon sphere to the observer
+            else:
+                p_uo = uo * uo * (1.0 - uo) * (np.cos(x) / np.sin(x)) ** 2  # P(uo), no cancellation
+                if name == "T":
+                    theta = _orb.sweep_from_turning_point(
+                        orb, uo, np.sqrt(p_uo / ((uo - orb.e1) * (orb.e3 - uo))))
                 else:
-                    p_uo = uo * uo * (1.0 - uo) * (np.cos(x) / np.sin(x)) ** 2  # P(uo), no cancellation
-                    if name == "T":
-                        theta = _orb.sweep_from_turning_point(
-                            orb, uo, np.sqrt(p_uo / ((uo - orb.e1) * (orb.e3 - uo))))
-                    else:
-                        theta = _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
+                    theta = _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
             z_all.append(z)
             th_all.append(theta)
             rho_all.append(rho)
@@ -630,13 +679,16 @@ class RayMap:
         self.node_j = np.concatenate([pieces[twin[i]] for i in range(self.n_seg)])
         self.s_dz = (self.s_zhi - self.s_zlo) / (n - 1)
 
-    def _nodes(self, seg, z, values, derivative=False):
+    def _nodes(self, seg, z, values, more=None):
+        """``values`` (per segment on its nodes, see :meth:`_setup_nodes`) at z, cubic; with ``more``
+        (another such array) both, from one stencil."""
         n = self.n_z
         g = _clip((z - self.s_zlo.take(seg)) / self.s_dz.take(seg), 0.0, n - 1)
         i0, w = _stencil(g, n)
         base = i0 + seg * n
-        return w[0] * values.take(base) + w[1] * values.take(base + 1) + w[2] * values.take(base + 2) + \
-            w[3] * values.take(base + 3)
+        out = [w[0] * v.take(base) + w[1] * v.take(base + 1) + w[2] * v.take(base + 2) + w[3] * v.take(base + 3)
+               for v in ((values,) if more is None else (values, more))]
+        return out[0] if more is None else out
 
     def _setup_rows(self):
         """Per segment, the table's rows inside it (from the label RHO_MIN + 0.5, the critical end, to the
@@ -663,8 +715,7 @@ class RayMap:
             seg = np.full(k.size, i)
             d = self._d_of_rho(seg, rho)
             far = self.s_far[i]
-            with np.errstate(divide="ignore"):
-                z = np.log(d) - np.log(far - d)
+            z = np.log(d) - np.log(far - d)
             b = _b_of(np.full(k.size, kc), rho)
             sc = _scale(np.full(k.size, kc), b)
             g = k + fl.offset[kc]
@@ -678,22 +729,29 @@ class RayMap:
             total += k.size
         self.row_g, self.row_d, self.row_theta = np.concatenate(rows), np.concatenate(ds), np.concatenate(ths)
         self.row_b, self.row_start, self.row_length = np.concatenate(bs), np.concatenate(sts), np.concatenate(lns)
+        self.row_ld = np.log(self.row_d)
         # per row: columns per radian, and the factor from the stored u (u b for T) to u
         self.row_cscale = (fl.n_cols - 1) / self.row_length
         row_kind = np.concatenate([np.full(self.r_count[i], self.s_kind[i]) for i in range(self.n_seg)
                                    if twin[i] == i])
         self.row_uscale = np.where(row_kind == 0, 1.0 / self.row_b, 1.0)
-        # the ray tangent at the observer (pi/2, the far end of the turning segments) as a row
-        self.tan = None
-        if self.n_seg == 4:
+        # made when first needed (points outside the seed's window; next to the observer): the ray
+        # tangent at the observer as a row, the table's error at the observer on each row
+        self._tan = self._eps = None
+
+    @property
+    def tan(self):
+        """The ray tangent at the observer (pi/2, the far end of the turning segments) as a row (a dict;
+        None with two segments); made on first use."""
+        if self._tan is None and self.n_seg == 4:
+            fl = self.flat
             i = 1
             d_far = self.s_far[i] - FAR_GAP_T
-            rho_t = self._rho(np.array([i]), np.array([d_far]))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rho_t = self._rho(np.array([i]), np.array([d_far]))
             kc = self.s_kind[i]
             n_c = fl.n_cols
-            kind = np.full(n_c, kc)
-            b = _b_of(kind[:1], rho_t)[0]
-            st_ln = [(self.flat.start, 0), (self.flat.length, 0)]
+            b = _b_of(np.array([kc]), rho_t)[0]
             g = np.clip((rho_t[0] - fl.rho0[kc]) / fl.step, 0.0, fl.n_rows[kc] - 1)
             i0, w = _cubic_stencil(np.array([g]), fl.n_rows[kc])
             rows_t = i0[0] + fl.offset[kc] + np.arange(4)
@@ -702,98 +760,117 @@ class RayMap:
             st = float(w @ fl.start[rows_t]) * sc
             ln = float(w @ fl.length[rows_t]) * sc
             u_rows = fl.u.reshape(-1, n_c)[rows_t]
-            self.tan = dict(u=w @ u_rows, b=b, start=st, length=ln, kind=kc,
-                            theta=self.node_theta[(i + 1) * self.n_z - 1])
-        # the table's error at the observer on each row (subtracted next to the observer)
-        all_rows = np.arange(self.row_g.size)
-        seg_of_row = np.concatenate([np.full(self.r_count[i], i) for i in range(self.n_seg) if self._twins()[i] == i])
-        self.row_eps = np.zeros(all_rows.size)
-        self.row_eps = self._row_residual(all_rows, np.full(all_rows.size, self.uo), np.zeros(all_rows.size),
-                                          seg_of_row)
+            self._tan = dict(u=w @ u_rows, b=b, start=st, length=ln, kind=kc,
+                             theta=self.node_theta[(i + 1) * self.n_z - 1])
+        return self._tan
+
+    @property
+    def row_eps(self) -> np.ndarray:
+        """The table's error at the observer on each row (u on the row at the observer's phase, less
+        uo): subtracted next to the observer; made on first use."""
+        if self._eps is None:
+            all_rows = np.arange(self.row_g.size)
+            seg_of_row = np.concatenate([np.full(self.r_count[i], i) for i in range(self.n_seg)
+                                         if self._twins()[i] == i])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                self._eps = self._row_residual(all_rows, np.full(all_rows.size, self.uo), np.zeros(all_rows.size),
+                                               seg_of_row)
+        return self._eps
 
     def _setup_index(self):
-        """The seed index: per segment, the table's u along every INDEX_ROW_STEP-th of its rows at
-        INDEX_SWEEPS angles uniform over [0, 2 pi] (the swept angle of either order), times the
-        segment's side (so growing along the rows; made monotone). :meth:`solve` reads a point's
-        fractional row from it (binary search over the coarse rows at the point's angle, linear in
-        between) and tries the table's rows around it as the bracket; where they do not bracket the
-        root it searches all rows. The index only chooses where the search starts: the bracket it
-        yields is the one the full search finds (f changes sign once along a segment's rows), so
-        the rays are the same as without it. About INDEX_SWEEPS * (rows / INDEX_ROW_STEP) 1-D
-        lookups per segment."""
-        ns, n_s = self.n_seg, INDEX_SWEEPS
-        pos, vals, q0, qn = [], [], np.zeros(ns, dtype=np.int64), np.zeros(ns, dtype=np.int64)
-        v0 = np.zeros(ns, dtype=np.int64)
-        sweeps = np.linspace(0.0, 2.0 * math.pi, n_s)
-        n_c, u_flat = self.flat.n_cols, self.flat.u
-        n_pos = n_val = 0
-        for i in range(ns):
+        """The seed index: the table's u along every INDEX_ROW_STEP-th row of every segment (and each
+        segment's last), in the order of the rays' xi over the whole sky (a segment whose rows run
+        towards smaller xi reversed), at INDEX_SWEEPS angles uniform over [0, 2 pi] (the swept angle of
+        either order). Along xi the radius a ray has reached grows (f changes sign once), so each
+        angle's sequence is made monotone (a running maximum) and stored shifted by INDEX_SHIFT per
+        angle, all angles in one sorted array: a point's place in it is one ``np.searchsorted``
+        (:meth:`_seed`). The index only chooses where the solve looks first (its segment and four
+        rows): the bracket it yields is the one the full search finds (f changes sign once along the
+        rays), so the rays are the same as without it. About INDEX_SWEEPS * (rows / INDEX_ROW_STEP)
+        1-D lookups, linear along each row."""
+        n_s = INDEX_SWEEPS
+        segs, locs = [], []
+        for i in range(self.n_seg):
             count = int(self.r_count[i])
             p = np.arange(0, count, INDEX_ROW_STEP)
             if p[-1] != count - 1:
                 p = np.append(p, count - 1)
-            q = p.size
-            rows = self.r_first[i] + p
-            # u along each row, linear between its columns (and beyond them): a seed needs no more
-            th = self.row_theta[rows, None] + self.s_dir[i] * sweeps[None, :]
-            if self.s_kind[i] != 1:
-                th = np.abs(th)
-            c = (th - self.row_start[rows, None]) * ((n_c - 1) / self.row_length[rows, None])
-            j = np.clip(np.floor(c).astype(np.int64), 0, n_c - 2)
-            t = c - j
-            base = self.row_g[rows, None] * n_c + j
-            f = u_flat.take(base) * (1.0 - t) + u_flat.take(base + 1) * t
-            if self.s_kind[i] == 0:
-                f = f / self.row_b[rows, None]
-            f = self.s_side[i] * f
-            f[np.isnan(f)] = 0.0
-            f = np.maximum.accumulate(f, axis=0).T  # (n_s, q): one angle's coarse rows contiguous
-            pos.append(p)
-            vals.append(f.reshape(-1))
-            q0[i], qn[i], v0[i] = n_pos, q, n_val
-            n_pos += q
-            n_val += f.size
-        self.ix_pos = np.concatenate(pos).astype(float)
-        self.ix_val = np.concatenate(vals)
-        self.ix_q0, self.ix_qn, self.ix_v0 = q0, qn, v0
-        self.ix_steps = int(math.ceil(math.log2(max(int(qn.max()) - 1, 1))))
+            if self.s_side[i] < 0:  # rows towards smaller xi: reversed
+                p = p[::-1]
+            segs.append(np.full(p.size, i))
+            locs.append(p)
+        seg, loc = np.concatenate(segs), np.concatenate(locs)
+        rows = self.r_first.take(seg) + loc
+        n_c, u_flat = self.flat.n_cols, self.flat.u
+        sweeps = np.linspace(0.0, 2.0 * math.pi, n_s)
+        # u along each row, linear between its columns (and beyond them): a seed needs no more
+        th = self.row_theta.take(rows)[None, :] + self.s_dir.take(seg)[None, :] * sweeps[:, None]
+        th = np.where((self.s_kind.take(seg) != 1)[None, :], np.abs(th), th)
+        c = (th - self.row_start.take(rows)) * self.row_cscale.take(rows)
+        j = _clip(np.floor(c), 0.0, n_c - 2.0).astype(np.int64)
+        t = c - j
+        base = self.row_g.take(rows) * n_c + j
+        f = (u_flat.take(base) * (1.0 - t) + u_flat.take(base + 1) * t) * self.row_uscale.take(rows)
+        # (n_s, q): monotone along xi, each value the least of those after it (rays that escaped,
+        # below every target, may wind up and down below zero: a running minimum from the side of
+        # the rays that fell in keeps the values next to every target's root)
+        f = _clip(np.where(np.isnan(f), 2.0, f), -1.0, 2.0)
+        f = np.minimum.accumulate(f[:, ::-1], axis=1)[:, ::-1]
+        self.ix_n = seg.size
+        self.ix_val = f  # per angle, the coarse rows' u
+        self.ix_flat = (f + INDEX_SHIFT * np.arange(n_s)[:, None]).reshape(-1)
+        self.ix_seg, self.ix_loc = seg, loc.astype(float)
 
-    def _index_rows(self, seg, u, sweep):
-        """Fractional local rows (0 .. count - 1) of the points' roots in their segments, from the seed
-        index (see :meth:`_setup_index`)."""
-        n_s = INDEX_SWEEPS
+    def _seed(self, u, sweep):
+        """(segment, fractional local row) of the points' roots from the seed index (see
+        :meth:`_setup_index`): the place of u among the coarse rows at the point's angle, the index's
+        values interpolated linearly between its two angles about it, and linearly between two coarse
+        rows. That place lies between the places at the two angles (each one ``np.searchsorted``): a
+        bisection between them, which most points skip (both places the same)."""
+        n_s, q = INDEX_SWEEPS, self.ix_n
         x = sweep * ((n_s - 1) / (2.0 * math.pi))
-        j = np.clip(np.floor(x).astype(np.int64), 0, n_s - 2)
+        j = _clip(x.astype(np.int64), 0, n_s - 2)  # x >= 0: truncation is floor
         w = x - j
-        qn = self.ix_qn.take(seg)
-        c0 = self.ix_v0.take(seg) + j * qn
-        c1 = c0 + qn
-        y = self.s_side.take(seg) * u
-        lo = np.zeros(seg.size, dtype=np.int64)
-        hi = qn - 1
         w0 = 1.0 - w
-        val = self.ix_val
-        for _ in range(self.ix_steps):
-            mid = (lo + hi) >> 1
-            below = w0 * val.take(c0 + mid) + w * val.take(c1 + mid) < y
-            lo = np.where(below, mid, lo)
-            hi = np.where(below, hi, mid)
-        v_lo = w0 * val.take(c0 + lo) + w * val.take(c1 + lo)
-        v_hi = w0 * val.take(c0 + hi) + w * val.take(c1 + hi)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.clip((y - v_lo) / (v_hi - v_lo), 0.0, 1.0)
+        y = _clip(u, -1.0, 2.0)
+        c0 = j * q  # the first coarse row of angle j in the flat arrays; angle j + 1's: c0 + q
+        key = y + INDEX_SHIFT * j
+        a0 = np.searchsorted(self.ix_flat, key) - c0  # the first coarse row >= u at angle j
+        a1 = np.searchsorted(self.ix_flat, key + INDEX_SHIFT) - (c0 + q)
+        # the interpolated values' first coarse row >= u, in [lo, hi]
+        lo, hi = np.minimum(a0, a1), np.maximum(a0, a1)
+        val = self.ix_val.reshape(-1)
+        o = np.flatnonzero(hi > lo)
+        while o.size:
+            lo_o, hi_o = lo.take(o), hi.take(o)
+            mid = (lo_o + hi_o) >> 1
+            at = c0.take(o) + mid
+            below = w0.take(o) * val.take(at) + w.take(o) * val.take(at + q) < y.take(o)
+            lo[o] = np.where(below, mid + 1, lo_o)
+            hi[o] = np.where(below, hi_o, mid)
+            o = o[hi.take(o) > lo.take(o)]
+        a = _clip(lo - 1, 0, q - 2)  # the coarse interval [a, a + 1]
+        at = c0 + a
+        v_a = w0 * val.take(at) + w * val.take(at + q)
+        v_b = w0 * val.take(at + 1) + w * val.take(at + q + 1)
+        t = _clip((y - v_a) / (v_b - v_a), 0.0, 1.0)
         t = np.where(np.isfinite(t), t, 0.5)
-        q0 = self.ix_q0.take(seg)
-        p_lo, p_hi = self.ix_pos.take(q0 + lo), self.ix_pos.take(q0 + hi)
-        return p_lo + t * (p_hi - p_lo)
+        s_a, s_b = self.ix_seg.take(a), self.ix_seg.take(a + 1)
+        l_a, l_b = self.ix_loc.take(a), self.ix_loc.take(a + 1)
+        same = s_a == s_b  # else between two segments' ends: the nearer one's
+        seg = np.where(same | (t < 0.5), s_a, s_b)
+        row = np.where(same, l_a + t * (l_b - l_a), np.where(t < 0.5, l_a, l_b))
+        return seg, row
 
     # ---- table lookups ----------------------------------------------------------------------------
-    def _evaluate(self, kind, rho, theta, want_j=False, theta_ref=None, want_u=True):
-        """u (and J, r_s/c) on orbits of kind codes ``kind`` and labels ``rho`` at angles ``theta`` from
-        their reference points, bicubic, continued linearly beyond a row's range. With ``theta_ref``
-        (the observer's phase): u(theta) - u(theta_ref) + uo and J(theta) - J(theta_ref), from the same
-        row stencil, so that the table's own small error cancels next to the observer. Without
-        ``want_u`` (J only) u is None."""
+    def _evaluate(self, kind, rho, theta, want_j=False, ref=None, want_u=True):
+        """(u, J (r_s/c), J's difference, b) on orbits of kind codes ``kind`` and labels ``rho`` at angles
+        ``theta`` from their reference points, bicubic, continued linearly beyond a row's range; b the
+        orbits' impact parameters (r_s). With ``ref`` = (indices k, the observer's phase theta_ref at
+        them): at those points u(theta) - u(theta_ref) + uo, and J(theta) - J(theta_ref) as the third
+        value (at k, NaN elsewhere), from the same row stencil, so that the table's own small error
+        cancels next to the observer. Without ``want_u`` (J only) u is None; without ``want_j`` J and
+        its difference are None."""
         fl = self.flat
         n_c = fl.n_cols
         nr = fl.n_rows.take(kind)
@@ -807,15 +884,22 @@ class RayMap:
         ln = (wr[0] * fl.length.take(i0) + wr[1] * fl.length.take(i0 + 1) + wr[2] * fl.length.take(i0 + 2)
               + wr[3] * fl.length.take(i0 + 3)) * sc
         u, j = self._columns(i0, wr, (theta - st) / ln * (n_c - 1), want_j, want_u)
-        if theta_ref is not None:
-            u0, j0 = self._columns(i0, wr, (theta_ref - st) / ln * (n_c - 1), want_j, want_u)
-            u = None if u is None else u - u0
-            j = None if j is None else j - j0
+        j_diff = None
+        if ref is not None:
+            k, theta_ref = ref
+            lk = ln.take(k)
+            u0, j0 = self._columns(i0.take(k), wr[:, k], (theta_ref - st.take(k)) / lk * (n_c - 1), want_j,
+                                   want_u)
+            if u is not None:
+                u[k] -= u0
+            if j is not None:
+                j_diff = np.full(j.size, np.nan)
+                j_diff[k] = (j.take(k) - j0) * lk * b.take(k)
         if u is not None:
             u = np.where(kind == 0, u / b, u)
-            if theta_ref is not None:
-                u = u + self.uo
-        return u, (None if j is None else j * ln * b)
+            if ref is not None:
+                u[ref[0]] += self.uo
+        return u, (None if j is None else j * ln * b), j_diff, b
 
     def _columns(self, i0, wr, c, want_j, want_u=True):
         fl = self.flat
@@ -823,43 +907,36 @@ class RayMap:
         cc = _clip(c, 0.0, n_c - 1)
         j0, wc = _stencil(cc, n_c)
         base = i0 * n_c + j0
-        u = _gather(fl.u, base, wr, wc, n_c) + _linear_tail(fl.u, base, n_c, c, cc, wr) if want_u else None
+        u = _linear_tail(fl.u, base, n_c, c, cc, wr, _gather(fl.u, base, wr, wc, n_c)) if want_u else None
         if not want_j:
             return u, None
-        return u, _gather(fl.j, base, wr, wc, n_c) + _linear_tail(fl.j, base, n_c, c, cc, wr)
+        return u, _linear_tail(fl.j, base, n_c, c, cc, wr, _gather(fl.j, base, wr, wc, n_c))
 
     def _residual(self, seg, d, u, sweep, want=False, near=None, want_f=True):
         """f = u_ray - u on the rays d of segments ``seg`` for targets (u, sweep); ``near`` (mask):
         targets next to the observer, whose f is formed as u_ray - u_ray(theta_o) + uo - u. With
         ``want``: (f, the rays' values for :meth:`_finish`); without ``want_f`` f is None."""
         far = self.s_far.take(seg)
-        with np.errstate(divide="ignore"):
-            z = np.log(d) - np.log(far - d)
+        z = np.log(d) - np.log(far - d)
         kind = self.s_kind.take(seg)
         rho = self._rho(seg, d)
-        th_o = self._nodes(seg, z, self.node_theta)
+        j_o = None
+        if want:  # the observer's phase and J there
+            th_o, j_o = self._nodes(seg, z, self.node_theta, self.node_j)
+        else:
+            th_o = self._nodes(seg, z, self.node_theta)
         th = th_o + self.s_dir.take(seg) * sweep
         turning = kind != 1
         th_row = np.where(turning, np.abs(th), th)
-        if near is not None and near.any():  # each point evaluated once: plainly, or next to the observer
-            k, f = np.flatnonzero(near), np.flatnonzero(~near)
-            uf, jf = self._evaluate(kind[f], rho[f], th_row[f], want, want_u=want_f)
-            uk, jk = self._evaluate(kind[k], rho[k], th_row[k], want, theta_ref=th_o[k], want_u=want_f)
-            u_ray = j = None
-            if want_f:
-                u_ray = np.empty(u.size)
-                u_ray[f], u_ray[k] = uf, uk
-            if want:
-                j = np.empty(u.size)
-                j[f] = jf
-                j[k] = np.nan  # marks the difference J(theta) - J(theta_o) (see _finish)
-                j_diff = np.full(u.size, np.nan)
-                j_diff[k] = jk
-        else:
-            u_ray, j = self._evaluate(kind, rho, th_row, want, want_u=want_f)
+        ref = None
+        if near is not None:
+            k = np.flatnonzero(near)
+            if k.size:
+                ref = (k, th_o.take(k))
+        u_ray, j, j_diff, b = self._evaluate(kind, rho, th_row, want, ref=ref, want_u=want_f)
         if want:
-            return (u_ray - u if want_f else None), dict(z=z, rho=rho, theta=th, theta_o=th_o, j=j,
-                                   j_diff=j_diff if near is not None and near.any() else None)
+            return (u_ray - u if want_f else None), dict(z=z, rho=rho, theta=th, theta_o=th_o, j=j, j_diff=j_diff,
+                                                         b=b, j_o=j_o)
         return u_ray - u
 
     def _row_residual(self, row, u, sweep, seg, near=None):
@@ -877,9 +954,11 @@ class RayMap:
         base = self.row_g.take(row).reshape(-1) * n_c + j0
         v = wc[0] * fl.u.take(base) + wc[1] * fl.u.take(base + 1) + wc[2] * fl.u.take(base + 2) + \
             wc[3] * fl.u.take(base + 3)
-        v = (v + _linear_tail(fl.u, base, n_c, c, cc, np.ones((1, c.size)))).reshape(np.shape(row))
+        v = _linear_tail(fl.u, base, n_c, c, cc, None, v).reshape(np.shape(row))
         f = v * self.row_uscale.take(row) - u
-        return f if near is None else f - np.where(near, self.row_eps.take(row), 0.0)
+        if near is None or not near.any():
+            return f
+        return f - np.where(near, self.row_eps.take(row), 0.0)
 
     def _tangent_residual(self, u, sweep, direction):
         """f on the ray tangent at the observer (1-D cubic along its interpolated row)."""
@@ -929,60 +1008,59 @@ class RayMap:
             rr = np.tile(r[idx], len(orders))
             pp = np.tile(p[idx], len(orders))
             oo = np.repeat(np.array(orders), m)
-            res = self.solve(rr, pp, oo)
+            res = self.solve(rr, pp, oo, quantities)
         else:  # nothing to solve (no valid point): the solve's fixed cost saved
             res = {q: np.empty(0) for q in QUANTITIES}
         out = {}
         for i, order in enumerate(orders):
             got = {}
             for q in quantities:
+                if m == r.size:  # every point valid: the solve's values as they are
+                    got[q] = res[q][i * m:(i + 1) * m].reshape(shape)
+                    continue
                 v = np.full(r.size, np.nan)
                 v[idx] = res[q][i * m:(i + 1) * m]
                 got[q] = v.reshape(shape)
             out[order] = Lookup(*(got.get(q) for q in QUANTITIES))
         return out
 
-    def solve(self, r, phi, order) -> dict:
+    def solve(self, r, phi, order, quantities=QUANTITIES) -> dict:
+        """{xi, dt, ux, uy} of the connecting rays of orders ``order`` (array of 1 and 2) to points
+        (r, phi) (1-D, valid; ux, uy only where ``quantities`` asks for either): see :meth:`_solve`
+        (under one np.errstate: the steps divide by zero and meet NaN by design, e.g. at rows' ends and
+        for rays that escaped)."""
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            return self._solve(r, phi, order, "ux" in quantities or "uy" in quantities)
+
+    def _solve(self, r, phi, order, tangents=True) -> dict:
         """{xi, dt, ux, uy} of the connecting rays of orders ``order`` (array of 1 and 2) to points
         (r, phi) (1-D, valid). Every point goes through the same vectorised steps:
 
-        1. its segment: the first whose end towards larger xi has f >= 0 (f changes sign once along
-           the rays ordered by xi);
-        2. the four rows about the root that the seed index gives (:meth:`_index_rows`; 1-D lookups
-           along each row) bracket it between neighbouring rows where f changes sign among them;
-           elsewhere a search over the segment's rows does (K-section, SEARCH_BUDGET; or the last
-           row and the far end, pi/2);
+        1. the four rows about the root in the segment that the seed index gives (:meth:`_seed`;
+           1-D lookups along each row) bracket it between neighbouring rows where f changes sign among
+           them (f changes sign once along the rays ordered by xi, over all segments: such a change
+           is the root's);
+        2. elsewhere its segment (the first whose end towards larger xi has f >= 0), then a search
+           over the segment's rows (K-section, SEARCH_BUDGET; from what the window showed when the
+           seed's segment was that one), or the last row and the far end, pi/2, bracket it;
         3. between two rows, the cubic through f on four rows gives a start and a slope; a Newton step
            with them and the bicubic interpolation ends where it is shorter than NEWTON_DONE, else
            secant steps converge (d = |xi - crit| to TOL_D); in the end intervals, and where the
            secant steps do not converge, the Anderson-Bjorck variant of regula falsi in d does."""
         n = r.size
-        with np.errstate(divide="ignore"):
-            u = 1.0 / r
+        u = 1.0 / r
         sweep = np.where(order == 1, phi, 2.0 * math.pi - phi)
-        with np.errstate(invalid="ignore"):
-            h = np.sin(0.5 * phi)
-            gap = np.hypot(r - self.r_obs, 2.0 * np.sqrt(r * self.r_obs) * h)  # distance from the observer
+        h = np.sin(0.5 * phi)
+        gap = np.hypot(r - self.r_obs, 2.0 * np.sqrt(r * self.r_obs) * h)  # distance from the observer
         near = (gap < NEAR * self.r_obs) & (order == 1)
         ns = self.n_seg
-        # 1. segments: the first whose end towards larger xi has f >= 0
-        seg = np.full(n, ns - 1)
-        if ns == 4:  # the ray tangent at the observer first, then one end on its side: two tests
-            low = self._tangent_residual(u, sweep, self.s_dir[1]) >= 0.0
-            for i, side in ((0, low), (2, ~low)):
-                at = np.flatnonzero(side)
-                f = self._row_residual(np.full(at.size, self.r_first[i]), u[at], sweep[at], np.full(at.size, i),
-                                       near[at])
-                seg[at] = np.where(f >= 0.0, i, i + 1)
-        else:  # two segments (an observer next to the photon sphere): the first's end
-            f = self._row_residual(np.full(n, self.r_first[0]), u, sweep, np.zeros(n, dtype=np.int64), near)
-            seg[f >= 0.0] = 0
-        # 2. the seed index's window of four rows about the root: where f changes sign inside it, the
-        # bracket and the cubic's four values are known; elsewhere a K-section search over the segment's
-        # rows (node count: its rows, then the far end) starts from what the window showed
+        # 1. the seed index's segment and window of four rows about the root: where f changes sign inside
+        # it (f changes sign once along the rays ordered by xi), the bracket and the cubic's four values
+        # are known
+        seg, k_row = self._seed(u, sweep)
         first, count = self.r_first.take(seg), self.r_count.take(seg)
-        orient = self.s_side.take(seg)  # f grows along the nodes when side > 0
-        k0 = np.clip(np.floor(self._index_rows(seg, u, sweep)).astype(np.int64) - 1, 0, count - 4)
+        orient = self.s_side.take(seg)  # f grows along the rows when side > 0
+        k0 = _clip(k_row.astype(np.int64) - 1, 0, count - 4)  # k_row >= 0: truncation is floor
         fw = self._row_residual(first + k0 + np.arange(4)[:, None], u, sweep, seg, near)  # (4, n)
         bw = orient * fw < 0.0
         lo, hi = np.zeros(n, dtype=np.int64), count.copy()
@@ -993,14 +1071,40 @@ class RayMap:
             at = bw[j] & ~bw[j + 1]
             lo[at], hi[at], f_lo[at], f_hi[at] = k0[at] + j, k0[at] + j + 1, fw[j, at], fw[j + 1, at]
             window |= at
-        rest = ~window
-        last = rest & bw[3]  # below on all four: the root is beyond them
-        lo[last], f_lo[last] = k0[last] + 3, fw[3, last]
-        start = rest & ~bw[0]  # above on all four: before them (at the critical end if k0 = 0)
-        hi[start], f_hi[start] = k0[start], fw[0, start]
-        at_first = start & (k0 == 0)
-        hi[at_first], f_lo[at_first] = 1, fw[0, at_first]
-        f_hi[at_first] = fw[1, at_first]
+        rest = np.flatnonzero(~window)
+        self.solved += n
+        self.windowed += n - rest.size
+        if rest.size:
+            # 2. elsewhere the segment from the signs at the segments' ends (the first whose end towards
+            # larger xi has f >= 0); in the seed's segment the search over its rows starts from what the
+            # window showed, in another one from all its rows
+            ur, sr, nr = u.take(rest), sweep.take(rest), near.take(rest)
+            s_rest = np.full(rest.size, ns - 1)
+            if ns == 4:  # the ray tangent at the observer first, then one end on its side: two tests
+                low = self._tangent_residual(ur, sr, self.s_dir[1]) >= 0.0
+                for i, side in ((0, low), (2, ~low)):
+                    at = np.flatnonzero(side)
+                    f = self._row_residual(np.full(at.size, self.r_first[i]), ur[at], sr[at], np.full(at.size, i),
+                                           nr[at])
+                    s_rest[at] = np.where(f >= 0.0, i, i + 1)
+            else:  # two segments (an observer next to the photon sphere): the first's end
+                f = self._row_residual(np.full(rest.size, self.r_first[0]), ur, sr, np.zeros(rest.size, dtype=np.int64),
+                                       nr)
+                s_rest[f >= 0.0] = 0
+            same = s_rest == seg.take(rest)
+            rs, ro = rest[same], rest[~same]
+            last = rs[bw[3, rs]]  # below on all four: the root is beyond them
+            lo[last], f_lo[last] = k0[last] + 3, fw[3, last]
+            start = rs[~bw[0, rs]]  # above on all four: before them (at the critical end if k0 = 0)
+            hi[start], f_hi[start] = k0[start], fw[0, start]
+            at_first = start[k0[start] == 0]
+            hi[at_first], f_lo[at_first] = 1, fw[0, at_first]
+            f_hi[at_first] = fw[1, at_first]
+            if ro.size:  # another segment: all its rows
+                seg[ro] = s_rest[~same]
+                first[ro], count[ro], orient[ro] = (self.r_first.take(seg[ro]), self.r_count.take(seg[ro]),
+                                                    self.s_side.take(seg[ro]))
+                hi[ro], f_hi[ro] = count[ro], orient[ro] * np.inf
         while True:  # a K-section search: K rows per point and pass, as many as SEARCH_BUDGET allows
             o = np.flatnonzero(hi - lo > 1)
             if not o.size:
@@ -1028,34 +1132,37 @@ class RayMap:
         inner = ~none & ~(turning & (hi >= count - 2)) & (hi < count)
         i = np.flatnonzero(inner)
         if i.size:
-            wi = window[i]
-            kc = np.where(wi, k0[i], np.clip(lo[i] - 1, 0, count[i] - 4))
-            fs = np.where(wi, fw[:, i], np.nan)
-            m_all = np.flatnonzero(~wi)
-            for j in range(4):  # outside the window: the bracket's two rows are known from the search
-                im = i[m_all]
-                kj = kc[m_all] + j
-                known_lo, known_hi = kj == lo[im], kj == hi[im]
-                fs[j, m_all[known_lo]], fs[j, m_all[known_hi]] = f_lo[im[known_lo]], f_hi[im[known_hi]]
-                m = m_all[~known_lo & ~known_hi]
-                if m.size:
-                    im = i[m]
-                    fs[j, m] = self._row_residual(first[im] + kc[m] + j, u[im], sweep[im], seg[im], near[im])
-            t, dp = _cubic_root(fs, (lo[i] - kc).astype(float), slope=True)
-            si = seg[i]
+            # the points' arrays at i (all of them, most often: no copies then)
+            pick = (lambda a: a) if i.size == n else (lambda a: a.take(i, axis=-1))
+            wi, lo_i, fst_i = pick(window), pick(lo), pick(first)
+            if wi.all():
+                kc, fs = pick(k0), pick(fw)
+            else:
+                kc = np.where(wi, pick(k0), _clip(lo_i - 1, 0, pick(count) - 4))
+                fs = np.where(wi, pick(fw), np.nan)
+                m_all = np.flatnonzero(~wi)
+                for j in range(4):  # outside the window: the bracket's two rows are known from the search
+                    im = i[m_all]
+                    kj = kc[m_all] + j
+                    known_lo, known_hi = kj == lo[im], kj == hi[im]
+                    fs[j, m_all[known_lo]], fs[j, m_all[known_hi]] = f_lo[im[known_lo]], f_hi[im[known_hi]]
+                    m = m_all[~known_lo & ~known_hi]
+                    if m.size:
+                        im = i[m]
+                        fs[j, m] = self._row_residual(first[im] + kc[m] + j, u[im], sweep[im], seg[im], near[im])
+            t, dp = _cubic_root(fs, (lo_i - kc).astype(float), slope=True)
             # the ray at t: ln d is smooth in the row index (rows uniform in rho, ln d ~ rho next to
             # the critical angle), so the cubic through the four rows' ln d gives d and dd/dt
-            r0 = first[i] + kc
-            ld = np.log(np.stack([self.row_d.take(r0 + j) for j in range(4)]))
-            _, wt = _cubic_stencil(t, 4)
-            d0 = np.exp((wt * ld).sum(0))
-            dd_dt = d0 * (_derivative_weights(t, 4) * ld).sum(0)
-            d_a, d_b = self.row_d.take(first[i] + lo[i]), self.row_d.take(first[i] + hi[i])
+            r0 = fst_i + kc
+            ld = self.row_ld.take(r0 + np.arange(4)[:, None])
+            p, dp_ld = _cubic_at(ld, t)
+            d0 = np.exp(p)
+            dd_dt = d0 * dp_ld
+            d_a, d_b = self.row_d.take(fst_i + lo_i), self.row_d.take(fst_i + pick(hi))
             d0 = np.clip(d0, np.minimum(d_a, d_b), np.maximum(d_a, d_b))
             # the cubic's slope as df/dd: the first step is Newton's with it
-            with np.errstate(divide="ignore", invalid="ignore"):
-                slope = dp / dd_dt
-            d[i], ok = self._secant(si, u[i], sweep[i], d0, d_a, d_b, near[i], slope=slope)
+            slope = dp / dd_dt
+            d[i], ok = self._secant(pick(seg), pick(u), pick(sweep), d0, d_a, d_b, pick(near), slope=slope)
             inner[i[~ok]] = False
         e = np.flatnonzero(~none & ~inner)
         if e.size:
@@ -1067,8 +1174,7 @@ class RayMap:
             if tan.size and self.tan is not None:  # the far end is the ray tangent at the observer: its f
                 f_b[tan] = self._tangent_residual(u[e[tan]], sweep[e[tan]], self.s_dir.take(seg[e[tan]]))
             # in these intervals f is smooth in d: regula falsi for a start, then secant steps
-            with np.errstate(divide="ignore", invalid="ignore"):
-                d0 = d_a - f_a * (d_b - d_a) / (f_b - f_a)
+            d0 = d_a - f_a * (d_b - d_a) / (f_b - f_a)
             lo_d, hi_d = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
             d0 = np.where(np.isfinite(d0) & (d0 > lo_d) & (d0 < hi_d), d0, 0.5 * (d_a + d_b))
             d[e], ok = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6)
@@ -1077,7 +1183,7 @@ class RayMap:
                 er = e[rest]
                 d[er] = self._regula_falsi(seg[er], u[er], sweep[er], d_a[rest], d_b[rest], f_a[rest], f_b[rest],
                                            near[er])
-        return self._finish(seg, d, u, r, phi, sweep, order, near)
+        return self._finish(seg, d, u, r, phi, sweep, order, near, tangents)
 
     def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4, slope=None):
         """Secant steps in d from d0 (inside the bracket [d_a, d_b], next to the root) with the bicubic
@@ -1092,8 +1198,7 @@ class RayMap:
         else:
             x_prev = d0
             f_prev = self._residual(seg, d0, u, sweep, near=near)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                x = d0 - f_prev / slope
+            x = d0 - f_prev / slope
             newton = np.isfinite(x) & (x >= lo) & (x <= hi) & (x != d0)
             x = np.where(newton, x, d0 + 1e-7 * (hi - lo))
         out = d0.copy()
@@ -1108,8 +1213,7 @@ class RayMap:
             if not act.size:
                 break
             f = self._residual(seg.take(act), x, u.take(act), sweep.take(act), near=near.take(act))
-            with np.errstate(divide="ignore", invalid="ignore"):
-                x_new = x - f * (x - x_prev) / (f - f_prev)
+            x_new = x - f * (x - x_prev) / (f - f_prev)
             x_new = np.where(f == 0.0, x, x_new)
             good = np.isfinite(x_new) & (x_new >= lo.take(act)) & (x_new <= hi.take(act))
             # a step this short leaves an error of order its square: converged
@@ -1128,14 +1232,12 @@ class RayMap:
         for _ in range(100):
             if not act.size:
                 break
-            with np.errstate(divide="ignore", invalid="ignore"):
-                c = b - f_b * (b - a) / (f_b - f_a)
+            c = b - f_b * (b - a) / (f_b - f_a)
             lo_d, hi_d = np.minimum(a, b), np.maximum(a, b)
             c = np.where(np.isfinite(c) & (c > lo_d) & (c < hi_d), c, 0.5 * (a + b))
             f_c = self._residual(seg.take(act), c, u.take(act), sweep.take(act), near=near.take(act))
             flip = (f_c < 0) != (f_b < 0)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                mm = 1.0 - f_c / f_b
+            mm = 1.0 - f_c / f_b
             mm = np.where(mm > 0.0, mm, 0.5)
             a, f_a = np.where(flip, b, a), np.where(flip, f_b, f_a * mm)
             tol = TOL_D * c
@@ -1147,40 +1249,50 @@ class RayMap:
         out[act] = b
         return out
 
-    def _finish(self, seg, d, u, r, phi, sweep, order, near) -> dict:
-        """xi, dt, ux, uy of the rays d of segments ``seg``."""
+    def _finish(self, seg, d, u, r, phi, sweep, order, near, tangents=True) -> dict:
+        """xi, dt and (with ``tangents``) ux, uy of the rays d of segments ``seg``."""
         k = self.k
         kind = self.s_kind.take(seg)
         xi = self.s_crit.take(seg) + self.s_side.take(seg) * d
         _, got = self._residual(seg, d, u, sweep, want=True, near=near, want_f=False)
-        rho, th = got["rho"], got["theta"]
-        b = _b_of(kind, rho)
-        j_o = self._nodes(seg, got["z"], self.node_j)
+        rho, th, b = got["rho"], got["theta"], got["b"]
+        j_o = got["j_o"]
         turning = kind != 1
         j_t = np.where(turning, np.sign(th), 1.0) * got["j"]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rs_o = self.r_obs + math.log(self.r_obs - 1.0)
-            rs_t = r + np.log(r - 1.0)
-            radial = np.abs(rs_t - rs_o)
-            tt = np.flatnonzero(turning & (th < 0.0))  # the ray passed its periapsis / apoapsis
-            if tt.size:
-                orb = _orbits("T", rho[tt]) if kind[tt[0]] == 0 else _orbits("I", rho[tt])
-                r_ref = 1.0 / np.where(kind[tt] == 0, orb.e2, orb.e3)
-                rs_ref = r_ref + np.log(r_ref - 1.0)
-                radial[tt] = np.abs(rs_t[tt] - rs_ref) + np.abs(rs_o - rs_ref)
-            dj = j_t - j_o
-            if got["j_diff"] is not None:  # next to the observer: J(theta) - J(theta_o) from one stencil
-                same = near & ((th >= 0.0) | ~turning)
-                dj = np.where(same, got["j_diff"], dj)
-            dt = radial + np.abs(dj)
+        rs_o = self.r_obs + math.log(self.r_obs - 1.0)
+        rs_t = r + np.log(r - 1.0)
+        radial = np.abs(rs_t - rs_o)
+        tt = np.flatnonzero(turning & (th < 0.0))  # the ray passed its periapsis / apoapsis
+        if tt.size:
+            r_ref = 1.0 / _reference_u("T" if kind[tt[0]] == 0 else "I", rho[tt])
+            rs_ref = r_ref + np.log(r_ref - 1.0)
+            radial[tt] = np.abs(rs_t[tt] - rs_ref) + np.abs(rs_o - rs_ref)
+        dj = j_t - j_o
+        if got["j_diff"] is not None:  # next to the observer: J(theta) - J(theta_o) from one stencil
+            same = near & ((th >= 0.0) | ~turning)
+            dj = np.where(same, got["j_diff"], dj)
+        dt = radial + np.abs(dj)
+        dt = np.where(np.isinf(r), np.inf, dt)
+        if not tangents:
+            return dict(xi=xi, dt=dt)
         direction = self.s_dir.take(seg)
         outward = np.where(turning, (np.sign(th) * direction > 0) == (kind == 0), direction < 0)
         s2 = np.maximum(1.0 - b * b * u * u * (1.0 - u), 0.0)
         u_r = np.where(outward, 1.0, -1.0) * k * np.sqrt(s2)
-        dt = np.where(np.isinf(r), np.inf, dt)
         r_u_phi = np.where(order == 1, 1.0, -1.0) * k * b * u
         c, s = np.cos(phi), np.sin(phi)
         return dict(xi=xi, dt=dt, ux=u_r * c - r_u_phi * s, uy=u_r * s + r_u_phi * c)
+
+
+def _cubic_at(fs, t):
+    """(p(t), p'(t)) of the cubic through (j, fs[j]), j = 0..3 (fs (4, N)), in Newton form."""
+    f0, f1, f2, f3 = fs
+    a = f1 - f0
+    c = 0.5 * (f2 - 2.0 * f1 + f0)
+    e = (f3 - 3.0 * f2 + 3.0 * f1 - f0) * (1.0 / 6.0)
+    t1 = t - 1.0
+    q = c + (t - 2.0) * e
+    return f0 + t * (a + t1 * q), a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e
 
 
 def _cubic_root(fs, t0, slope=False):
@@ -1193,13 +1305,11 @@ def _cubic_root(fs, t0, slope=False):
     e = (f3 - 3.0 * f2 + 3.0 * f1 - f0) / 6.0
     fa = np.where(t0 == 0, f0, np.where(t0 == 1, f1, f2))
     fb = np.where(t0 == 0, f1, np.where(t0 == 1, f2, f3))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = t0 + np.where(fb != fa, fa / (fa - fb), 0.5)
+    t = t0 + np.where(fb != fa, fa / (fa - fb), 0.5)
     for _ in range(CUBIC_STEPS):
         p = f0 + t * (a + (t - 1.0) * (c + (t - 2.0) * e))
         dp = a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t_new = t - p / dp
+        t_new = t - p / dp
         t = np.where(np.isfinite(t_new), np.clip(t_new, t0, t0 + 1.0), t)
     if slope:  # and the cubic's derivative there
         return t, a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e

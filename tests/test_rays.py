@@ -134,11 +134,17 @@ def test_batch_independence_and_determinism():
             assert np.array_equal(getattr(a[o], q)[sub], getattr(b[o], q)), (o, q)
 
 
+def _no_seed(self, u, sweep):
+    """The seed index disabled: every point's window at the first segment's first rows."""
+    return np.zeros(u.size, dtype=np.int64), np.zeros(u.size)
+
+
 @pytest.mark.parametrize("r_obs", [1e4, 20.0, 2.0, 1.2])
 def test_seed_index_chooses_only_where_the_search_starts(r_obs, monkeypatch):
     """The per-radius seed index puts most points' roots inside its window of four rows (so the rows
-    looked up per point stay few), and the rays are those of the full binary search over the rows
-    (index disabled: the window at the segment's first rows, which brackets almost nothing)."""
+    looked up per point stay few: no segment tests for those), and the rays are those of the segment
+    tests and the full search over the rows (index disabled: the window at the first segment's first
+    rows, which brackets almost nothing)."""
     rng = np.random.default_rng(int(r_obs) + 3)
     r, p = _targets(rng, r_obs, 4000)
     ok = r >= 1.05
@@ -155,11 +161,12 @@ def test_seed_index_chooses_only_where_the_search_starts(r_obs, monkeypatch):
     evaluated.clear()
     got = m.lookup_orders(r, p)
     with_index = sum(evaluated) / (2 * r.size)
-    monkeypatch.setattr(rays.RayMap, "_index_rows", lambda self, seg, u, sweep: np.zeros(seg.size))
+    monkeypatch.setattr(rays.RayMap, "_seed", _no_seed)
     evaluated.clear()
     full = m.lookup_orders(r, p)
     without = sum(evaluated) / (2 * r.size)
-    assert with_index < 8.0 < without  # segments (up to 3) and the window (4); a search costs about 10
+    # the window (4), and for the few points it does not bracket the segments' ends (up to 3) and a search
+    assert with_index < 6.0 < without
     for o in (1, 2):
         assert np.nanmax(np.abs(got[o].xi - full[o].xi)) < 1e-8, o
         assert np.nanmax(np.abs(got[o].dt / full[o].dt - 1.0)) < 1e-8, o
@@ -216,7 +223,7 @@ def test_row_search_passes_give_the_bisections_bracket(r_obs, monkeypatch):
     ok = r >= 1.05
     r, p = r[ok], p[ok]
     # the index disabled: every point goes through the search
-    monkeypatch.setattr(rays.RayMap, "_index_rows", lambda self, seg, u, sweep: np.zeros(seg.size))
+    monkeypatch.setattr(rays.RayMap, "_seed", _no_seed)
     calls = []
     real = rays.RayMap._row_residual
 
@@ -244,3 +251,60 @@ def test_no_valid_point():
     assert got[1].xi.shape == (0,) and got[2].dt.shape == (0,)
     got = m.lookup_orders(np.array([[0.5, np.nan]]), np.array([[0.3, 0.3]]), orders=(2,))
     assert got[2].xi.shape == (1, 2) and np.isnan(got[2].xi).all() and np.isnan(got[2].uy).all()
+
+
+@pytest.mark.parametrize("r_obs", [20.0, 4.0])
+def test_rays_past_the_periapsis_next_to_the_observer(r_obs):
+    """Points beside the observer (order 1, within rays.NEAR r_obs) whose connecting ray passes its
+    periapsis on the way (about the observer's radius, a little off its direction): finite travel times
+    that agree with lutgen.connect (the near-observer difference of J serves only rays that did not pass
+    it; these take the plain sum of both legs), and the tangents and xi as elsewhere. Fails with NaN
+    travel times where the two were mixed up."""
+    rng = np.random.default_rng(17)
+    r = r_obs * rng.uniform(0.97, 1.05, 200)
+    p = rng.uniform(0.02, 0.25, r.size)
+    got = rays.RayMap(r_obs).lookup(r, p, 1)
+    c = lutgen.connect(r_obs, r, p, 1)
+    inward = c.xi > 0.5 * np.pi  # rays that start inwards: those beyond the periapsis's radius pass it
+    assert 0.25 * r.size < inward.sum() < 0.75 * r.size
+    assert np.isfinite(got.dt).all()
+    assert np.max(np.abs(got.xi - c.xi)) < 2e-6
+    assert np.max(np.abs(got.dt / c.dt - 1.0)) < 5e-6
+    assert np.max(np.abs(got.ux - c.ux)) < 1e-4 and np.max(np.abs(got.uy - c.uy)) < 1e-4
+
+
+def test_quantities_asked_for():
+    """Without ux, uy asked for, the solve skips the tangents: xi and dt bit-identical to a full lookup's,
+    the tangents absent; every point valid or not, the values where they belong."""
+    rng = np.random.default_rng(23)
+    r, p = _targets(rng, 9.0, 500)
+    r = np.concatenate([r, [0.5, np.nan]])  # two invalid points (inside r_min, NaN)
+    p = np.concatenate([p, [1.0, 1.0]])
+    m = rays.RayMap(9.0)
+    full = m.lookup_orders(r, p)
+    some = m.lookup_orders(r, p, quantities=("xi", "dt"))
+    for o in (1, 2):
+        assert some[o].ux is None and some[o].uy is None
+        for q in ("xi", "dt"):
+            assert np.array_equal(getattr(full[o], q), getattr(some[o], q), equal_nan=True), (o, q)
+        assert np.isnan(full[o].xi[-2:]).all() and np.isfinite(full[o].xi[:-2]).all()
+    valid = m.lookup_orders(r[:-2], p[:-2], quantities=("dt",))  # every point valid: the solve's arrays
+    assert np.array_equal(valid[2].dt, full[2].dt[:-2])
+
+
+def test_per_radius_shortcuts_equal_the_general_forms():
+    """The set-up's and the solve's shortcuts give the general closed forms' numbers bit for bit: the
+    crossing rays' phase at the observer (lutgen.orbit.sweep at the observer less at the photon sphere,
+    both sides of the photon sphere and beyond pi/2 in Legendre's amplitude), and the turning orbits'
+    reference points (the roots of _orbits)."""
+    rho = np.linspace(rays.RHO_MIN, rays.RHO_MAX_P, 2000)
+    orb = rays._orbits("P", rho)
+    for r_obs in (1.001, 1.2, 1.5, 3.0, 1e4, 1e7):
+        uo = 1.0 / r_obs
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ends = O.sweep(orb, np.array([[uo], [O.U_PHOTON]]) * np.ones(rho.size))
+            assert np.array_equal(rays._crossing_phase(orb, uo), ends[0] - ends[1], equal_nan=True), r_obs
+    for kind, mx in (("T", rays.RHO_MAX_T), ("I", rays.RHO_MAX_I)):
+        rho = np.linspace(rays.RHO_MIN, mx, 2000)
+        o = rays._orbits(kind, rho)
+        assert np.array_equal(rays._reference_u(kind, rho), o.e2 if kind == "T" else o.e3), kind

@@ -71,3 +71,33 @@ def test_blackbody_colours_shift_towards_the_hotter_or_cooler_blackbody():
             assert np.sign(got[2] / got[0] - rgb[2] / rgb[0]) == np.sign(want[2] / want[0] - rgb[2] / rgb[0])
             assert np.abs(got / got[1] - want / want[1]).max() < 0.25
             assert abs(got[1] / want[1] - 1) < 0.1
+
+
+def test_many_matrices_at_once_are_shift_matrix():
+    """The vectorised quadrature behind the per-frame tables is shift_matrix's own, to rounding."""
+    g = np.array([0.2, 0.25, 0.6, 1.0, 1.37, 4.0, 5.5])
+    np.testing.assert_allclose(S._shift_matrices_direct(g), S.shift_matrix(g), rtol=1e-12, atol=1e-12 * g.max() ** 5)
+
+
+def test_shifted_matrices_against_shift_matrix_over_the_range():
+    """shifted_matrices (the cached table, interpolated) against shift_matrix over g = 1/4 .. 4: within
+    2e-4 g^5 (a kink of M at each crossing of a 1 nm node limits linear interpolation), hue and
+    brightness apart as g_bright^5 M(g_hue) / g_hue^5, rows summing to g_bright^5, the hue clipped to
+    LN_G_RANGE (its ends) and the brightness not."""
+    rng = np.random.default_rng(5)
+    ln_g = np.concatenate([rng.uniform(*S.LN_G_RANGE, 400), list(S.LN_G_RANGE), [0.0]])
+    g = np.exp(ln_g)
+    got = S.shifted_matrices(ln_g, ln_g)
+    want = S.shift_matrix(g)
+    err = np.abs(got - want).max((1, 2)) / g ** 5
+    assert err.max() < 2e-4, err.max()
+    assert err.max() > 1e-6  # (an interpolation, not the quadrature itself)
+    np.testing.assert_allclose(S.shifted_matrices(0.0, 0.0), np.eye(3), atol=2e-4)
+    ln_b = rng.uniform(-2.0, 2.0, len(ln_g))
+    both = S.shifted_matrices(ln_g, ln_b)
+    np.testing.assert_allclose(both, got / (g ** 5)[:, None, None] * np.exp(5 * ln_b)[:, None, None], rtol=1e-12)
+    np.testing.assert_allclose(both.sum(-1), np.repeat(np.exp(5 * ln_b)[:, None], 3, 1), rtol=1e-8)
+    lo, hi = S.LN_G_RANGE
+    np.testing.assert_allclose(S.shifted_matrices(hi + 0.7, 0.0), S.shift_matrix(4.0) / 4.0 ** 5, atol=1e-12)
+    np.testing.assert_allclose(S.shifted_matrices(lo - 0.7, 0.0), S.shift_matrix(0.25) / 0.25 ** 5, atol=1e-12)
+    assert S.shifted_matrices(np.zeros((2, 5)), np.zeros((2, 5))).shape == (2, 5, 3, 3)

@@ -813,6 +813,84 @@ def test_the_skys_colour_shift_is_hooked_restorably():
     assert _snapshot(w.node_tree) == before
 
 
+def _shift_reference(c, beta, r_obs, colour=True, beaming=True, gravity=True):
+    """The sky's shift matrices at camera-frame cosines ``c`` by core.spectrum.shift_matrix: hue shifted
+    by g_hue (clipped to 1/4 .. 4), brightness by g_bright^5."""
+    from grlens_addon.core import spectrum
+
+    gamma = 1 / math.sqrt(1 - beta * beta)
+    ln_m = -np.log(gamma * (1 + beta * c))
+    ln_grav = -0.5 * math.log(1 - 1 / r_obs) if gravity else 0.0
+    g_hue = np.exp(np.clip(ln_m * colour + ln_grav, *spectrum.LN_G_RANGE))
+    g_bright = np.exp(ln_m * beaming + ln_grav)
+    return spectrum.shift_matrix(g_hue) / (g_hue ** 5)[:, None, None] * (g_bright ** 5)[:, None, None], g_bright
+
+
+def _matrices_of(px):
+    """(n, 3, 3) the matrices that the sky-shift group applies, from its texels ``px`` (3, n, 4): one
+    row per table."""
+    assert np.all(px[:, :, 3] == 1)
+    return np.swapaxes(px[:, :, :3], 0, 1)
+
+
+@pytest.mark.parametrize("beta, tol", [(0.0, 3e-4), (0.3, 3e-4), (0.7, 3e-4), (0.9, 4e-3)])
+def test_the_sky_shift_tables_against_the_exact_shift(beta, tol):
+    """world.sky_shift_pixels: the matrices the sky-shift group makes of its texels (two entries per row
+    and the row sum) against core.spectrum.shift_matrix at each texel's cosine (within 2e-4 g^5, the
+    cached table's interpolation), and halfway between texels, where the group interpolates linearly in
+    c (the error grows where g changes fast: next to the direction of motion of a fast camera), for
+    every switch setting; the group's u puts c_j at texel j's centre."""
+    from grlens_addon.blender import world
+
+    n = world.SHIFT_SIZE
+    c = np.linspace(-1, 1, n)
+    for switches in ((True, True, True), (True, False, True), (False, True, True), (True, True, False)):
+        px = world.sky_shift_pixels(beta, 20.0, *switches).reshape(3, n, 4).astype(np.float64)
+        want, g_b = _shift_reference(c, beta, 20.0, *switches)
+        err = np.abs(_matrices_of(px) - want).max((1, 2)) / g_b ** 5
+        assert err.max() < 2e-4, (switches, err.max())
+        mid = 0.5 * (c[1:] + c[:-1])
+        want, g_b = _shift_reference(mid, beta, 20.0, *switches)
+        err = np.abs(_matrices_of(0.5 * (px[:, 1:] + px[:, :-1])) - want).max((1, 2)) / g_b ** 5
+        assert err.max() < tol, (switches, err.max())
+    grp = world._build_shift_group("test shift")
+    u = grp.nodes["Math"]
+    assert u.label == "u"
+    for j in (0, 17, n - 1):
+        assert c[j] * u.inputs[1].default_value + u.inputs[2].default_value == pytest.approx((j + 0.5) / n, abs=1e-9)
+
+
+def test_the_sky_shift_tables_are_written_when_the_camera_changes_and_read_per_engine():
+    """The tables are written (into the spare images, which take the lookups' place) only when the
+    camera's speed, radius or a switch changes; Cycles reads them with one filtered lookup each, Eevee
+    with texel pairs mixed in math nodes."""
+    from grlens_addon.blender import world
+
+    scene = bpy.context.scene
+    w = _direction_world(scene)
+    _, cam, hole = _scene()
+    _moving(scene, cam, shift_colours=True)
+    grp = world._group_node(w.node_tree).node_tree
+    shift = grp.nodes[world.SHIFT_HOLDER].node_tree
+    before = shift.nodes["shift 0"].image
+    world.set_sky_shift(grp, scene, 20.0, 0.5)
+    assert not world.set_sky_shift(grp, scene, 20.0, 0.5)
+    assert world.set_sky_shift(grp, scene, 20.0, 0.6)
+    scene.grlens.use_beaming = False
+    assert world.set_sky_shift(grp, scene, 20.0, 0.6)
+    a = shift.nodes["shift 0"].image
+    assert a == shift.nodes["shift 0 0"].image == shift.nodes["shift 0 1"].image != shift.nodes["shift 0 spare"].image
+    px = np.empty(4 * world.SHIFT_SIZE, np.float32)
+    a.pixels.foreach_get(px)
+    np.testing.assert_array_equal(px, world.sky_shift_pixels(0.6, 20.0, True, False, True)[0])
+    assert before is not None
+    eevee = "BLENDER_EEVEE" if bpy.app.version >= (5, 0, 0) else "BLENDER_EEVEE_NEXT"
+    for engine, source in (("CYCLES", "shift 1"), (eevee, "shift 1 closest"), ("CYCLES", "shift 1")):
+        scene.render.engine = engine
+        world.update(scene)
+        assert shift.nodes["row 1"].inputs[0].links[0].from_node.name == source, engine
+
+
 def test_check_frame_of_a_moving_camera_checks_its_aberrated_sky(tmp_path):
     """bpy.ops.grlens.check_frame with a moving camera: the reference traces the camera's own pixel
     rays and the sky model takes them back to the static frame as the node group does: they agree."""

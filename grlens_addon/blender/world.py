@@ -25,15 +25,18 @@ records what it had in its custom property ``grlens_hooked`` ({input identifier:
 :func:`apply` is idempotent: nodes the user adds while lensing is on are hooked at the next update.
 
 With physical time and a colour switch on, every Background colour of the user's tree is passed
-through "grlens Shift by g" with the sky's g (:func:`_sky_shift`, :func:`_hook_sky_shift`), recorded
-and restored like the rest.
+through the world's own sky-shift group (:func:`_build_shift_group`, hooked by :func:`_hook_sky_shift`),
+recorded and restored like the rest: per sample two lookups of a per-frame table of the shift's 3x3
+matrix against c = D . n (the inverse aberration's own dot product; :func:`sky_shift_pixels`), the
+motion, gravity, switches and brightness folded into the table.
 
 Before all this, D is taken back to the camera's local static frame (exact inverse aberration in
 four nodes, :func:`_static_direction`) when frames measure physical time and the camera moves (its velocity
 from its own keyframes, as the images'); at rest the nodes give D itself.
 
 Per frame only values change (never the tree): e1, xi_lim and the camera's velocity inside the
-group, and the table's pixels when the camera's radius changes (r_obs rounded to 7 digits, as the
+group, the sky-shift tables when the camera's speed or radius changes, and the table's pixels when
+the camera's radius changes (r_obs rounded to 7 digits, as the
 LUTs). Saving stores
 the user's own world: the file is restored before it is written and lensed again after
 (save_pre / save_post), so a .blend never holds grlens' nodes or its table.
@@ -54,6 +57,15 @@ HOOKED = "grlens_hooked"
 R_OBS_KEY = "grlens_r_obs"
 GROUP_PREFIX = "grlens Lensed Sky"
 TABLE_PREFIX = "grlens Sky Table"
+SHIFT_PREFIX = "grlens Sky Shift"
+SHIFT_HOLDER = "sky shift group"
+"""The lensed-sky group's unlinked group node that holds the world's sky-shift group."""
+SHIFT_LOOKUPS = ("shift 0", "shift 1", "shift 2")
+"""The sky-shift group's table lookups, one per row of the matrix (each with an unlinked "<name> spare"
+beside it, and "<name> 0", "<name> 1" for Eevee)."""
+SHIFT_SIZE = 1024
+"""Texels of the sky-shift tables: the matrix at cos = -1 .. 1 (the ray's direction against the
+camera's velocity, in the camera's frame), evenly."""
 
 DIRECTION_TEXTURES = ("ShaderNodeTexEnvironment", "ShaderNodeTexSky", "ShaderNodeTexNoise",
                       "ShaderNodeTexVoronoi", "ShaderNodeTexWave", "ShaderNodeTexMagic",
@@ -115,8 +127,7 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
     ng = bpy.data.node_groups.new(name, "ShaderNodeTree")
     ng.interface.new_socket(name="Vector", in_out="OUTPUT", socket_type="NodeSocketVector")
     ng.interface.new_socket(name="Escapes", in_out="OUTPUT", socket_type="NodeSocketFloat")
-    ng.interface.new_socket(name="ln g hue", in_out="OUTPUT", socket_type="NodeSocketFloat")
-    ng.interface.new_socket(name="ln g bright", in_out="OUTPUT", socket_type="NodeSocketFloat")
+    ng.interface.new_socket(name="Doppler cos", in_out="OUTPUT", socket_type="NodeSocketFloat")
     N, L = ng.nodes, ng.links
     geo = N.new("ShaderNodeNewGeometry")
     e1 = N.new("ShaderNodeCombineXYZ")
@@ -215,9 +226,11 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
     out.location = (2600, 0)
     L.new(rot.outputs["Vector"], out.inputs["Vector"])
     L.new(esc.outputs[0], out.inputs["Escapes"])
-    hue, bright = _sky_shift(N, L, d.outputs["Vector"])
-    L.new(hue, out.inputs["ln g hue"])
-    L.new(bright, out.inputs["ln g bright"])
+    L.new(N["doppler cos"].outputs["Value"], out.inputs["Doppler cos"])
+    holder = N.new("ShaderNodeGroup")  # unlinked: keeps this world's sky-shift group (and finds it)
+    holder.name = holder.label = SHIFT_HOLDER
+    holder.location = (2400, -600)
+    holder.node_tree = _build_shift_group(name.replace(GROUP_PREFIX, SHIFT_PREFIX, 1))
     return ng
 
 
@@ -241,6 +254,7 @@ def _static_direction(N, L, d):
     gb.location = (0, -1200)
     gb.outputs[0].default_value = 0.0
     c = _vmath(N, "DOT_PRODUCT", 250)
+    c.name = "doppler cos"  # also the sky's Doppler factor: g = 1 / (gamma (1 + |beta| c))
     L.new(d, c.inputs[0])
     L.new(n.outputs[0], c.inputs[1])
     k = _math(N, "MULTIPLY_ADD", x=300)  # (gamma - 1) c + gamma b
@@ -257,52 +271,169 @@ def _static_direction(N, L, d):
     return out
 
 
-def _sky_shift(N, L, d):
-    """Nodes giving ln g of the sky's light for the ray direction ``d`` (a socket; relinked to the
-    static direction with the others, :func:`_direction_inputs`): light emitted at rest at infinity
-    reaches the camera with g = gamma (1 + beta . D_static) / sqrt(1 - r_s/r_obs) (the motion's part:
-    ln(gamma - gamma |beta| (D_static . n)), n = "beta_dir"; the gravitational part: node
-    "ln_g_gravity"), each part times its switch ("sky gravitational shift", "sky Doppler colour",
-    "sky beaming"). Returns the sockets (ln g of the hue, ln g of the brightness), for
-    "grlens Shift by g" in front of the user's Background colours (:func:`_hook_sky_shift`)."""
-    t = _vmath(N, "DOT_PRODUCT", 450)
-    t.name = "sky doppler dot"
-    L.new(d, t.inputs[0])
-    L.new(N["beta_dir"].outputs[0], t.inputs[1])
-    values = {}
-    for k, (name, default) in enumerate((("gamma", 1.0), ("minus_gamma_beta", 0.0), ("ln_g_gravity", 0.0),
-                                         ("sky gravitational shift", 1.0), ("sky Doppler colour", 1.0),
-                                         ("sky beaming", 1.0))):
-        v = N.new("ShaderNodeValue")
-        v.name = v.label = name
-        v.location = (200, -1400 - 150 * k)
-        v.outputs[0].default_value = default
-        values[name] = v.outputs[0]
-    lin = _math(N, "MULTIPLY_ADD", x=500)  # gamma - gamma b t
-    L.new(t.outputs["Value"], lin.inputs[0])
-    L.new(values["minus_gamma_beta"], lin.inputs[1])
-    L.new(values["gamma"], lin.inputs[2])
-    motion = _math(N, "LOGARITHM", x=550)
-    motion.inputs[1].default_value = math.e
-    L.new(lin.outputs[0], motion.inputs[0])
-    grav = _math(N, "MULTIPLY", x=550)
-    L.new(values["ln_g_gravity"], grav.inputs[0])
-    L.new(values["sky gravitational shift"], grav.inputs[1])
-    out = []
-    for switch in ("sky Doppler colour", "sky beaming"):
-        m = _math(N, "MULTIPLY_ADD", x=600)
-        L.new(motion.outputs[0], m.inputs[0])
-        L.new(values[switch], m.inputs[1])
-        L.new(grav.outputs[0], m.inputs[2])
-        out.append(m.outputs[0])
-    return out
+def _build_shift_group(name: str) -> bpy.types.NodeTree:
+    """The node group that shifts one colour of the world (input ``Color``, linear RGB, as the user's
+    tree gives it to a Background) by the sky's g (input ``Doppler cos``: c = D . n of the lensed-sky
+    group, the camera's ray direction against n = -beta / |beta| in the camera's frame; 0 at rest),
+    output ``Color``: max(T(c) Color, 0), T(c) the matrix of :func:`sky_shift_pixels` for this frame,
+    every part of the shift (the camera's motion, gravity, the colour switches, the brightness) folded
+    into it per frame.
+
+    Per sample, nine nodes: u = 0.5 + c (n - 1) / (2 n) (one multiply-add: texel centres at
+    c = -1 .. 1); three 'Linear' lookups at u of the tables "shift 0" .. "shift 2" (T's rows); three dot
+    products of the rows with the colour; one Combine XYZ; one vector maximum with 0 (negative channels
+    of out-of-gamut colours clipped, as "grlens Shift by g" does). Cycles spends about the same per node
+    whatever it does (its per-node overhead dominates: ``./dev bench physical_time_sky --instructions``),
+    so the count is what is kept small: two lookups and the row sums (each row sums to the brightness
+    factor) would need the colour's channels apart and float-to-vector conversions, thirteen nodes. Eevee
+    reads the tables by closest-texel pairs mixed in math nodes (:func:`_use_shift_lookup`)."""
+    tree = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    tree.interface.new_socket(name="Color", in_out="INPUT", socket_type="NodeSocketColor").default_value = \
+        (1.0, 1.0, 1.0, 1.0)
+    tree.interface.new_socket(name="Doppler cos", in_out="INPUT", socket_type="NodeSocketFloat")
+    tree.interface.new_socket(name="Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+    N, L = tree.nodes, tree.links
+    gin, gout = N.new("NodeGroupInput"), N.new("NodeGroupOutput")
+    gout.location = (1600, 0)
+    u = _math(N, "MULTIPLY_ADD", x=200, label="u")
+    L.new(gin.outputs["Doppler cos"], u.inputs[0])
+    u.inputs[1].default_value = (SHIFT_SIZE - 1) / (2.0 * SHIFT_SIZE)
+    u.inputs[2].default_value = 0.5
+    # the 'closest' way (Eevee): texels j0 and j0 + 1, j = (c + 1) (n - 1) / 2, mixed by j - j0
+    j = _math(N, "MULTIPLY_ADD", x=200)
+    j.location.y = -1500
+    L.new(gin.outputs["Doppler cos"], j.inputs[0])
+    j.inputs[1].default_value = j.inputs[2].default_value = (SHIFT_SIZE - 1) / 2.0
+    j0 = _math(N, "FLOOR", x=250)
+    j0.location.y = -1500
+    L.new(j.outputs[0], j0.inputs[0])
+    w = _math(N, "SUBTRACT", x=300, label="weight")
+    w.location.y = -1500
+    L.new(j.outputs[0], w.inputs[0])
+    L.new(j0.outputs[0], w.inputs[1])
+    uk = []
+    for k in range(2):
+        n = _math(N, "MULTIPLY_ADD", x=300)
+        n.location.y = -1700 - 200 * k
+        L.new(j0.outputs[0], n.inputs[0])
+        n.inputs[1].default_value = 1.0 / SHIFT_SIZE
+        n.inputs[2].default_value = (0.5 + k) / SHIFT_SIZE
+        uk.append(n.outputs[0])
+    comb = N.new("ShaderNodeCombineXYZ")
+    comb.location = (1200, 0)
+    for k, name_k in enumerate(SHIFT_LOOKUPS):
+        image = _new_table_image(f"{name} {name_k[-1]}", SHIFT_SIZE)
+        tex = _table_lookup(N, name_k, image, "Linear", (400, -300 * k))
+        L.new(u.outputs[0], tex.inputs["Vector"])
+        _table_lookup(N, name_k + " spare", _new_table_image(f"{name} {name_k[-1]} (spare)", SHIFT_SIZE), "Linear",
+                      (400, -700 - 300 * k))
+        pair = []
+        for i in range(2):
+            t = _table_lookup(N, f"{name_k} {i}", image, "Closest", (400 + 200 * i, -1500 - 300 * k))
+            L.new(uk[i], t.inputs["Vector"])
+            pair.append(t)
+        mix = N.new("ShaderNodeMix")
+        mix.name = name_k + " closest"
+        mix.data_type = "RGBA"
+        mix.clamp_factor = False
+        mix.location = (800, -1500 - 300 * k)
+        L.new(w.outputs[0], mix.inputs[0])
+        L.new(pair[0].outputs["Color"], mix.inputs[6])
+        L.new(pair[1].outputs["Color"], mix.inputs[7])
+        dot = _vmath(N, "DOT_PRODUCT", 1000)
+        dot.name = f"row {k}"
+        dot.location.y = -300 * k
+        L.new(tex.outputs["Color"], dot.inputs[0])
+        L.new(gin.outputs["Color"], dot.inputs[1])
+        L.new(dot.outputs["Value"], comb.inputs[k])
+    clip = _vmath(N, "MAXIMUM", 1400)
+    clip.name = "clip"
+    L.new(comb.outputs[0], clip.inputs[0])
+    clip.inputs[1].default_value = (0.0, 0.0, 0.0)
+    L.new(clip.outputs["Vector"], gout.inputs["Color"])
+    return tree
+
+
+def _use_shift_lookup(tree, kind: str) -> bool:
+    """Take the sky-shift group's rows from its 'linear' lookups (Cycles) or from its 'closest' pairs
+    mixed in math nodes (Eevee: a GPU sampler's mipmaps average the table over many texels where c
+    changes by several texels per pixel, and T's large entries of opposite sign turn that into errors
+    of 0.5 in colour), as :func:`_use_lookup` for the escape table. Relinks only when that changes.
+    Returns whether it relinked."""
+    nodes, links = tree.nodes, tree.links
+    changed = False
+    for k, name in enumerate(SHIFT_LOOKUPS):
+        sock = nodes[f"row {k}"].inputs[0]
+        src = nodes[name].outputs["Color"] if kind == "linear" else nodes[name + " closest"].outputs[2]
+        if sock.is_linked and sock.links[0].from_socket == src:
+            continue
+        for lk in list(sock.links):
+            links.remove(lk)
+        links.new(src, sock)
+        changed = True
+    return changed
+
+
+def sky_shift_pixels(beta: float, r_obs: float, doppler_colour=True, beaming=True, gravity=True) -> np.ndarray:
+    """(3, SHIFT_SIZE * 4) float32: the texels of the tables "shift 0" .. "shift 2" for a camera at
+    ``r_obs`` (r_s) moving with speed ``beta`` (units of c, in its local static frame; 0: at rest) and the
+    scene's colour switches. Entry j is for c_j = -1 + 2 j / (SHIFT_SIZE - 1), the camera-frame cosine of
+    its ray direction D against n = -beta / |beta|: light from the sky (emitted at rest at infinity)
+    reaches it with g = g_motion g_gravity, g_motion = 1 / (gamma (1 + |beta| c)) (the same as
+    gamma (1 + beta . D_static)) and g_gravity = 1 / sqrt(1 - r_s / r_obs). The hue is shifted by
+    g_hue = g_motion^[doppler_colour] g_gravity^[gravity], the brightness by g_bright (beaming in place of
+    doppler_colour): T = core.spectrum.shifted_matrices(ln g_hue, ln g_bright). Table i holds row i of
+    T in its colour channels (alpha 1)."""
+    from ..core import spectrum
+
+    c = np.linspace(-1.0, 1.0, SHIFT_SIZE)
+    b = float(beta)
+    gamma = 1.0 / math.sqrt(max(1.0 - b * b, 1e-300))
+    ln_motion = -np.log(gamma * (1.0 + b * c))
+    ln_grav = -0.5 * math.log(1.0 - 1.0 / r_obs) if gravity else 0.0
+    ln_hue = ln_motion * float(doppler_colour) + ln_grav
+    ln_bright = ln_motion * float(beaming) + ln_grav
+    t = spectrum.shifted_matrices(ln_hue, ln_bright)
+    px = np.ones((3, SHIFT_SIZE, 4), np.float32)
+    px[:, :, :3] = np.swapaxes(t, 0, 1)
+    return px.reshape(3, -1)
+
+
+def write_shift_table(group, beta: float, r_obs: float, switches) -> bool:
+    """Give the sky-shift group of the lensed-sky ``group`` the tables of :func:`sky_shift_pixels` (its
+    arguments after ``group``; ``switches`` = (doppler_colour, beaming, gravity)) unless its images hold
+    them already in this session (compared in float32, the radius rounded as the LUTs). Like
+    :func:`write_table`, new texels go into the spare images, which then take the lookups' places.
+    Returns whether it wrote."""
+    from .lutcache import round_radius
+
+    switches = tuple(bool(v) for v in switches)
+    key = repr((float(np.float32(beta)), round_radius(r_obs) if switches[2] else 0.0, switches))
+    tree = group.nodes[SHIFT_HOLDER].node_tree
+    nodes = tree.nodes
+    cur = [nodes[k].image for k in SHIFT_LOOKUPS]
+    if all(im is not None and _written.get(im.as_pointer()) == key and im.get(R_OBS_KEY) == key for im in cur):
+        return False
+    px = sky_shift_pixels(beta, r_obs, *switches)
+    for k, name in enumerate(SHIFT_LOOKUPS):
+        spare = nodes[name + " spare"]
+        image = spare.image
+        image.pixels.foreach_set(px[k])
+        image.update()
+        image[R_OBS_KEY] = key
+        image.update_tag()
+        _written[image.as_pointer()] = key
+        for k2 in (name, f"{name} 0", f"{name} 1"):
+            nodes[k2].image = image
+        spare.image = cur[k]
+    return True
 
 
 def _direction_inputs(group):
     """The inputs that take the ray's direction: xi's cosine, the deflection's axis, the rotated
-    vector, the sky's Doppler factor."""
+    vector."""
     return (group.nodes["cos xi"].inputs[0], group.nodes["deflection axis"].inputs[1],
-            group.nodes["rotate"].inputs["Vector"], group.nodes["sky doppler dot"].inputs[0])
+            group.nodes["rotate"].inputs["Vector"])
 
 
 def _use_aberration(group, moving: bool) -> bool:
@@ -356,12 +487,18 @@ def _use_lookup(group, kind: str) -> bool:
     return True
 
 
-def _new_table_image(name: str):
+def _new_table_image(name: str, size: int | None = None):
+    """A 1-row float32 data image of ``size`` texels for a table of the group (default: the escape
+    table, its value in the colour channels). Given a ``size`` (the sky-shift tables) its alpha is a
+    fourth channel of data (CHANNEL_PACKED: never (un)premultiplied)."""
     from lutgen.escape import TABLE_SIZE
 
-    img = bpy.data.images.new(name, width=TABLE_SIZE, height=1, alpha=False, float_buffer=True, is_data=True)
+    img = bpy.data.images.new(name, width=size or TABLE_SIZE, height=1, alpha=size is not None, float_buffer=True,
+                              is_data=True)
     img.use_half_precision = False  # Eevee would upload 16-bit floats (an error of ~1e-2 rad at phi ~ 20)
     img.colorspace_settings.name = "Non-Color"
+    if size is not None:
+        img.alpha_mode = "CHANNEL_PACKED"
     return img
 
 
@@ -423,11 +560,18 @@ def _socket(sockets, ident):
     return None
 
 
+def _shift_ok(group) -> bool:
+    holder = group.nodes.get(SHIFT_HOLDER)
+    tree = holder.node_tree if holder is not None else None
+    return tree is not None and all(k in tree.nodes for n in SHIFT_LOOKUPS
+                                    for k in (n, n + " spare", n + " 0", n + " 1", n + " closest"))
+
+
 def _group_ok(group) -> bool:
-    return group is not None and all(k in group.nodes for k in (*TABLE_LOOKUPS, "spare", "e1", "xi_lim", "rotate",
+    return group is not None and _shift_ok(group) and all(k in group.nodes for k in (*TABLE_LOOKUPS, "spare", "e1", "xi_lim", "rotate",
                                                                  "beta_dir", "gamma_minus_1", "gamma_beta", "D",
-                                                                 "static direction", "sky doppler dot",
-                                                                 "gamma", "minus_gamma_beta", "ln_g_gravity",
+                                                                 "static direction",
+                                                                 "doppler cos", SHIFT_HOLDER,
                                                                  "cos xi", "deflection axis", *LOOKUPS.values()))
 
 
@@ -576,8 +720,13 @@ def restore(world) -> None:
             if node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None:
                 groups.append(node.node_tree)
             tree.nodes.remove(node)
-    for g in groups:
-        for k in (*TABLE_LOOKUPS, "spare"):
+    holders = [g for g in groups if SHIFT_HOLDER in g.nodes]  # lensed-sky groups hold the sky-shift group
+    ordered = []
+    for g in holders + groups + [h.nodes[SHIFT_HOLDER].node_tree for h in holders]:
+        if g is not None and g not in ordered:
+            ordered.append(g)
+    for g in ordered:  # holders first: the group they hold loses that user when they go
+        for k in (*TABLE_LOOKUPS, "spare", *SHIFT_LOOKUPS, *(n + " spare" for n in SHIFT_LOOKUPS)):
             tex = g.nodes.get(k)
             if tex is not None and tex.image is not None and tex.image not in images:
                 images.append(tex.image)
@@ -729,7 +878,8 @@ def update(scene, depsgraph=None) -> str | None:
     _use_aberration(grp, bool(np.any(beta != 0)))
     shifted = g.speed_of_light > 0 and any(getattr(g, prop) for prop in SKY_SWITCHES)
     if shifted:
-        set_sky_shift(grp, scene, r_obs)
+        set_sky_shift(grp, scene, r_obs, float(np.linalg.norm(beta)))
+        _use_shift_lookup(grp.nodes[SHIFT_HOLDER].node_tree, lookup_for(scene.render.engine))
     _hook_sky_shift(world, _group_node(world.node_tree), shifted)
     skipped = unhooked(world)
     if skipped:
@@ -749,23 +899,18 @@ def set_velocity(group, beta) -> None:
         _set(node.inputs[k], float(n[k]))
     _set(group.nodes["gamma_minus_1"].outputs[0], gamma - 1.0)
     _set(group.nodes["gamma_beta"].outputs[0], gamma * b)
-    _set(group.nodes["gamma"].outputs[0], gamma)
-    _set(group.nodes["minus_gamma_beta"].outputs[0], -gamma * b)
 
 
-SKY_SWITCHES = {"use_gravitational_shift": "sky gravitational shift", "use_doppler_colour": "sky Doppler colour",
-                "use_beaming": "sky beaming"}
-"""scene.grlens switch -> the sky group's Value node that carries it."""
+SKY_SWITCHES = ("use_doppler_colour", "use_beaming", "use_gravitational_shift")
+"""scene.grlens' colour switches, in the order of :func:`sky_shift_pixels`' arguments."""
 
 
 def _hook_sky_shift(world, group_node, on: bool) -> None:
     """With ``on`` (physical time, a colour switch on), every Background node of the user's tree takes
-    its colour through a "grlens Shift by g" node (marked ``grlens_own == "sky shift"``) fed by the sky
-    group's ln g outputs, its Color input recorded as the lensed world records inputs (so
+    its colour through a group node of the world's sky-shift group (:func:`_build_shift_group`, marked
+    ``grlens_own == "sky shift"``) fed by the lensed-sky group's ``Doppler cos``, its Color input recorded as the lensed world records inputs (so
     :func:`restore` puts it back); without, those nodes are taken out again and the colours relinked.
     An unlinked colour is copied into the shift node (again whenever it changes)."""
-    from . import shading
-
     tree = world.node_tree
     links = tree.links
     incoming = _incoming(tree)
@@ -782,7 +927,7 @@ def _hook_sky_shift(world, group_node, on: bool) -> None:
                 shift = lk.from_node
             else:
                 shift = tree.nodes.new("ShaderNodeGroup")
-                shift.node_tree = shading.ensure_shift_by_g_group()
+                shift.node_tree = group_node.node_tree.nodes[SHIFT_HOLDER].node_tree
                 shift[OWN] = "sky shift"
                 shift.label = "grlens: the sky's colour shift (physical time)"
                 shift.location = (bg.location.x - 250.0, bg.location.y - 200.0)
@@ -801,8 +946,7 @@ def _hook_sky_shift(world, group_node, on: bool) -> None:
                 else:
                     _record(bg, sock.identifier, "")
                 links.new(shift.outputs["Color"], sock)
-                links.new(group_node.outputs["ln g hue"], shift.inputs["ln g hue"])
-                links.new(group_node.outputs["ln g bright"], shift.inputs["ln g bright"])
+                links.new(group_node.outputs["Doppler cos"], shift.inputs["Doppler cos"])
             if not shift.inputs["Color"].is_linked and tuple(shift.inputs["Color"].default_value) != \
                     tuple(sock.default_value):
                 shift.inputs["Color"].default_value = tuple(sock.default_value)
@@ -823,12 +967,12 @@ def _hook_sky_shift(world, group_node, on: bool) -> None:
             tree.nodes.remove(node)
 
 
-def set_sky_shift(group, scene, r_obs: float) -> None:
-    """The sky group's gravitational shift for the camera at ``r_obs`` (r_s; light from infinity is
-    blue-shifted by 1 / sqrt(1 - r_s/r_obs)) and the scene's colour switches."""
-    _set(group.nodes["ln_g_gravity"].outputs[0], -0.5 * math.log(1.0 - 1.0 / r_obs))
-    for prop, name in SKY_SWITCHES.items():
-        _set(group.nodes[name].outputs[0], 1.0 if getattr(scene.grlens, prop) else 0.0)
+def set_sky_shift(group, scene, r_obs: float, beta: float = 0.0) -> bool:
+    """The sky's shift for the camera at ``r_obs`` (r_s; light from infinity is blue-shifted by
+    1 / sqrt(1 - r_s/r_obs)) moving at ``beta`` (c; the speed the group's inverse aberration uses) with
+    the scene's colour switches: the tables of the group's sky-shift group (:func:`write_shift_table`).
+    Returns whether they were written."""
+    return write_shift_table(group, beta, r_obs, [getattr(scene.grlens, prop) for prop in SKY_SWITCHES])
 
 
 def refresh(scene, depsgraph=None):

@@ -102,3 +102,53 @@ def shift_table(n: int = 256) -> tuple[np.ndarray, np.ndarray]:
     ln_g = np.linspace(*LN_G_RANGE, n)
     g = np.exp(ln_g)
     return ln_g, shift_matrix(g) / (g**5)[:, None, None]
+
+
+def _shift_matrices_direct(g) -> np.ndarray:
+    """(len(g), 3, 3) M(g) of :func:`shift_matrix` for many g at once (g (n,) > 0): the same
+    quadrature (the 1 nm spectra interpolated linearly at g lambda, flat beyond both ends), its
+    interpolation done by index arithmetic on the evenly spaced wavelengths instead of np.interp per g."""
+    g = np.asarray(g, dtype=np.float64).reshape(-1)
+    lam = LAMBDA_NM
+    a = response(lam)  # (N, 3)
+    spectra = basis().T  # (3 basis colours, N)
+    p = np.clip(g[:, None] * lam[None, :], lam[0], lam[-1]) - lam[0]  # (n, N), 1 nm steps
+    i = np.minimum(np.floor(p).astype(np.intp), len(lam) - 2)
+    w = p - i
+    out = np.empty((len(g), 3, 3))
+    for b in range(3):  # rows of M are channels, columns the basis colours
+        s = spectra[b]
+        out[:, :, b] = (s[i] * (1.0 - w) + s[i + 1] * w) @ a
+    return out * (g**5)[:, None, None]
+
+
+FINE_POINTS = 1025
+"""Nodes of the cached table behind :func:`shifted_matrices`, evenly in ln g over LN_G_RANGE (steps of
+2.7e-3; built once, about 0.03 s). M(g) has a small kink wherever g lambda crosses a node of the 1 nm
+spectra, so linear interpolation converges only as the first power of the step: within 1.6e-4 here,
+7e-5 with 2049 nodes."""
+
+
+@lru_cache(maxsize=1)
+def _fine_table() -> tuple[np.ndarray, np.ndarray]:
+    ln_g = np.linspace(*LN_G_RANGE, FINE_POINTS)
+    return ln_g, _shift_matrices_direct(np.exp(ln_g)) / np.exp(5.0 * ln_g)[:, None, None]
+
+
+def shifted_matrices(ln_g_hue, ln_g_bright) -> np.ndarray:
+    """(..., 3, 3) the matrices of light whose hue is shifted by g_hue and brightness by g_bright
+    (natural logarithms ``ln_g_hue``, ``ln_g_bright``, broadcast together): M(g_hue) / g_hue^5 times
+    g_bright^5, the colour seen of the emitted colour rgb being that matrix times rgb. ln g_hue is
+    clipped to LN_G_RANGE, as in the node group "grlens Shift by g" (beyond, the flat continuation makes
+    the shift a plain change of brightness anyway); the brightness is not. With g_hue = g_bright = g
+    inside the range it is M(g) (:func:`shift_matrix`), here from a cached table of FINE_POINTS nodes
+    interpolated linearly (within 2e-4 g_bright^5 of shift_matrix, tests/test_spectrum.py), fast enough
+    for a table per frame (1024 matrices in 0.2 ms). Each row sums to g_bright^5 (white stays white)."""
+    hue, bright = np.broadcast_arrays(np.asarray(ln_g_hue, dtype=np.float64),
+                                      np.asarray(ln_g_bright, dtype=np.float64))
+    ln_tab, tab = _fine_table()
+    x = (np.clip(hue, *LN_G_RANGE) - ln_tab[0]) / (ln_tab[1] - ln_tab[0])
+    i = np.minimum(np.floor(x).astype(np.intp), len(ln_tab) - 2)
+    w = (x - i)[..., None, None]
+    m = tab[i] * (1.0 - w) + tab[i + 1] * w
+    return m * np.exp(5.0 * bright)[..., None, None]
