@@ -76,6 +76,52 @@ def test_a_cancelled_build_raises_between_stages_and_leaves_nothing(at):
     assert prog.cancelled
 
 
+def test_a_build_is_cancelled_inside_its_long_stages_and_reports_fractions_within_them(monkeypatch):
+    """Frame.checkpoint between the blocks of the dense passes (frame.edge_lengths, the back faces in
+    visibility): the hook is called inside prepare, map and plan with fractions between the stage's
+    own and the next stage's, never decreasing; cancelled at such a point the build raises there,
+    before the stage ends; the images with checkpoints are the same as without."""
+    from grlens_addon.core import frame as F
+    from grlens_addon.core import visibility
+
+    monkeypatch.setattr(F, "EDGE_BLOCK", 1000)
+    monkeypatch.setattr(visibility, "TRI_BLOCK", 1000)
+    monkeypatch.setattr(visibility.B, "BACK_FACE_MIN_PIECES", 1000)  # (the sphere's back faces: the dense way)
+    src, scene, lut, settings = _core_case(96, 48)
+    plain = pipeline.build_images(src, scene, lut, settings)
+    seen = []
+    hooked = pipeline.build_images(src, scene, lut, settings, progress=pipeline.Progress(
+        lambda stage, f: seen.append((stage, f))))
+    fractions = [f for _, f in seen]
+    assert all(b >= a for a, b in zip(fractions, fractions[1:])), fractions
+    firsts = {}  # each stage's first fraction, and the repeated calls inside it
+    inside = []
+    for i, (stage, f) in enumerate(seen):
+        if i and seen[i - 1][0] == stage:
+            inside.append((stage, f, i))
+        else:
+            firsts.setdefault(stage, f)
+    assert {s for s, _, _ in inside} >= {"prepare", "map", "plan"}, inside
+    for stage, f, i in inside:
+        nxt = next(g for s, g in seen[i:] if s != stage)
+        assert seen[i - 1][1] <= f <= nxt
+    for o in plain:
+        np.testing.assert_array_equal(plain[o].positions, hooked[o].positions)
+        np.testing.assert_array_equal(plain[o].tris, hooked[o].tris)
+    for stage, _, i in inside[::3]:  # cancelled inside the stage: raised at the very next call
+        calls = []
+
+        def hook(s, f, at=i):
+            calls.append(s)
+            if len(calls) == at:
+                prog.cancel()
+
+        prog = pipeline.Progress(hook)
+        with pytest.raises(pipeline.Cancelled) as err:
+            pipeline.build_images(src, scene, lut, settings, progress=prog)
+        assert str(err.value) == stage and calls[-1] == stage and len(calls) == i
+
+
 # --- the add-on ----------------------------------------------------------------------------------------
 
 @pytest.fixture

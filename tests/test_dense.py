@@ -97,6 +97,118 @@ def test_closed_volume_from_shared_normals():
         assert visibility.is_closed_outward(pts, t) is want and given is want
 
 
+def test_block_passes_are_the_plain_arithmetic_to_the_bit(monkeypatch):
+    """The dense passes in blocks (frame.edge_lengths, visibility's normals and back-face masks) give
+    exactly what the plain whole-array arithmetic gives (observer_view.chord_length, silhouette.normals,
+    the corner-by-corner n . d test), NaN and degenerate triangles included, whatever the block size;
+    their checkpoint is called between blocks."""
+    from grlens_addon.core import frame as F
+    from grlens_addon.core import observer_view
+
+    rng = np.random.default_rng(5)
+    pts = rng.normal(size=(3000, 3)) * 4.0
+    pts[7] = np.nan
+    tris = rng.integers(0, len(pts), (9000, 3))
+    tris[:5, 1] = tris[:5, 0]  # degenerate
+    d = rng.normal(size=(len(pts), 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    d[11] = np.nan
+    ev = rng.integers(0, len(pts), (7000, 2))
+    for block in (1000, 1 << 15):
+        monkeypatch.setattr(F, "EDGE_BLOCK", block)
+        monkeypatch.setattr(visibility, "TRI_BLOCK", block)
+        calls = []
+        chord, length = F.edge_lengths([d, pts], ev, lambda q: calls.append(q))
+        assert len(calls) == (len(ev) - 1) // block
+        np.testing.assert_array_equal(chord, observer_view.chord_length(d[ev[:, 1]], d[ev[:, 0]]))
+        assert np.array_equal(length, observer_view.row_norm(pts[ev[:, 1]] - pts[ev[:, 0]]), equal_nan=True)
+        raw, unit = visibility._normals_in_blocks(pts, tris, lambda q: calls.append(q))
+        want = visibility.silhouette.normals(pts, tris)
+        assert np.array_equal(raw, want, equal_nan=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            want_unit = want / observer_view.row_norm(want)[:, None]
+        assert np.array_equal(unit, want_unit, equal_nan=True)
+        away = visibility._away_in_blocks(unit, tris, d)
+        with np.errstate(invalid="ignore"):
+            dots = np.stack([np.einsum("fx,fx->f", unit, d[tris[:, k]]) for k in range(3)], axis=1)
+        np.testing.assert_array_equal(away, (dots < -visibility.B.BACK_FACE_MARGIN).all(axis=1))
+        assert 0 < away.sum() < len(tris)
+
+
+def test_the_map_in_chunks_is_one_call_to_the_bit(table, monkeypatch):
+    """frame.images_in_chunks (a dense mesh's vertices and edge midpoints in calls of MAP_CHUNK points,
+    a checkpoint between calls) gives exactly the values of one call, tangents and plane included."""
+    from grlens_addon.core import frame as F
+
+    src = _dense_sphere(60)
+    fr = F.frame_context(SCENE, table, BA.make_settings(CAM), None, CAM.frustum_planes())
+    plane = mapping.plane_coordinates(src.positions, SCENE)
+    whole = fr.map.images(src.positions, fr.orders, plane, tangents=True)
+    calls = []
+    fr.check = calls.append
+    monkeypatch.setattr(F, "MAP_CHUNK", 3000)
+    for given in (plane, None):
+        calls.clear()
+        parts = F.images_in_chunks(fr, src.positions, given, True, (0.0, 0.5))
+        assert len(calls) == (len(src.positions) - 1) // 3000 and all(0 < c < 0.5 for c in calls)
+        for o in fr.orders:
+            for name in ("position", "direction", "distance", "valid", "xi", "dt", "ux", "uy"):
+                assert np.array_equal(getattr(parts[o], name), getattr(whole[o], name), equal_nan=True), name
+            for name in ("r", "phi", "e2", "on_axis"):
+                assert np.array_equal(getattr(parts[o].plane, name), getattr(plane, name)), name
+
+
+def test_cleaning_shortcuts_keep_what_the_full_tests_keep():
+    """frame.clean_source's shortcuts (every index in range, every coordinate finite: two reductions)
+    drop exactly the triangles the full per-corner tests drop, and the edges kept per topology are
+    found again for an equal index array only."""
+    from grlens_addon.core import frame as F
+
+    pts, tris = uv_sphere(24, 12, 1.0)
+    for bad_pts, bad_tris, n_bad in ((None, None, 0), ({3: np.inf}, None, 6), (None, {(4, 1): -1}, 1),
+                                     (None, {(5, 2): len(pts)}, 1), ({0: np.nan}, {(6, 0): len(pts) + 3}, 25)):
+        p, t = pts.copy(), tris.copy()
+        for i, v in (bad_pts or {}).items():
+            p[i, 0] = v
+        for (i, k), v in (bad_tris or {}).items():
+            t[i, k] = v
+        cleaned, dropped = F.clean_source(pipeline.SourceMesh(p, t, np.zeros((len(t), 3, 2))))
+        ok = np.array([all(0 <= v < len(p) for v in row) and len(set(row)) == 3
+                       and all(np.isfinite(p[v]).all() for v in row) for row in t])
+        assert dropped == int((~ok).sum()) and (dropped > 0) == (n_bad > 0), (bad_pts, bad_tris)
+        np.testing.assert_array_equal(cleaned.tris, t[ok])
+    uv = np.zeros((len(tris), 3, 2))
+    uv[2, 1, 0] = np.nan
+    cleaned, _ = F.clean_source(pipeline.SourceMesh(pts, tris, uv))
+    assert np.isfinite(cleaned.corner_uv).all() and cleaned.corner_uv[2, 1, 0] == 0.0
+    a = F._edges_of(tris)
+    assert F._edges_of(tris.copy()) is a
+    other = tris.copy()
+    other[0] = other[0, ::-1]
+    assert F._edges_of(other) is not a
+
+
+@pytest.mark.parametrize("name", ["sphere 180 (patches)", "floor (cut, strips)", "sphere 45"])
+def test_float32_uvs_give_the_same_image_uvs(table, name):
+    """UVs given in float32 (as Blender stores them and the gather passes them on) give the same image
+    UVs as the same values in float64: taken as they are for whole source triangles, interpolated in
+    float64 for cut pieces and patch faces."""
+    src = SCENES[name]()
+    if src.corner_uv is None:
+        rng = np.random.default_rng(3)
+        src.corner_uv = rng.random((len(src.tris), 3, 2))
+    uv32 = np.asarray(src.corner_uv, np.float32)
+    settings = BA.make_settings(CAM)
+    a = pipeline.build_images(pipeline.SourceMesh(src.positions, src.tris, uv32.astype(np.float64)), SCENE, table,
+                              settings, frustum_planes=CAM.frustum_planes())
+    b = pipeline.build_images(pipeline.SourceMesh(src.positions, src.tris, uv32), SCENE, table, settings,
+                              frustum_planes=CAM.frustum_planes())
+    for o in a:
+        np.testing.assert_array_equal(a[o].tris, b[o].tris)
+        np.testing.assert_array_equal(a[o].corner_uv, b[o].corner_uv)
+        assert b[o].corner_uv.dtype in (np.float32, np.float64)
+
+
 def test_image_edges_upload_into_a_valid_blender_mesh(table):
     """The edges written by upload.upload are a valid mesh for Blender (validate() changes nothing)
     and the ones Blender finds itself."""
@@ -133,3 +245,55 @@ def test_image_edges_upload_into_a_valid_blender_mesh(table):
         bpy.data.meshes.remove(theirs)
     finally:
         bpy.data.meshes.remove(me)
+
+
+def test_gather_reuses_what_it_derived_from_equal_arrays_only():
+    """gather.mesh_part reuses the triangle corners, UVs and normals it derived from a mesh whose
+    arrays are equal to those read just before (an object that only moves), and derives them again
+    (the same as a first read) as soon as positions, UVs or the topology differ; the world normals are
+    reused for the same local normals and the same linear part of the matrix only."""
+    bpy = pytest.importorskip("bpy")
+    import bmesh
+
+    from grlens_addon.blender import gather
+
+    me = bpy.data.meshes.new("gather reuse")
+    bm = bmesh.new()
+    bm.loops.layers.uv.new("UVMap")
+    bmesh.ops.create_uvsphere(bm, u_segments=16, v_segments=8, radius=1.0, calc_uvs=True)
+    bm.to_mesh(me)
+    bm.free()
+    try:
+        def fresh():
+            gather._KNOWN.clear()
+            return gather.mesh_part(me)
+
+        first = fresh()
+        again = gather.mesh_part(me)
+        assert again.tris is first.tris and again.corner_uv is first.corner_uv
+        assert again.corner_normals is first.corner_normals
+        me.vertices[20].co.x += 0.3  # a quad folded or not: the corners are derived again
+        moved = gather.mesh_part(me)
+        assert moved.tris is not first.tris
+        want = fresh()
+        np.testing.assert_array_equal(moved.tris, want.tris)
+        np.testing.assert_array_equal(moved.corner_normals, want.corner_normals)
+        me.uv_layers.active.uv[5].vector = (0.25, 0.75)
+        changed = gather.mesh_part(me)
+        assert changed.corner_uv is not want.corner_uv
+        np.testing.assert_array_equal(changed.corner_uv, fresh().corner_uv)
+        assert (changed.corner_uv == [0.25, 0.75]).all(axis=-1).any()
+        rot = np.array([[0.0, -2.0, 0.0], [2.0, 0.0, 0.0], [0.0, 0.0, 2.0]])
+        n1 = gather._world_normals(first.corner_normals, rot)
+        assert gather._world_normals(first.corner_normals, rot.copy()) is n1
+        n2 = gather._world_normals(first.corner_normals, np.diag([1.0, 2.0, 3.0]))
+        assert n2 is not n1
+        inv_t = np.linalg.inv(np.diag([1.0, 2.0, 3.0])).T
+        direct = first.corner_normals @ inv_t.T
+        direct /= np.linalg.norm(direct, axis=-1, keepdims=True)
+        np.testing.assert_allclose(n2, direct, atol=1e-15)
+        np.testing.assert_allclose(np.linalg.norm(n1, axis=-1), 1.0, atol=1e-15)
+    finally:
+        bpy.data.meshes.remove(me)
+        gather._KNOWN.clear()
+        gather._LAST_NORMALS.clear()

@@ -55,7 +55,8 @@ def may_have_instances(obj) -> bool:
 @dataclass
 class Part:
     """One evaluated mesh in its object's local space (BU): co (V, 3), tris (T, 3) vertex indices,
-    corner_uv (T, 3, 2) or None, material (T,) slot indices, corner_normals (T, 3, 3) (local, not
+    corner_uv (T, 3, 2) or None (float32, as Blender stores them: the core carries them so, the upload
+    writes them so), material (T,) slot indices, corner_normals (T, 3, 3) (local, not
     normalised) or None, materials: its slots' materials (original data-blocks or None), and its
     loose vertices and edges (in no face)."""
 
@@ -113,16 +114,42 @@ def _edge_verts(me) -> np.ndarray:
     return ev
 
 
+_KNOWN: list = []
+_KNOWN_SIZE = 2
+"""The arrays read from the last few meshes and what was derived from them (:func:`mesh_part`): a mesh
+read again with equal arrays (an object that moves, or a frame that changes nothing of it) reuses
+its triangles' corners, UVs and normals instead of deriving them again (comparing arrays is memory
+speed; the quads' split and the corners' gathers are not)."""
+
+
+def _equal(a, b) -> bool:
+    return a is not None and b is not None and a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b)
+
+
+def _known(key: str, raw: tuple, make):
+    """``make()``, or what it gave for equal ``raw`` arrays (a tuple) under ``key`` among the last
+    meshes read (_KNOWN)."""
+    for entry in _KNOWN:
+        got = entry.get(key)
+        if got is not None and len(got[0]) == len(raw) and all(_equal(a, b) for a, b in zip(got[0], raw)):
+            _KNOWN[0][key] = got
+            return got[1]
+    value = make()
+    _KNOWN[0][key] = (raw, value)
+    return value
+
+
 def mesh_part(me, materials=(), with_normals: bool = True) -> Part:
     """A :class:`Part` of the mesh ``me`` (as from ``to_mesh()``). Reads Blender's attribute arrays
     (memory speed) and derives the triangles' corners from them (core.triangulate); only meshes with
-    n-gons use the slower per-triangle API."""
+    n-gons use the slower per-triangle API. What is derived from arrays equal to those of a mesh read
+    just before (the same mesh in the next frame) is reused (_KNOWN)."""
     n_v, n_l, n_p, n_e = len(me.vertices), len(me.loops), len(me.polygons), len(me.edges)
     if n_v == 0:
         return Part(np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, np.zeros(0, np.int64), None, list(materials))
-    co = np.empty(3 * n_v, dtype=np.float32)
-    me.attributes["position"].data.foreach_get("vector", co)
-    co = co.reshape(-1, 3).astype(np.float64)
+    co32 = np.empty(3 * n_v, dtype=np.float32)
+    me.attributes["position"].data.foreach_get("vector", co32)
+    co = co32.reshape(-1, 3).astype(np.float64)
     if n_p == 0:
         ev = _edge_verts(me)
         return Part(co, np.zeros((0, 3), np.int64), None, np.zeros(0, np.int64), None, list(materials),
@@ -132,12 +159,29 @@ def mesh_part(me, materials=(), with_normals: bool = True) -> Part:
     tri_poly = np.empty(n_t, dtype=np.int32)
     me.loop_triangle_polygons.foreach_get("value", tri_poly)
     corner_vert = _int_attr(me, ".corner_vert", n_l, lambda: _loops(me, "vertex_index"))
-    loops = triangulate.tri_corners(tri_poly, n_p, corner_vert, co)
-    if loops is None:  # n-gons: Blender's own polygon fill
-        loops = np.empty(3 * n_t, dtype=np.int32)
-        me.loop_triangles.foreach_get("loops", loops)
-    loops = loops.reshape(-1).astype(np.int64)
-    tris = corner_vert[loops].reshape(-1, 3).astype(np.int64)
+    _KNOWN.insert(0, {})
+    del _KNOWN[_KNOWN_SIZE + 1:]
+    try:
+        return _mesh_part(me, materials, with_normals, co32, co, tri_poly, corner_vert, (n_v, n_l, n_p, n_e))
+    finally:
+        if len(_KNOWN) > _KNOWN_SIZE:  # (the entry of this mesh replaces the oldest)
+            _KNOWN.pop()
+
+
+def _mesh_part(me, materials, with_normals, co32, co, tri_poly, corner_vert, counts) -> Part:
+    n_v, n_l, n_p, n_e = counts
+    n_t = len(tri_poly)
+    sizes = np.array(counts)
+
+    def corners():
+        loops = triangulate.tri_corners(tri_poly, n_p, corner_vert, co)
+        if loops is None:  # n-gons: Blender's own polygon fill
+            loops = np.empty(3 * n_t, dtype=np.int32)
+            me.loop_triangles.foreach_get("loops", loops)
+        loops = loops.reshape(-1).astype(np.int64)
+        return loops, corner_vert[loops].reshape(-1, 3).astype(np.int64)
+
+    loops, tris = _known("corners", (sizes, tri_poly, corner_vert, co32), corners)
     mat = np.zeros(n_t, dtype=np.int64)
     mi = me.attributes.get("material_index")
     if mi is not None and mi.domain == "FACE":
@@ -148,18 +192,24 @@ def mesh_part(me, materials=(), with_normals: bool = True) -> Part:
     if me.uv_layers.active is not None:
         uv = np.empty(2 * n_l, dtype=np.float32)
         me.uv_layers.active.uv.foreach_get("vector", uv)
-        corner_uv = uv.reshape(-1, 2).take(loops, axis=0).reshape(-1, 3, 2).astype(np.float64)
+        corner_uv = _known("uv", (loops, uv), lambda: uv.reshape(-1, 2).take(loops, axis=0).reshape(-1, 3, 2))
     normals = None
     if with_normals:
         cn = np.empty(3 * n_l, dtype=np.float32)
         me.corner_normals.foreach_get("vector", cn)
-        normals = cn.reshape(-1, 3).take(loops, axis=0).astype(np.float64).reshape(-1, 3, 3)
+        normals = _known("normals", (loops, cn), lambda: cn.reshape(-1, 3).take(loops, axis=0).astype(np.float64)
+                         .reshape(-1, 3, 3))
     # loose parts: edges in no face, vertices in no edge
     corner_edge = _int_attr(me, ".corner_edge", n_l, lambda: _loops(me, "edge_index"))
-    loose_edges = n_e - int(np.count_nonzero(np.bincount(corner_edge, minlength=n_e)))
-    free = n_v - int(np.count_nonzero(np.bincount(corner_vert, minlength=n_v)))  # vertices in no face
-    if free and loose_edges:
-        free = n_v - int(np.count_nonzero(np.bincount(_edge_verts(me), minlength=n_v)))
+
+    def loose():
+        loose_edges = n_e - int(np.count_nonzero(np.bincount(corner_edge, minlength=n_e)))
+        free = n_v - int(np.count_nonzero(np.bincount(corner_vert, minlength=n_v)))  # vertices in no face
+        if free and loose_edges:
+            free = n_v - int(np.count_nonzero(np.bincount(_edge_verts(me), minlength=n_v)))
+        return free, loose_edges
+
+    free, loose_edges = _known("loose", (sizes, corner_vert, corner_edge), loose)
     return Part(co, tris, corner_uv, mat, normals, list(materials), loose_verts=free, loose_edges=loose_edges)
 
 
@@ -202,6 +252,40 @@ def _unit_rows(n) -> np.ndarray:
     return n
 
 
+def _rows_times(a, m) -> np.ndarray:
+    """``a`` (..., 3) @ ``m`` (3, 3) as one (N, 3) @ (3, 3) product (a single BLAS call instead of one
+    per leading index: several times faster for corner normals (T, 3, 3))."""
+    a = np.ascontiguousarray(a)
+    return (a.reshape(-1, 3) @ m).reshape(a.shape)
+
+
+_LAST_NORMALS: list = []
+"""[(local corner normals, linear part of the matrix (bytes), world normals)] of the last objects
+placed: an object that only moves (its matrix's linear part and its mesh's normals the same, the
+normals' array reused by mesh_part) keeps its world normals."""
+
+
+def _world_normals(local, lin) -> np.ndarray:
+    """Unit world corner normals of the ``local`` ones (T, 3, 3) under the linear part ``lin`` (3, 3)
+    of an object's matrix (not mirroring): by the inverse transpose, normalised (one factor for a
+    rotation and uniform scale); the last few results are kept (_LAST_NORMALS)."""
+    key = np.ascontiguousarray(lin, dtype=np.float64).tobytes()
+    for entry in _LAST_NORMALS:
+        if entry[0] is local and entry[1] == key:
+            return entry[2]
+    inv = _inverse(lin[None])[0]
+    gram = inv @ inv.T
+    scale = np.trace(gram) / 3.0
+    if scale > 0 and np.allclose(gram, scale * np.eye(3), rtol=0.0, atol=1e-9 * scale):
+        # rotation and uniform scale: unit normals stay unit after one factor
+        nrm = _rows_times(local, inv / np.sqrt(scale))
+    else:
+        nrm = _unit_rows(_rows_times(local, inv))  # the inverse transpose, on rows
+    _LAST_NORMALS.insert(0, (local, key, nrm))
+    del _LAST_NORMALS[_KNOWN_SIZE:]
+    return nrm
+
+
 def _placed(part: Part, matrices: np.ndarray, with_normals: bool):
     """World positions (K V, 3), triangles (K T, 3), corner UVs, corner normals (unit) of ``part``
     placed by the (K, 4, 4) ``matrices``; triangles of mirroring matrices (negative determinant) are
@@ -214,14 +298,7 @@ def _placed(part: Part, matrices: np.ndarray, with_normals: bool):
         if np.linalg.det(m[:3, :3]) >= 0:
             nrm = None
             if with_normals and part.corner_normals is not None:
-                inv = _inverse(m[:3, :3][None])[0]
-                gram = inv @ inv.T
-                scale = np.trace(gram) / 3.0
-                if scale > 0 and np.allclose(gram, scale * np.eye(3), rtol=0.0, atol=1e-9 * scale):
-                    # rotation and uniform scale: unit normals stay unit after one factor
-                    nrm = part.corner_normals @ (inv / np.sqrt(scale))
-                else:
-                    nrm = _unit_rows(part.corner_normals @ inv)  # the inverse transpose, on rows
+                nrm = _world_normals(part.corner_normals, m[:3, :3])
             return pos, part.tris, part.corner_uv, nrm
     else:
         pos = (np.einsum("kij,vj->kvi", lin, part.co) + matrices[:, None, :3, 3]).reshape(-1, 3)

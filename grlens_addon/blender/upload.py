@@ -147,7 +147,9 @@ def set_normals(mesh, img) -> None:
         if have:
             mesh.attributes.remove(mesh.attributes["custom_normal"])
         return
-    vals = np.ascontiguousarray(n if img.order != 2 else -n, dtype=np.float32).reshape(-1, 3)
+    vals = np.ascontiguousarray(n, dtype=np.float32).reshape(-1, 3)
+    if img.order == 2:
+        vals = np.negative(vals, out=vals if vals is not n else None)  # (exact: no float64 copy of -n first)
     if FREE_NORMALS:
         a = mesh.attributes.get("custom_normal")
         if a is None or a.data_type != "FLOAT_VECTOR" or a.domain != "CORNER":

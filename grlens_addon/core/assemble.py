@@ -297,7 +297,7 @@ def _patch_parts(patches, patch_keep, order, offset):
 def _patch_corner_values(values, face_src, bary, vertex_tri, vertex_bary, corner_row) -> np.ndarray:
     """(F, 3, K) corner values of patch faces (see _patch_parts and PATCH_SEAM_JUMP) from the source
     triangles' corner values ``values`` (T, 3, K)."""
-    values = np.asarray(values, dtype=np.float64)
+    values = np.asarray(values)  # (float32 UVs stay so: the arithmetic below is in float64)
     own = subdivision.carry_rows(vertex_bary, vertex_tri, corner_row, values)
     # only faces with a corner on another triangle than their own can be across a seam (where all
     # three lie on it, both ways interpolate in that triangle at the same point)
@@ -314,7 +314,7 @@ def _carry(corner_values, src_tri, rows, unit=False):
     the faces' own source triangles' (``src_tri``) when ``rows`` is None, else interpolated at the
     rows (row_bary, row_src, corner_row, n_unit) of subdivision.carry_rows (``unit``: unit vectors,
     normalised again where interpolated; the source's own are unit already)."""
-    corner_values = np.asarray(corner_values, dtype=np.float64)
+    corner_values = np.asarray(corner_values)  # (float32 UVs: taken as they are, interpolated in float64)
     if rows is None:
         return corner_values.take(src_tri, axis=0)
     row_bary, row_src, corner_row, n_unit = rows

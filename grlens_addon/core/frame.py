@@ -12,7 +12,7 @@ Units: positions in Blender units (BU), angles in radians; r in units of r_s.
 """
 from __future__ import annotations
 
-import hashlib
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,8 +25,9 @@ from .budget import Budget
 class SourceMesh:
     """Evaluated source geometry in world space.
 
-    positions (N, 3) BU; tris (T, 3) vertex indices; corner_uv (T, 3, 2) or None; material (T,) slot
-    indices; corner_normals (T, 3, 3) unit normals in world space or None.
+    positions (N, 3) BU; tris (T, 3) vertex indices; corner_uv (T, 3, 2) or None (float64, or float32 as
+    Blender stores them: a whole source triangle's image keeps them as they are, interpolated ones
+    are computed in float64); material (T,) slot indices; corner_normals (T, 3, 3) unit normals in world space or None.
     """
 
     positions: np.ndarray
@@ -109,6 +110,14 @@ class Frame:
     camera: CameraModel
     budget: Budget
     light: Light | None = None
+    check: object = field(default=None, repr=False)
+
+    def checkpoint(self, part: float | None = None) -> None:
+        """A cancellation point inside a stage: calls ``check`` (set by pipeline.build_images: the build's
+        progress, which raises pipeline.Cancelled once the build was cancelled), if any, with ``part``
+        (0 to 1: about how far through the stage its work is; None: not known)."""
+        if self.check is not None:
+            self.check(part)
 
     @property
     def orders(self) -> tuple:
@@ -138,7 +147,7 @@ class Source:
     triangles dropped by the cleaning; presplit: triangles added by a first split (level_plan); edges
     (subdivision.Edges); plane (mapping.PlaneCoordinates) of the vertices; axis_xyz: their
     observer_view.axis_coordinates (BU); circumference (T,): the triangles' undistorted circumference on the
-    view sphere; near_axis (T,): those the axis may cross (observer_view.near_axis); crossings: where the axis
+    view sphere; edge_length (E,): the edges' lengths (BU); near_axis (T,): those the axis may cross (observer_view.near_axis); crossings: where the axis
     crosses the surface (axis_patch.crossings_of, found when first needed)."""
 
     mesh: SourceMesh
@@ -150,6 +159,7 @@ class Source:
     circumference: np.ndarray | None = None
     near_axis: np.ndarray | None = None
     presplit: int = 0
+    edge_length: np.ndarray | None = field(default=None, repr=False)
     crossings: list | None = field(default=None, repr=False)  # axis_patch.crossings_of
     _xy: np.ndarray | None = field(default=None, repr=False)
 
@@ -186,9 +196,12 @@ def prepare_source(frame: Frame, src: SourceMesh, origin=None, n_bad: int = 0) -
     out.edges = _edges_of(mesh.tris)
     out.plane = mapping.plane_coordinates(mesh.positions, scene)
     out.axis_xyz = observer_view.axis_coordinates(mesh.positions, scene.camera, scene.hole)
-    out.circumference = circumference_from_edges(
-        chord_lengths(observer_view.unit_directions(mesh.positions, scene.camera, scene.view_beta), out.edges.verts),
-        out.edges.of_tri)
+    frame.checkpoint(0.5)
+    # one pass over the edges for two measures: the chords of the undistorted view and the lengths (BU)
+    chord, out.edge_length = edge_lengths(
+        [observer_view.unit_directions(mesh.positions, scene.camera, scene.view_beta), mesh.positions],
+        out.edges.verts, lambda q: frame.checkpoint(0.5 + 0.35 * q))
+    out.circumference = circumference_from_edges(chord, out.edges.of_tri)
     out.near_axis = observer_view.near_axis(mesh.positions, mesh.tris, scene.camera, scene.hole, axis_xyz=out.axis_xyz)
     return out
 
@@ -208,14 +221,21 @@ def _clean(src: SourceMesh):
     tris = tris.astype(np.int64, copy=False)
     pos = np.asarray(src.positions, dtype=np.float64).reshape(-1, 3)
     t0, t1, t2 = tris[:, 0], tris[:, 1], tris[:, 2]
-    in_range = (np.minimum(np.minimum(t0, t1), t2) >= 0) & (np.maximum(np.maximum(t0, t1), t2) < len(pos))
-    finite = np.isfinite(pos[:, 0]) & np.isfinite(pos[:, 1]) & np.isfinite(pos[:, 2])
-    if len(tris) and len(pos):
-        s0, s1, s2 = (np.where(in_range, t, 0) for t in (t0, t1, t2))
-        ok = in_range & finite[s0] & finite[s1] & finite[s2]
+    if len(tris) and len(pos) and tris.min() >= 0 and tris.max() < len(pos):  # (the usual case: two reductions)
+        ok = None
     else:
+        ok = (np.minimum(np.minimum(t0, t1), t2) >= 0) & (np.maximum(np.maximum(t0, t1), t2) < len(pos))
+    if not len(tris) or not len(pos):
         ok = np.zeros(len(tris), bool)
-    ok &= (t0 != t1) & (t1 != t2) & (t2 != t0)
+    elif not np.isfinite(np.add.reduce(pos, axis=None)):  # some coordinate is not finite (or the sum overflows)
+        finite = np.isfinite(pos[:, 0]) & np.isfinite(pos[:, 1]) & np.isfinite(pos[:, 2])
+        if ok is None:
+            ok = finite[t0] & finite[t1] & finite[t2]
+        else:
+            s0, s1, s2 = (np.where(ok, t, 0) for t in (t0, t1, t2))
+            ok &= finite[s0] & finite[s1] & finite[s2]
+    distinct = (t0 != t1) & (t1 != t2) & (t2 != t0)
+    ok = distinct if ok is None else ok & distinct
 
     all_ok = bool(ok.all())
 
@@ -233,27 +253,33 @@ def _finite_or_zero(a):
     must not reach an image mesh; a zero normal receives no GR irradiance). Copies only if needed."""
     if a is None:
         return None
-    a = np.asarray(a, dtype=np.float64)
+    a = np.asarray(a)
+    if a.dtype != np.float32:  # (float32 UVs, as Blender stores them, stay so: exact in float64 arithmetic)
+        a = np.asarray(a, dtype=np.float64)
+    if np.isfinite(np.add.reduce(a, axis=None)):  # (one reduction: a NaN or infinity anywhere makes it so)
+        return a
     bad = ~np.isfinite(a)
     if bad.any():
         a = np.where(bad, 0.0, a)
     return a
 
 
-_EDGE_CACHE: dict = {}
+_EDGE_CACHE: list = []
 _EDGE_CACHE_SIZE = 8
 
 
 def _edges_of(tris) -> subdivision.Edges:
     """subdivision.mesh_edges, remembered for the last few topologies (animated meshes usually keep
-    theirs from frame to frame; the key is a digest of the index array)."""
-    key = hashlib.blake2b(np.ascontiguousarray(tris).tobytes(), digest_size=16).digest() + bytes(str(tris.shape), "ascii")
-    edges = _EDGE_CACHE.get(key)
-    if edges is None:
-        edges = subdivision.mesh_edges(tris)
-        if len(_EDGE_CACHE) >= _EDGE_CACHE_SIZE:
-            _EDGE_CACHE.pop(next(iter(_EDGE_CACHE)))
-        _EDGE_CACHE[key] = edges
+    theirs from frame to frame): a copy of each index array is kept and compared with the new one
+    (a comparison is several times cheaper than a digest of the array)."""
+    for i, (known, edges) in enumerate(_EDGE_CACHE):
+        if known.shape == tris.shape and np.array_equal(known, tris):
+            if i:  # the most recent first
+                _EDGE_CACHE.insert(0, _EDGE_CACHE.pop(i))
+            return edges
+    edges = subdivision.mesh_edges(tris)
+    _EDGE_CACHE.insert(0, (np.array(tris, copy=True), edges))
+    del _EDGE_CACHE[_EDGE_CACHE_SIZE:]
     return edges
 
 
@@ -261,6 +287,73 @@ def chord_lengths(directions, edge_verts) -> np.ndarray:
     """(E,) chord length between the unit ``directions`` of each edge's end points (dimensionless)."""
     return observer_view.chord_length(directions.take(edge_verts[:, 1], axis=0),
                                 directions.take(edge_verts[:, 0], axis=0))
+
+
+MAP_CHUNK = 1 << 16
+"""Points per call of the table for a dense mesh's vertices and edge midpoints (:func:`images_in_chunks`:
+a cancellation point and the progress between calls; each point's values do not depend on the
+others)."""
+
+
+def images_in_chunks(frame: Frame, points, plane=None, tangents: bool = False, part=(0.0, 1.0)) -> dict:
+    """frame.map.images of ``points`` (N, 3; BU) for every order of the frame (``plane``: their
+    mapping.PlaneCoordinates, or None; ``tangents``: the rays' tangents too), in calls of MAP_CHUNK
+    points with frame.checkpoint between them, reporting the way through the stage from part[0] to
+    part[1] (the same values as one call: the map is per point)."""
+    n = len(points)
+    if n <= MAP_CHUNK:
+        return frame.map.images(points, frame.orders, plane, tangents=tangents)
+    parts = []
+    for s in range(0, n, MAP_CHUNK):
+        if s:
+            frame.checkpoint(part[0] + (part[1] - part[0]) * s / n)
+        e = min(s + MAP_CHUNK, n)
+        sub = None if plane is None else mapping.PlaneCoordinates(
+            r=plane.r[s:e], phi=plane.phi[s:e], e2=plane.e2[s:e], on_axis=plane.on_axis[s:e])
+        parts.append(frame.map.images(points[s:e], frame.orders, sub, tangents=tangents))
+    out = {}
+    for o in frame.orders:
+        values = {}
+        for f in dataclasses.fields(mapping.Images):
+            got = [getattr(p[o], f.name) for p in parts]
+            if f.name == "plane":
+                values[f.name] = plane if plane is not None else mapping.PlaneCoordinates(
+                    *(np.concatenate([getattr(g, k) for g in got]) for k in ("r", "phi", "e2", "on_axis")))
+            elif all(isinstance(g, np.ndarray) for g in got):
+                values[f.name] = np.concatenate(got)
+            else:
+                values[f.name] = got[0]  # (None)
+        out[o] = mapping.Images(**values)
+    return out
+
+
+EDGE_BLOCK = 1 << 15
+"""Edges per block of :func:`edge_lengths` (their end points' rows stay in the cache between the
+gather and the arithmetic; a cancellation point between blocks)."""
+
+
+def edge_lengths(columns, edge_verts, checkpoint=None) -> list:
+    """[(E,) per array of ``columns``]: for each (N, 3) array of per-vertex vectors (unit directions
+    on the view sphere: the chord; positions in BU: the edge's length), the distance between the rows
+    of each edge's end points (``edge_verts`` (E, 2)), as :func:`chord_lengths` (the same arithmetic:
+    |v[b] - v[a]| by observer_view.chord_length), for all arrays in one pass over the edges: the end
+    points' rows of every array are gathered together, in blocks of EDGE_BLOCK edges. ``checkpoint``:
+    None, or called between blocks with the fraction of the edges done (it may raise to stop)."""
+    k = len(columns)
+    stacked = np.concatenate([np.asarray(c, np.float64).reshape(-1, 3) for c in columns], axis=1) if k > 1 else \
+        np.asarray(columns[0], np.float64).reshape(-1, 3)
+    n_e = len(edge_verts)
+    out = np.empty((n_e, k))
+    a_idx, b_idx = edge_verts[:, 0], edge_verts[:, 1]
+    for s in range(0, n_e, EDGE_BLOCK):
+        if checkpoint is not None and s:
+            checkpoint(s / n_e)
+        e = min(s + EDGE_BLOCK, n_e)
+        w = stacked.take(b_idx[s:e], axis=0)
+        w -= stacked.take(a_idx[s:e], axis=0)
+        w = w.reshape(e - s, k, 3)
+        np.sqrt(np.einsum("ijk,ijk->ij", w, w), out=out[s:e])
+    return [np.ascontiguousarray(out[:, j]) for j in range(k)]
 
 
 def circumference_from_edges(chords, of_tri) -> np.ndarray:
@@ -294,7 +387,9 @@ def map_source(frame: Frame, source: Source) -> SourceImages:
     """The map stage for the source's vertices: their images of every order of the frame, with the rays'
     tangents when pieces are measured on screen (visibility needs the directions in which the rays
     leave the vertices: one lookup for both)."""
-    images = frame.map.images(source.positions, frame.orders, source.plane, tangents=frame.budget.active)
-    chord = {o: chord_lengths(images[o].direction, source.edges.verts) for o in frame.orders}
+    images = images_in_chunks(frame, source.positions, source.plane, frame.budget.active, (0.0, 0.75))
+    frame.checkpoint(0.75)  # (the table's lookups are about three quarters of the stage)
+    chord = dict(zip(frame.orders, edge_lengths([images[o].direction for o in frame.orders], source.edges.verts,
+                                                 lambda q: frame.checkpoint(0.75 + 0.2 * q))))
     circ = {o: circumference_from_edges(chord[o], source.edges.of_tri) for o in frame.orders}
     return SourceImages(images, chord, circ, frame.scene)

@@ -115,7 +115,9 @@ def sampled_sources(frame, source) -> np.ndarray:
     pts, ev = source.positions, source.edges.verts
     scene = frame.scene
     scale = np.minimum(row_norm(pts - scene.camera), row_norm(pts - scene.hole))
-    length = row_norm(pts.take(ev[:, 1], axis=0) - pts.take(ev[:, 0], axis=0))
+    length = source.edge_length  # (frame.prepare_source)
+    if length is None:
+        length = row_norm(pts.take(ev[:, 1], axis=0) - pts.take(ev[:, 0], axis=0))
     if not length.max(initial=0.0) > B.SAMPLE_REACH * scale.min(initial=np.inf):
         return np.zeros(len(source.tris), bool)
     long = length > B.SAMPLE_REACH * np.minimum(scale.take(ev[:, 0]), scale.take(ev[:, 1]))

@@ -28,7 +28,7 @@ import numpy as np
 
 from . import axis_patch, culling, interior, mapping, observer_view, silhouette, subdivision
 from . import budget as B
-from .frame import Frame, Source, SourceImages
+from .frame import Frame, Source, SourceImages, images_in_chunks
 
 
 @dataclass
@@ -57,7 +57,7 @@ def probe_edges(frame: Frame, source: Source, coarse: SourceImages) -> Probes:
               for o in frame.orders}
     probed = np.unique(np.concatenate([np.zeros(0, np.int64)] + list(probes.values())))
     pts = source.positions
-    mids = frame.map.images(0.5 * (pts.take(ev[probed, 0], axis=0) + pts.take(ev[probed, 1], axis=0)), frame.orders)
+    mids = images_in_chunks(frame, 0.5 * (pts.take(ev[probed, 0], axis=0) + pts.take(ev[probed, 1], axis=0)))
     return Probes(chords, probes, probed, mids)
 
 

@@ -40,18 +40,23 @@ __all__ = ["SourceMesh", "Settings", "Light", "DiscEmitter", "ImageMesh", "clean
 
 
 class Cancelled(Exception):
-    """A build was stopped between two stages by its progress hook (:class:`Progress.cancel`); it
-    returns nothing, so no partial image exists."""
+    """A build was stopped by its progress hook (:class:`Progress.cancel`), between two stages or at a
+    checkpoint inside a long one (frame.Frame.checkpoint); it returns nothing, so no partial image
+    exists."""
 
 
-STAGE_WEIGHTS = {"prepare": 0.18, "map": 0.25, "visibility": 0.02, "patches": 0.01, "probes": 0.08,
-                 "plan": 0.15, "cut": 0.03, "cull": 0.04, "refine": 0.03, "assemble": 0.02}
+STAGE_WEIGHTS = {"prepare": 0.05, "map": 0.26, "visibility": 0.01, "patches": 0.005, "probes": 0.21,
+                 "plan": 0.15, "cut": 0.005, "cull": 0.015, "refine": 0.005, "assemble": 0.06}
 """Share of a build's time each stage takes (per order for plan, cut, cull, refine and assemble), for
-the progress fractions: about the shares measured on closed UV spheres of 200k and 1M triangles
-beside the hole at 1920x1080, both orders, to the viewport's tolerance (the shares move with the
-view and the tolerance: benchmarks/bench_background.py prints how far the fraction strays from the
-time). Only the fractions' spacing depends on them; the first split beside the axis (when there is
-one) runs map and visibility again within their shares."""
+the progress fractions: the shares that keep the fraction shown closest to the time on closed UV
+spheres of 200k and 1M triangles beside the hole at 1920x1080, both orders, to the viewport's
+tolerance, the larger of the two differences made smallest (from the median shares
+benchmarks/profile_dense.py --preview prints; the shares move with the view, the tolerance and
+the mesh: probes take a quarter of the 200k sphere's build and 1 % of the 1M one's, assembly 4 % and
+a quarter;
+benchmarks/bench_background.py prints how far the fraction strays from the time). Only the
+fractions' spacing depends on them; the first split beside the axis (when there is one) runs map and
+visibility again within their shares."""
 
 
 class Progress:
@@ -59,8 +64,9 @@ class Progress:
     watches it (thread-safe: a lock-free read of two fields, a threading.Event).
 
     The core calls it between stages, ``progress(stage, fraction)`` with the stage about to run and
-    the fraction of the build done (0 to 1, never decreasing); it raises :class:`Cancelled` there once
-    :meth:`cancel` was called. ``callback(stage, fraction)``, if given, is called at each step too (in
+    the fraction of the build done (0 to 1, never decreasing), and inside long stages between the
+    blocks of their passes (the stage running, the fraction within its share); it raises
+    :class:`Cancelled` there once :meth:`cancel` was called. ``callback(stage, fraction)``, if given, is called at each step too (in
     the building thread)."""
 
     def __init__(self, callback=None):
@@ -92,14 +98,24 @@ class _Steps:
         w = STAGE_WEIGHTS
         self.total = sum(v for k, v in w.items() if k not in self.PER_ORDER) + n_orders * sum(
             w[k] for k in self.PER_ORDER)
-        self.done = 0.0
+        self.done = self.start = 0.0
+        self.stage = ""
 
     def __call__(self, stage: str) -> None:
         """Before ``stage``: report the fraction done and check for cancellation; count its share."""
         if self.progress is None:
             return
+        self.stage, self.start = stage, self.done
         self.progress(stage, min(self.done / self.total, 1.0))
         self.done += STAGE_WEIGHTS.get(stage, 0.0)
+
+    def inside(self, part: float | None = None) -> None:
+        """A cancellation point inside the stage running (Frame.checkpoint: between the blocks or
+        passes of a long stage), reporting the fraction at the stage's start, or ``part`` (0 to 1) of
+        the way through its share."""
+        if self.progress is not None:
+            part = 0.0 if part is None else min(max(float(part), 0.0), 1.0)
+            self.progress(self.stage, min((self.start + part * (self.done - self.start)) / self.total, 1.0))
 
     def check(self, stage: str) -> None:
         """A cancellation point inside a stage's share (the fraction stays)."""
@@ -125,10 +141,13 @@ def build_images(src: SourceMesh, scene: Scene, lut, settings: Settings, light: 
 
     ``progress``: None, or a callable ``progress(stage, fraction)`` (e.g. a :class:`Progress`) called
     before every stage with its name and the fraction of the build done (non-decreasing, 0 to 1;
-    ("done", 1.0) last); it may raise (:class:`Cancelled`) to stop the build there: nothing is
+    ("done", 1.0) last), and again inside long stages (the same name, a fraction within the stage's
+    share: Frame.checkpoint); it may raise (:class:`Cancelled`) to stop the build there: nothing is
     returned then, and nothing the caller holds has changed (the stages build new arrays)."""
     frame = frame_context(scene, lut, settings, light, frustum_planes)
     steps = _Steps(progress, len(frame.orders))
+    if progress is not None:
+        frame.check = steps.inside  # cancellation inside long stages too (Frame.checkpoint)
     st = run_stages(frame, src, steps)
     if st.source.empty:
         steps.finish()

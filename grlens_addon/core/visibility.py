@@ -29,6 +29,7 @@ class Sight:
         self._d = {}
         self._normals = None
         self._raw = None
+        self._away = {}
 
     def closed(self) -> bool:
         """True for a closed, outward-wound surface seen from outside (computed once)."""
@@ -45,7 +46,8 @@ class Sight:
         """(T, 3) the geometric normals (p1 - p0) x (p2 - p0) of every source triangle (BU^2, from the
         winding; silhouette.normals), once: the closed surface's volume and the back faces share them."""
         if self._raw is None:
-            self._raw = silhouette.normals(self.source.positions, self.source.tris)
+            self._raw, self._normals = _normals_in_blocks(self.source.positions, self.source.tris,
+                                                          lambda q: self.frame.checkpoint())
         return self._raw
 
     def leaving(self, vertices, order) -> np.ndarray:
@@ -66,13 +68,21 @@ class Sight:
         triangles turned away at the corners before are looked at the next; the normals and corners
         of ``tri_idx`` are gathered once, none when ``tri_idx`` is every triangle in order)."""
         src = self.source
-        if self._normals is None:  # unit geometric normals of every triangle, once
-            n = self._raw_normals().copy()
-            with np.errstate(invalid="ignore", divide="ignore"):
-                n /= mapping.row_norm(n)[:, None]
-            self._normals = n
+        self._raw_normals()  # (unit geometric normals of every triangle, once, with the raw ones)
         tri_idx = np.asarray(tri_idx, dtype=np.int64)
         n_t = len(src.tris)
+        if 2 * len(tri_idx) >= n_t or all(o in self._away for o in orders):
+            # many triangles (a dense mesh's selection): every triangle once per order, in blocks
+            # (the same arithmetic per triangle), kept for the frame
+            away = None
+            for o in orders:
+                if o not in self._away:
+                    self.leaving(np.zeros(0, np.int64), o)
+                    self._away[o] = _away_in_blocks(self._normals, src.tris, self._d[o],
+                                                    lambda q: self.frame.checkpoint())
+                a = self._away[o].take(tri_idx)
+                away = a if away is None else away & a
+            return away if away is not None else np.zeros(len(tri_idx), bool)
         every = len(tri_idx) == n_t and (n_t == 0 or (tri_idx[0] == 0 and tri_idx[-1] == n_t - 1
                                                        and bool(np.all(np.diff(tri_idx) == 1))))
         normals = self._normals if every else self._normals.take(tri_idx, axis=0)
@@ -174,6 +184,48 @@ class Sight:
         inside = np.ones(len(tris), dtype=bool)
         inside[cand[outside != 0]] = False
         return np.flatnonzero(inside), out_v
+
+
+TRI_BLOCK = 1 << 15
+"""Triangles per block of the per-triangle passes below (their corners' rows stay in the cache; a
+cancellation point between blocks)."""
+
+
+def _normals_in_blocks(points, tris, checkpoint=None):
+    """((T, 3) geometric normals (p1 - p0) x (p2 - p0) (BU^2; silhouette.normals), (T, 3) the same
+    normalised (NaN for a degenerate triangle)) of the triangles ``tris`` of ``points``, in one pass
+    over blocks of TRI_BLOCK triangles (the corners gathered once per block). ``checkpoint``: None, or
+    called between blocks with the fraction of the triangles done."""
+    n_t = len(tris)
+    raw, unit = np.empty((n_t, 3)), np.empty((n_t, 3))
+    for s in range(0, n_t, TRI_BLOCK):
+        if checkpoint is not None and s:
+            checkpoint(s / n_t)
+        e = min(s + TRI_BLOCK, n_t)
+        raw[s:e] = silhouette.normals(points, tris[s:e])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            np.divide(raw[s:e], mapping.row_norm(raw[s:e])[:, None], out=unit[s:e])
+    return raw, unit
+
+
+def _away_in_blocks(unit_normals, tris, directions, checkpoint=None) -> np.ndarray:
+    """(T,) bool: the triangles ``tris`` whose unit normals ``unit_normals`` (T, 3) are turned away
+    from the unit leaving ``directions`` (N, 3) of all three corners by more than BACK_FACE_MARGIN
+    (n . d < -margin; NaN, no ray: not turned away), in blocks of TRI_BLOCK triangles. ``checkpoint``:
+    None, or called between blocks with the fraction of the triangles done."""
+    n_t = len(tris)
+    away = np.empty(n_t, bool)
+    for s in range(0, n_t, TRI_BLOCK):
+        if checkpoint is not None and s:
+            checkpoint(s / n_t)
+        e = min(s + TRI_BLOCK, n_t)
+        n, t = unit_normals[s:e], tris[s:e]
+        with np.errstate(invalid="ignore"):
+            a = np.einsum("fx,fx->f", n, directions.take(t[:, 0], axis=0)) < -B.BACK_FACE_MARGIN
+            for k in (1, 2):
+                a &= np.einsum("fx,fx->f", n, directions.take(t[:, k], axis=0)) < -B.BACK_FACE_MARGIN
+        away[s:e] = a
+    return away
 
 
 def see(frame: Frame, source: Source, coarse) -> Sight:
