@@ -29,31 +29,17 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+from bench_dense import dense_scene  # noqa: E402
 from provenance import code_version  # noqa: E402
 
-SIZES = {"16k": (128, 64), "200k": (448, 224), "1M": (1200, 416)}
 OUT = os.path.join(ROOT, "docs", "manual.md")
 BEGIN, END = "<!-- bench_background: begin -->", "<!-- bench_background: end -->"
 
 
 def _scene(size):
-    import bmesh
-    import bpy
-
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    bpy.ops.grlens.demo_scene(r_s=2.0)
-    scene = bpy.context.scene
-    scene.render.resolution_x, scene.render.resolution_y = 1920, 1080
-    scene.grlens.auto_update = False
-    sphere = bpy.data.objects["OrbitingSphere"]
-    seg, rings = SIZES[size]
-    bm = bmesh.new()
-    bm.loops.layers.uv.new("UVMap")
-    bmesh.ops.create_uvsphere(bm, u_segments=seg, v_segments=rings, radius=1.0, calc_uvs=True)
-    bm.to_mesh(sphere.data)
-    bm.free()
+    scene, sphere, n_tris = dense_scene(size)
     scene.frame_set(30)
-    return scene, sphere, sum(len(p.vertices) - 2 for p in sphere.data.polygons)
+    return scene, sphere, n_tris
 
 
 def _request(scene, background):

@@ -29,6 +29,29 @@ SIZES = {"16k": (128, 64), "200k": (448, 224), "1M": (1200, 416)}
 triangles have open edges next to their poles, e.g. 1000 x 500: an open mesh has no back faces culled)."""
 
 
+def dense_scene(size, resolution=(1920, 1080)):
+    """(scene, sphere, source triangles) in Blender (bpy module): ``bpy.ops.grlens.demo_scene`` (r_s = 2 BU)
+    at ``resolution`` (pixels), auto-update off, its orbiting sphere's mesh replaced by the UV sphere of
+    SIZES[size] (bmesh, radius 1 BU, with UVs). Shared by the dense-mesh benchmarks (bench_background,
+    profile_dense)."""
+    import bmesh
+    import bpy
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    bpy.ops.grlens.demo_scene(r_s=2.0)
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = resolution
+    scene.grlens.auto_update = False
+    seg, rings = SIZES[size]
+    sphere = bpy.data.objects["OrbitingSphere"]
+    bm = bmesh.new()
+    bm.loops.layers.uv.new("UVMap")
+    bmesh.ops.create_uvsphere(bm, u_segments=seg, v_segments=rings, radius=1.0, calc_uvs=True)
+    bm.to_mesh(sphere.data)
+    bm.free()
+    return scene, sphere, sum(len(p.vertices) - 2 for p in sphere.data.polygons)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="16k,200k,1M")
@@ -68,21 +91,7 @@ def main(argv=None):
              "image triangles (order 1 / 2) |", "|---|---|---|---|---|---|"]
     print("\n".join(table))
     for size in args.sizes.split(","):
-        import bmesh
-
-        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-        bpy.ops.grlens.demo_scene(r_s=2.0)
-        scene = bpy.context.scene
-        scene.render.resolution_x, scene.render.resolution_y = w, h
-        scene.grlens.auto_update = False
-        seg, rings = SIZES[size]
-        sphere = bpy.data.objects["OrbitingSphere"]
-        bm = bmesh.new()
-        bm.loops.layers.uv.new("UVMap")
-        bmesh.ops.create_uvsphere(bm, u_segments=seg, v_segments=rings, radius=1.0, calc_uvs=True)
-        bm.to_mesh(sphere.data)
-        bm.free()
-        n_tris = sum(len(p.vertices) - 2 for p in sphere.data.polygons)
+        scene, sphere, n_tris = dense_scene(size, (w, h))
         scene.frame_set(frames[0] - 1)
         rebuild.rebuild_scene(scene, bpy.context.evaluated_depsgraph_get())  # one untimed (tables, caches)
         rows = []

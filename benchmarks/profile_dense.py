@@ -24,31 +24,20 @@ import numpy as np
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 
-SIZES = {"16k": (128, 64), "200k": (448, 224), "1M": (1200, 416)}
-
 
 def capture(path, size, frames, preview):
     """The inputs of build_images for each frame (bpy), into ``path``."""
-    import bpy  # noqa: I001 (before bmesh)
-    import bmesh
+    import bpy
 
     import grlens_addon
     from grlens_addon.blender import rebuild
 
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from bench_dense import dense_scene
+
     if not hasattr(bpy.types.Scene, "grlens"):
         grlens_addon.register()
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    bpy.ops.grlens.demo_scene(r_s=2.0)
-    scene = bpy.context.scene
-    scene.render.resolution_x, scene.render.resolution_y = 1920, 1080
-    scene.grlens.auto_update = False
-    sphere = bpy.data.objects["OrbitingSphere"]
-    seg, rings = SIZES[size]
-    bm = bmesh.new()
-    bm.loops.layers.uv.new("UVMap")
-    bmesh.ops.create_uvsphere(bm, u_segments=seg, v_segments=rings, radius=1.0, calc_uvs=True)
-    bm.to_mesh(sphere.data)
-    bm.free()
+    scene = dense_scene(size)[0]
     got = {}
     real = rebuild.pipeline.build_images
 
