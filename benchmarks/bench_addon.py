@@ -29,6 +29,9 @@ import grlens_addon  # noqa: E402
 from grlens_addon.blender import rebuild  # noqa: E402
 from grlens_addon.core import pipeline  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_dense import uv_sphere_mesh  # noqa: E402
+
 
 def _rss_mb():
     with open("/proc/self/status") as f:
@@ -44,14 +47,7 @@ def _scene(resolution, segments=36, rings=18):
     scene = bpy.context.scene
     scene.render.resolution_x, scene.render.resolution_y = resolution
     if segments != 36:
-        import bmesh
-
-        sphere = bpy.data.objects["OrbitingSphere"]
-        bm = bmesh.new()
-        bm.loops.layers.uv.new("UVMap")
-        bmesh.ops.create_uvsphere(bm, u_segments=segments, v_segments=rings, radius=1.0, calc_uvs=True)
-        bm.to_mesh(sphere.data)
-        bm.free()
+        uv_sphere_mesh(bpy.data.objects["OrbitingSphere"].data, segments, rings)
     return scene
 
 

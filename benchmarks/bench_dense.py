@@ -34,7 +34,6 @@ def dense_scene(size, resolution=(1920, 1080)):
     at ``resolution`` (pixels), auto-update off, its orbiting sphere's mesh replaced by the UV sphere of
     SIZES[size] (bmesh, radius 1 BU, with UVs). Shared by the dense-mesh benchmarks (bench_background,
     profile_dense)."""
-    import bmesh
     import bpy
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
@@ -42,14 +41,21 @@ def dense_scene(size, resolution=(1920, 1080)):
     scene = bpy.context.scene
     scene.render.resolution_x, scene.render.resolution_y = resolution
     scene.grlens.auto_update = False
-    seg, rings = SIZES[size]
     sphere = bpy.data.objects["OrbitingSphere"]
+    uv_sphere_mesh(sphere.data, *SIZES[size])
+    return scene, sphere, sum(len(p.vertices) - 2 for p in sphere.data.polygons)
+
+
+def uv_sphere_mesh(mesh, segments, rings):
+    """Replace the Blender ``mesh``'s geometry by a UV sphere of radius 1 BU with ``segments`` x ``rings``
+    (bmesh, UVs in the layer "UVMap")."""
+    import bmesh
+
     bm = bmesh.new()
     bm.loops.layers.uv.new("UVMap")
-    bmesh.ops.create_uvsphere(bm, u_segments=seg, v_segments=rings, radius=1.0, calc_uvs=True)
-    bm.to_mesh(sphere.data)
+    bmesh.ops.create_uvsphere(bm, u_segments=segments, v_segments=rings, radius=1.0, calc_uvs=True)
+    bm.to_mesh(mesh)
     bm.free()
-    return scene, sphere, sum(len(p.vertices) - 2 for p in sphere.data.polygons)
 
 
 def main(argv=None):
