@@ -145,7 +145,56 @@ def _reference_u(kind, rho) -> np.ndarray:
 _sweep_inner = _orb.sweep_inner
 
 
+SINGLE_PHASE_RANGE = (1.1, 2.0)
+"""Observers (r_s) at or inside the first or at or beyond the second radius get the crossing rays' phase
+from one elliptic integral (:func:`_crossing_phase_single`); between them, next to the photon sphere,
+from two (:func:`_crossing_phase_pair`), whose difference keeps full accuracy there."""
+
+
 def _crossing_phase(orb, uo) -> np.ndarray:
+    """The angle orbits of kind P (complex roots, ``orb`` from :func:`_orbits`) sweep from the photon
+    sphere to inverse radius ``uo`` (radians): :func:`_crossing_phase_single` away from the photon
+    sphere (SINGLE_PHASE_RANGE), :func:`_crossing_phase_pair` next to it."""
+    lo, hi = SINGLE_PHASE_RANGE
+    if 1.0 / lo <= uo or uo <= 1.0 / hi:
+        return _crossing_phase_single(orb, uo)
+    return _crossing_phase_pair(orb, uo)
+
+
+def _crossing_phase_single(orb, uo) -> np.ndarray:
+    """The angle orbits of kind P (complex roots, ``orb`` from :func:`_orbits`) sweep from the photon
+    sphere to inverse radius ``uo`` (radians): lutgen.orbit.sweep(orb, uo) - sweep(orb, 2/3), as one
+    elliptic integral. Both are F(phi|k^2) / sqrt(A) in Legendre's form (cos phi = (A - x)/(A + x),
+    x = u - e1, amplitudes in [0, pi)); the addition theorem gives F(a) - F(c) = F(g) with
+    sin g = (sin a cos c D_c - sin c cos a D_a) / E, cos g = (cos a cos c + sin a sin c D_a D_c) / E,
+    D = sqrt(1 - k^2 sin^2), E = 1 - k^2 sin^2 a sin^2 c, and g in (-pi, pi) (F(a) - F(c) lies in
+    (-2K, 2K)); F(g) by Carlson's R_F, 2K - F(pi - |g|) where cos g < 0, odd in g. One R_F per orbit
+    (and R_F(0, 1 - k^2, 1) = K where cos g < 0) instead of two; 1 - k^2 is formed without
+    cancellation and D^2 = cos^2 + (1 - k^2) sin^2. Next to the photon sphere both amplitudes approach
+    pi/2 as k -> 1 and sin g cancels: used only beyond SINGLE_PHASE_RANGE (within 1e-12 rad of the
+    pair there, tests/test_rays.py)."""
+    a, me1, n = orb.e1, orb.m - orb.e1, orb.n
+    big_a = np.sqrt(me1 ** 2 + n ** 2)
+    k2c = n ** 2 / (2.0 * big_a * (big_a + me1))
+    k2 = 1.0 - k2c
+    x_o, x_c = uo - a, _orb.U_PHOTON - a
+    c_o, c_c = (big_a - x_o) / (big_a + x_o), (big_a - x_c) / (big_a + x_c)
+    s_o, s_c = 2.0 * np.sqrt(big_a * x_o) / (big_a + x_o), 2.0 * np.sqrt(big_a * x_c) / (big_a + x_c)
+    so2, sc2 = s_o * s_o, s_c * s_c
+    dd_o, dd_c = np.sqrt(c_o * c_o + k2c * so2), np.sqrt(c_c * c_c + k2c * sc2)
+    den = 1.0 - k2 * so2 * sc2
+    sg = (s_o * c_c * dd_c - s_c * c_o * dd_o) / den
+    cg = (c_o * c_c + s_o * s_c * dd_o * dd_c) / den
+    c2 = cg * cg
+    s_abs = np.abs(sg)
+    half = s_abs * elliprf(c2, c2 + k2c * s_abs * s_abs, 1.0)
+    neg = np.flatnonzero(cg < 0.0)
+    if neg.size:
+        half[neg] = 2.0 * elliprf(0.0, k2c.take(neg), 1.0) - half.take(neg)
+    return np.copysign(half, sg) / np.sqrt(big_a)
+
+
+def _crossing_phase_pair(orb, uo) -> np.ndarray:
     """The angle orbits of kind P (complex roots, ``orb`` from :func:`_orbits`) sweep from the photon
     sphere to inverse radius ``uo``: lutgen.orbit.sweep(orb, uo) - sweep(orb, 2/3) with the same
     operations on the same numbers (Legendre's form of Carlson's R_F), the terms that do not depend
@@ -701,7 +750,7 @@ class RayMap:
         far end): global row index, d, the observer's phase, b, theta start and length. Concatenated;
         ``r_first``, ``r_count`` per segment."""
         fl = self.flat
-        rows, ds, ths, bs, sts, lns = [], [], [], [], [], []
+        rows, ds, ths, jos, bs, sts, lns = [], [], [], [], [], [], []
         self.r_first, self.r_count = np.empty(self.n_seg, dtype=np.int64), np.empty(self.n_seg, dtype=np.int64)
         total = 0
         twin = self._twins()
@@ -727,7 +776,9 @@ class RayMap:
             g = k + fl.offset[kc]
             rows.append(g)
             ds.append(d)
-            ths.append(self._nodes(seg, z, self.node_theta))
+            th_r, jo_r = self._nodes(seg, z, self.node_theta, self.node_j)
+            ths.append(th_r)
+            jos.append(jo_r)
             bs.append(b)
             sts.append(fl.start[g] * sc)
             lns.append(fl.length[g] * sc)
@@ -736,6 +787,9 @@ class RayMap:
         self.row_g, self.row_d, self.row_theta = np.concatenate(rows), np.concatenate(ds), np.concatenate(ths)
         self.row_b, self.row_start, self.row_length = np.concatenate(bs), np.concatenate(sts), np.concatenate(lns)
         self.row_ld = np.log(self.row_d)
+        # per row: J at the observer's phase, and the factor from the stored J to J (r_s/c)
+        self.row_jo = np.concatenate(jos)
+        self.row_jscale = self.row_length * self.row_b
         # per row: columns per radian, and the factor from the stored u (u b for T) to u
         self.row_cscale = (fl.n_cols - 1) / self.row_length
         row_kind = np.concatenate([np.full(self.r_count[i], self.s_kind[i]) for i in range(self.n_seg)
@@ -945,15 +999,23 @@ class RayMap:
                                                          b=b, j_o=j_o)
         return u_ray - u
 
-    def _row_residual(self, row, u, sweep, seg, near=None):
+    def _row_residual(self, row, u, sweep, seg, near=None, want_q=False):
         """f on the concatenated rows ``row`` (1-D cubic along each row); ``near``: targets next to the
         observer, from whose f the table's error at the observer is subtracted. ``row`` may be (k, N)
-        with the targets' arrays (N,): k rows per target (the per-target parts formed once)."""
+        with the targets' arrays (N,): k rows per target (the per-target parts formed once). With
+        ``want_q``: (f, q), q the travel-time remainder from the observer to the target along each row,
+        J(theta) signed as theta (turning rays: negative past the periapsis / apoapsis) less J at the
+        observer's phase (r_s/c; the quantity whose modulus :meth:`_finish` adds to the radial part),
+        from the same column stencil."""
         fl = self.flat
         n_c = fl.n_cols
         th = self.row_theta.take(row) + self.s_dir.take(seg) * sweep
+        past = None
         if self.n_seg > 2:  # turning rays: the angle from the periapsis / apoapsis
-            th = np.where(self.s_kind.take(seg) != 1, np.abs(th), th)
+            turning = self.s_kind.take(seg) != 1
+            if want_q:
+                past = turning & (th < 0.0)
+            th = np.where(turning, np.abs(th), th)
         c = ((th - self.row_start.take(row)) * self.row_cscale.take(row)).reshape(-1)
         cc = _clip(c, 0.0, n_c - 1)
         j0, wc = _stencil(cc, n_c)
@@ -962,9 +1024,16 @@ class RayMap:
             wc[3] * fl.u.take(base + 3)
         v = _linear_tail(fl.u, base, n_c, c, cc, None, v).reshape(np.shape(row))
         f = v * self.row_uscale.take(row) - u
-        if near is None or not near.any():
+        if near is not None and near.any():
+            f = f - np.where(near, self.row_eps.take(row), 0.0)
+        if not want_q:
             return f
-        return f - np.where(near, self.row_eps.take(row), 0.0)
+        vj = wc[0] * fl.j.take(base) + wc[1] * fl.j.take(base + 1) + wc[2] * fl.j.take(base + 2) + \
+            wc[3] * fl.j.take(base + 3)
+        vj = _linear_tail(fl.j, base, n_c, c, cc, None, vj).reshape(np.shape(row)) * self.row_jscale.take(row)
+        if past is not None:
+            vj = np.where(past, -vj, vj)
+        return f, vj - self.row_jo.take(row)
 
     def _tangent_residual(self, u, sweep, direction):
         """f on the ray tangent at the observer (1-D cubic along its interpolated row)."""
@@ -1070,7 +1139,7 @@ class RayMap:
         first, count = self.r_first.take(seg), self.r_count.take(seg)
         orient = self.s_side.take(seg)  # f grows along the rows when side > 0
         k0 = _clip(k_row.astype(np.int64) - 1, 0, count - 4)  # k_row >= 0: truncation is floor
-        fw = self._row_residual(first + k0 + np.arange(4)[:, None], u, sweep, seg, near)  # (4, n)
+        fw, qw = self._row_residual(first + k0 + np.arange(4)[:, None], u, sweep, seg, near, want_q=True)  # (4, n)
         bw = orient * fw < 0.0
         lo, hi = np.zeros(n, dtype=np.int64), count.copy()
         f_lo = np.full(n, np.nan)  # node 0's value: computed below where the search never moved lo
@@ -1156,6 +1225,7 @@ class RayMap:
         if at0.size:
             f_lo[at0] = self._row_residual(first[at0], u[at0], sweep[at0], seg[at0], near[at0])
         d = np.empty(n)
+        carried = None  # the rays whose values the Newton step's read gave (see below)
         none = orient * f_lo >= 0.0  # a root at the critical end (within rounding)
         d[none] = self.row_d.take(first[none])
         # the end intervals: the far end (pi/2) and the two rows before it
@@ -1167,8 +1237,9 @@ class RayMap:
             pick = (lambda a: a) if i.size == n else (lambda a: a.take(i, axis=-1))
             wi, lo_i, fst_i = pick(window), pick(lo), pick(first)
             if wi.all():
-                kc, fs = pick(k0), pick(fw)
+                kc, fs, qs = pick(k0), pick(fw), pick(qw)
             else:
+                qs = np.where(wi, pick(qw), np.nan)  # outside the window: no rows' q (values read at the end)
                 kc = np.where(wi, pick(k0), _clip(lo_i - 1, 0, pick(count) - 4))
                 fs = np.where(wi, pick(fw), np.nan)
                 m_all = np.flatnonzero(~wi)
@@ -1197,8 +1268,18 @@ class RayMap:
             d0 = np.clip(d0, np.minimum(d_a, d_b), np.maximum(d_a, d_b))
             # the cubic's slope as df/dd: the first step is Newton's with it
             slope = dp / dd_dt
-            d[i], ok = self._secant(pick(seg), pick(u), pick(sweep), d0, d_a, d_b, pick(near), slope=slope)
+            seg_i, near_i = pick(seg), pick(near)
+            f0, got0 = self._residual(seg_i, d0, pick(u), pick(sweep), want=True, near=near_i)
+            d_i, ok, short = self._secant(seg_i, pick(u), pick(sweep), d0, d_a, d_b, near_i, slope=slope, f0=f0)
+            d[i] = d_i
             inner[i[~ok]] = False
+            # where that Newton step ended the solve, the ray's values come from its read at d0: the
+            # travel-time remainder carried to the ray by its derivative along the four rows (the step
+            # is below NEWTON_DONE of d: what is left is the step times that derivative's error)
+            q_x = self._remainder(seg_i, got0, near_i) + (d_i - d0) * (_cubic_at(qs, t)[1] / dd_dt)
+            c_at = np.flatnonzero(short & np.isfinite(q_x))
+            if c_at.size:
+                carried = (i.take(c_at), got0["theta"].take(c_at), q_x.take(c_at))
         e = np.flatnonzero(~none & ~inner)
         if e.size:
             far_d = self.s_far.take(seg[e]) - FAR_GAP_T
@@ -1251,19 +1332,19 @@ class RayMap:
                 d0[end[good]] = x[good]
                 slope = np.full(e.size, np.nan)  # no slope: the plain secant start (see _secant)
                 slope[end[good]] = dp[good]
-            d[e], ok = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6, slope=slope)
+            d[e], ok, _ = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6, slope=slope)
             rest = np.flatnonzero(~ok)
             if rest.size:
                 er = e[rest]
                 d[er] = self._regula_falsi(seg[er], u[er], sweep[er], d_a[rest], d_b[rest], f_a[rest], f_b[rest],
                                            near[er])
-        return self._finish(seg, d, u, r, phi, sweep, order, near, tangents)
+        return self._finish(seg, d, u, r, phi, sweep, order, near, tangents, carried)
 
-    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4, slope=None):
+    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4, slope=None, f0=None):
         """Secant steps in d from d0 (inside the bracket [d_a, d_b], next to the root) with the bicubic
-        interpolation; returns (d, converged). With ``slope`` (an estimate of df/dd at d0) the second
-        point is Newton's step from d0 with it (where it falls inside the bracket), else d0 plus 1e-7 of
-        the bracket."""
+        interpolation; returns (d, converged, ended by the first step). With ``slope`` (an estimate of
+        df/dd at d0) the second point is Newton's step from d0 with it (where it falls inside the
+        bracket), else d0 plus 1e-7 of the bracket; ``f0``: f at d0 where known (with ``slope``)."""
         lo, hi = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
         if slope is None:
             x_prev = d0 + 1e-7 * (hi - lo)
@@ -1271,16 +1352,18 @@ class RayMap:
             x = d0
         else:  # (a NaN slope: no Newton step, the second point as without a slope)
             x_prev = d0
-            f_prev = self._residual(seg, d0, u, sweep, near=near)
+            f_prev = self._residual(seg, d0, u, sweep, near=near) if f0 is None else f0
             x = d0 - f_prev / slope
             newton = np.isfinite(x) & (x >= lo) & (x <= hi) & (x != d0)
             x = np.where(newton, x, d0 + 1e-7 * (hi - lo))
         out = d0.copy()
         ok = np.zeros(u.size, dtype=bool)
         act = np.arange(u.size)
+        first = np.zeros(u.size, dtype=bool)
         if slope is not None:  # a Newton step this short leaves its length times the slope's error
             done = newton & (np.abs(x - d0) <= NEWTON_DONE * x)
             out[done], ok[done] = x[done], True
+            first = done
             keep = ~done
             act, x_prev, f_prev, x = act[keep], x_prev[keep], f_prev[keep], x[keep]
         for _ in range(steps):
@@ -1296,7 +1379,7 @@ class RayMap:
             ok[act[done]] = True
             keep = good & ~done
             act, x_prev, f_prev, x = act[keep], x[keep], f[keep], x_new[keep]
-        return out, ok
+        return out, ok, first
 
     def _regula_falsi(self, seg, u, sweep, a, b, f_a, f_b, near):
         """d of the roots bracketed by [a, b] (f values f_a, f_b, possibly infinite): the
@@ -1323,32 +1406,62 @@ class RayMap:
         out[act] = b
         return out
 
-    def _finish(self, seg, d, u, r, phi, sweep, order, near, tangents=True) -> dict:
-        """xi, dt and (with ``tangents``) ux, uy of the rays d of segments ``seg``."""
+    def _remainder(self, seg, got, near):
+        """The travel-time remainder (r_s/c) of rays read by :meth:`_residual` (``got``): J at the target
+        signed as theta (turning rays: negative past the periapsis / apoapsis) less J at the observer;
+        next to the observer J's difference from one stencil. :meth:`_finish` adds its modulus to the
+        radial part."""
+        th = got["theta"]
+        turning = self.s_kind.take(seg) != 1
+        dj = np.where(turning, np.sign(th), 1.0) * got["j"] - got["j_o"]
+        if got["j_diff"] is not None:  # next to the observer: J(theta) - J(theta_o) from one stencil
+            same = near & ((th >= 0.0) | ~turning)
+            dj = np.where(same, got["j_diff"], dj)
+        return dj
+
+    def _finish(self, seg, d, u, r, phi, sweep, order, near, tangents=True, carried=None) -> dict:
+        """xi, dt and (with ``tangents``) ux, uy of the rays d of segments ``seg``. ``carried``: (indices,
+        theta, remainder) of rays whose values are known (see :meth:`_solve`); the others' are read."""
         k = self.k
         kind = self.s_kind.take(seg)
-        xi = self.s_crit.take(seg) + self.s_side.take(seg) * d
-        _, got = self._residual(seg, d, u, sweep, want=True, near=near, want_f=False)
-        rho, th, b = got["rho"], got["theta"], got["b"]
-        j_o = got["j_o"]
         turning = kind != 1
-        j_t = np.where(turning, np.sign(th), 1.0) * got["j"]
+        xi = self.s_crit.take(seg) + self.s_side.take(seg) * d
+        n = d.size
+        if carried is None or not carried[0].size:
+            _, got = self._residual(seg, d, u, sweep, want=True, near=near, want_f=False)
+            rho, th, b = got["rho"], got["theta"], got["b"]
+            dj = self._remainder(seg, got, near)
+        elif carried[0].size == n:  # every ray known (carried[0] is then 0..n-1)
+            _, th, dj = carried
+            rho = b = None  # (b from xi below; rho only where needed)
+        else:
+            ci = carried[0]
+            th, dj = np.empty(n), np.empty(n)
+            th[ci], dj[ci] = carried[1], carried[2]
+            rho = b = None
+            rest = np.ones(n, dtype=bool)
+            rest[ci] = False
+            rest = np.flatnonzero(rest)
+            sr = seg.take(rest)
+            _, got = self._residual(sr, d.take(rest), u.take(rest), sweep.take(rest), want=True,
+                                    near=near.take(rest), want_f=False)
+            th[rest] = got["theta"]
+            dj[rest] = self._remainder(sr, got, near.take(rest))
         rs_o = self.r_obs + math.log(self.r_obs - 1.0)
         rs_t = r + np.log(r - 1.0)
         radial = np.abs(rs_t - rs_o)
         tt = np.flatnonzero(turning & (th < 0.0))  # the ray passed its periapsis / apoapsis
         if tt.size:
-            r_ref = 1.0 / _reference_u("T" if kind[tt[0]] == 0 else "I", rho[tt])
+            rho_tt = self._rho(seg.take(tt), d.take(tt)) if rho is None else rho.take(tt)
+            r_ref = 1.0 / _reference_u("T" if kind[tt[0]] == 0 else "I", rho_tt)
             rs_ref = r_ref + np.log(r_ref - 1.0)
             radial[tt] = np.abs(rs_t[tt] - rs_ref) + np.abs(rs_o - rs_ref)
-        dj = j_t - j_o
-        if got["j_diff"] is not None:  # next to the observer: J(theta) - J(theta_o) from one stencil
-            same = near & ((th >= 0.0) | ~turning)
-            dj = np.where(same, got["j_diff"], dj)
         dt = radial + np.abs(dj)
         dt = np.where(np.isinf(r), np.inf, dt)
         if not tangents:
             return dict(xi=xi, dt=dt)
+        if b is None:  # the impact parameter of the ray leaving the static observer at xi
+            b = np.sin(xi) * (self.r_obs / k)
         direction = self.s_dir.take(seg)
         outward = np.where(turning, (np.sign(th) * direction > 0) == (kind == 0), direction < 0)
         s2 = np.maximum(1.0 - b * b * u * u * (1.0 - u), 0.0)

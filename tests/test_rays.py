@@ -337,21 +337,52 @@ def test_quantities_asked_for():
 
 
 def test_per_radius_shortcuts_equal_the_general_forms():
-    """The set-up's and the solve's shortcuts give the general closed forms' numbers bit for bit: the
-    crossing rays' phase at the observer (lutgen.orbit.sweep at the observer less at the photon sphere,
-    both sides of the photon sphere and beyond pi/2 in Legendre's amplitude), and the turning orbits'
-    reference points (the roots of _orbits)."""
+    """The set-up's and the solve's shortcuts give the general closed forms' numbers: the crossing rays'
+    phase at the observer next to the photon sphere bit for bit (lutgen.orbit.sweep at the observer
+    less at the photon sphere, both sides of the photon sphere and beyond pi/2 in Legendre's
+    amplitude), away from it (one integral by the addition theorem) within 2e-12 rad; and the turning
+    orbits' reference points (the roots of _orbits) bit for bit."""
     rho = np.linspace(rays.RHO_MIN, rays.RHO_MAX_P, 2000)
     orb = rays._orbits("P", rho)
-    for r_obs in (1.001, 1.2, 1.5, 3.0, 1e4, 1e7):
+    lo, hi = rays.SINGLE_PHASE_RANGE
+    for r_obs in (1.001, 1.05, lo, lo * 1.001, 1.2, 1.5, hi * 0.999, hi, 3.0, 1e4, 1e7):
         uo = 1.0 / r_obs
         with np.errstate(invalid="ignore", divide="ignore"):
             ends = O.sweep(orb, np.array([[uo], [O.U_PHOTON]]) * np.ones(rho.size))
-            assert np.array_equal(rays._crossing_phase(orb, uo), ends[0] - ends[1], equal_nan=True), r_obs
+            got = rays._crossing_phase(orb, uo)
+            if lo < r_obs < hi:
+                assert np.array_equal(got, ends[0] - ends[1], equal_nan=True), r_obs
+            else:
+                assert np.max(np.abs(got - (ends[0] - ends[1]))) < 2e-12, r_obs
     for kind, mx in (("T", rays.RHO_MAX_T), ("I", rays.RHO_MAX_I)):
         rho = np.linspace(rays.RHO_MIN, mx, 2000)
         o = rays._orbits(kind, rho)
         assert np.array_equal(rays._reference_u(kind, rho), o.e2 if kind == "T" else o.e3), kind
+
+
+def test_crossing_phase_against_quadrature():
+    """The crossing rays' phase at the observer, both forms (one integral by the addition theorem, and
+    the difference of two), against scipy's adaptive quadrature of dtheta = du / sqrt(e^2 - u^2 (1 - u))
+    from the photon sphere to the observer: with u = 2/3 + w, e^2 - u^2 (1 - u) = eps + w^2 + w^3 exactly
+    (eps = e^2 - 4/27 = 4/27 e^rho for these labels), and w = sqrt(eps) sinh(v) takes the near double
+    root of orbits that wind out of the integrand, 1 / sqrt(1 + w^3 / (eps cosh^2 v)) dv."""
+    from scipy.integrate import quad
+    rho = np.array([-20.0, -8.0, -2.0, 0.0, 3.0, 12.0])
+    orb = rays._orbits("P", rho)
+    for r_obs in (1.01, 1.05, 2.0, 3.0, 30.0, 1e4):
+        uo = 1.0 / r_obs
+        single, pair = rays._crossing_phase_single(orb, uo), rays._crossing_phase_pair(orb, uo)
+        for i in range(rho.size):
+            eps = 4.0 / 27.0 * math.exp(rho[i])
+            sq = math.sqrt(eps)
+
+            def f(v):
+                w = sq * math.sinh(v)
+                return 1.0 / math.sqrt(1.0 + w ** 3 / (eps * math.cosh(v) ** 2))
+            exact = quad(f, 0.0, math.asinh((uo - O.U_PHOTON) / sq), epsabs=0.0, epsrel=1e-13, limit=200)[0]
+            tol = 1e-12 + 1e-11 * abs(exact)
+            assert abs(single[i] - exact) < tol, (r_obs, rho[i], single[i], exact)
+            assert abs(pair[i] - exact) < tol, (r_obs, rho[i], pair[i], exact)
 
 
 def test_cubic_root_through_uneven_nodes():
