@@ -543,13 +543,17 @@ def check_any_observer(r_obs) -> float:
 
 class _Flat:
     """The orbit table's three kinds as one array of rows (same columns), for lookups that mix kinds:
-    per kind its first row, label origin and count."""
+    per kind its first row, label origin and count. ``uj``: each node's u (the stored u) and J as one
+    complex number u + i J (row-major, flat), so that one ``take`` reads both (the interpolation
+    weights are real: the sums' real and imaginary parts are those of u and of J, bit for bit)."""
 
     def __init__(self, table: OrbitTable):
         ks = [table.kinds[k] for k in _KINDS]
         self.n_cols = ks[0].n_cols
-        self.u = np.ascontiguousarray(np.concatenate([k.u for k in ks])).reshape(-1)
-        self.j = np.ascontiguousarray(np.concatenate([k.j for k in ks])).reshape(-1)
+        uj = np.empty(sum(k.u.size for k in ks), dtype=np.complex128)
+        uj.real = np.concatenate([k.u.reshape(-1) for k in ks])
+        uj.imag = np.concatenate([k.j.reshape(-1) for k in ks])
+        self.uj = uj
         self.start = np.concatenate([k.start for k in ks])
         self.length = np.concatenate([k.length for k in ks])
         self.offset = np.cumsum([0] + [k.n_rows for k in ks])[:-1]
@@ -570,13 +574,14 @@ def _scale(kind, b):
 
 
 def _gather(flat, base, wr, wc, n_c):
-    """Bicubic sum of the 4 x 4 nodes of a row-major table (``flat``, ``n_c`` columns) from the flat
-    indices ``base`` (N,), with row and column weights wr, wc (4, N)."""
-    v = np.zeros(base.size)
+    """Bicubic sum of the 4 x 4 nodes of a row-major table (``flat``, ``n_c`` columns; real or complex)
+    from the flat indices ``base`` (N,), with row and column weights wr, wc (4, N)."""
+    v = None
     for i in range(4):
         b = base + i * n_c
-        v += wr[i] * (wc[0] * flat.take(b) + wc[1] * flat.take(b + 1) + wc[2] * flat.take(b + 2)
-                      + wc[3] * flat.take(b + 3))
+        t = wr[i] * (wc[0] * flat.take(b) + wc[1] * flat.take(b + 1) + wc[2] * flat.take(b + 2)
+                     + wc[3] * flat.take(b + 3))
+        v = t if v is None else v + t
     return v
 
 
@@ -587,7 +592,7 @@ def _linear_tail(flat, base, n_c, c, cc, wr, v):
     out = np.flatnonzero(c != cc)
     if out.size:
         dw = _derivative_weights(cc[out], n_c)
-        slope = np.zeros(out.size)
+        slope = np.zeros(out.size, dtype=flat.dtype)
         for i in range(1 if wr is None else wr.shape[0]):
             for j in range(4):
                 slope += (1.0 if wr is None else wr[i, out]) * dw[j] * flat.take(base[out] + (i * n_c + j))
@@ -819,7 +824,7 @@ class RayMap:
             sc = _scale(np.array([kc]), np.array([b]))[0]
             st = float(w @ fl.start[rows_t]) * sc
             ln = float(w @ fl.length[rows_t]) * sc
-            u_rows = fl.u.reshape(-1, n_c)[rows_t]
+            u_rows = np.ascontiguousarray(fl.uj.reshape(-1, n_c)[rows_t].real)
             self._tan = dict(u=w @ u_rows, b=b, start=st, length=ln, kind=kc,
                              theta=self.node_theta[(i + 1) * self.n_z - 1])
         return self._tan
@@ -861,7 +866,7 @@ class RayMap:
             locs.append(p)
         seg, loc = np.concatenate(segs), np.concatenate(locs)
         rows = self.r_first.take(seg) + loc
-        n_c, u_flat = self.flat.n_cols, self.flat.u
+        n_c, uj = self.flat.n_cols, self.flat.uj
         sweeps = np.linspace(0.0, 2.0 * math.pi, n_s)
         # u along each row, linear between its columns (and beyond them): a seed needs no more
         th = self.row_theta.take(rows)[None, :] + self.s_dir.take(seg)[None, :] * sweeps[:, None]
@@ -870,7 +875,7 @@ class RayMap:
         j = _clip(np.floor(c), 0.0, n_c - 2.0).astype(np.int64)
         t = c - j
         base = self.row_g.take(rows) * n_c + j
-        f = (u_flat.take(base) * (1.0 - t) + u_flat.take(base + 1) * t) * self.row_uscale.take(rows)
+        f = (uj.take(base).real * (1.0 - t) + uj.take(base + 1).real * t) * self.row_uscale.take(rows)
         # (n_s, q): monotone along xi, each value the least of those after it (rays that escaped,
         # below every target, may wind up and down below zero: a running minimum from the side of
         # the rays that fell in keeps the values next to every target's root)
@@ -967,10 +972,8 @@ class RayMap:
         cc = _clip(c, 0.0, n_c - 1)
         j0, wc = _stencil(cc, n_c)
         base = i0 * n_c + j0
-        u = _linear_tail(fl.u, base, n_c, c, cc, wr, _gather(fl.u, base, wr, wc, n_c)) if want_u else None
-        if not want_j:
-            return u, None
-        return u, _linear_tail(fl.j, base, n_c, c, cc, wr, _gather(fl.j, base, wr, wc, n_c))
+        v = _linear_tail(fl.uj, base, n_c, c, cc, wr, _gather(fl.uj, base, wr, wc, n_c))  # u + i J
+        return (v.real if want_u else None), (v.imag if want_j else None)
 
     def _residual(self, seg, d, u, sweep, want=False, near=None, want_f=True):
         """f = u_ray - u on the rays d of segments ``seg`` for targets (u, sweep); ``near`` (mask):
@@ -1020,17 +1023,15 @@ class RayMap:
         cc = _clip(c, 0.0, n_c - 1)
         j0, wc = _stencil(cc, n_c)
         base = self.row_g.take(row).reshape(-1) * n_c + j0
-        v = wc[0] * fl.u.take(base) + wc[1] * fl.u.take(base + 1) + wc[2] * fl.u.take(base + 2) + \
-            wc[3] * fl.u.take(base + 3)
-        v = _linear_tail(fl.u, base, n_c, c, cc, None, v).reshape(np.shape(row))
-        f = v * self.row_uscale.take(row) - u
+        t = fl.uj
+        v = wc[0] * t.take(base) + wc[1] * t.take(base + 1) + wc[2] * t.take(base + 2) + wc[3] * t.take(base + 3)
+        v = _linear_tail(t, base, n_c, c, cc, None, v).reshape(np.shape(row))  # u + i J
+        f = v.real * self.row_uscale.take(row) - u
         if near is not None and near.any():
             f = f - np.where(near, self.row_eps.take(row), 0.0)
         if not want_q:
             return f
-        vj = wc[0] * fl.j.take(base) + wc[1] * fl.j.take(base + 1) + wc[2] * fl.j.take(base + 2) + \
-            wc[3] * fl.j.take(base + 3)
-        vj = _linear_tail(fl.j, base, n_c, c, cc, None, vj).reshape(np.shape(row)) * self.row_jscale.take(row)
+        vj = v.imag * self.row_jscale.take(row)
         if past is not None:
             vj = np.where(past, -vj, vj)
         return f, vj - self.row_jo.take(row)
@@ -1141,14 +1142,17 @@ class RayMap:
         k0 = _clip(k_row.astype(np.int64) - 1, 0, count - 4)  # k_row >= 0: truncation is floor
         fw, qw = self._row_residual(first + k0 + np.arange(4)[:, None], u, sweep, seg, near, want_q=True)  # (4, n)
         bw = orient * fw < 0.0
-        lo, hi = np.zeros(n, dtype=np.int64), count.copy()
-        f_lo = np.full(n, np.nan)  # node 0's value: computed below where the search never moved lo
-        f_hi = orient * np.inf
-        window = np.zeros(n, dtype=bool)
-        for j in (2, 1, 0):  # f changes sign between rows k0 + j and k0 + j + 1
-            at = bw[j] & ~bw[j + 1]
-            lo[at], hi[at], f_lo[at], f_hi[at] = k0[at] + j, k0[at] + j + 1, fw[j, at], fw[j + 1, at]
-            window |= at
+        # f changes sign between rows k0 + j and k0 + j + 1 (the first such j); elsewhere lo, hi span the
+        # segment, f_lo NaN (node 0's value: computed below where the search never moved lo)
+        cand = bw[:3] & ~bw[1:]
+        window = cand[0] | cand[1] | cand[2]
+        js = cand.argmax(0)
+        at_lo = js * n + np.arange(n)
+        lo = np.where(window, k0 + js, 0)
+        hi = np.where(window, lo + 1, count)
+        fw_flat = fw.reshape(-1)
+        f_lo = np.where(window, fw_flat.take(at_lo), np.nan)
+        f_hi = np.where(window, fw_flat.take(at_lo + n), orient * np.inf)
         rest = np.flatnonzero(~window)
         moved = np.zeros(n, dtype=bool)  # points whose segment is not the seed's (their window is not theirs)
         self.solved += n
@@ -1511,8 +1515,10 @@ def _cubic_root(fs, t0, slope=False):
     a = f1 - f0
     c = 0.5 * (f2 - 2.0 * f1 + f0)
     e = (f3 - 3.0 * f2 + 3.0 * f1 - f0) / 6.0
-    fa = np.where(t0 == 0, f0, np.where(t0 == 1, f1, f2))
-    fb = np.where(t0 == 0, f1, np.where(t0 == 1, f2, f3))
+    n = t0.size
+    at = t0.astype(np.int64) * n + np.arange(n)  # the bracket's nodes t0, t0 + 1
+    flat = fs.reshape(-1) if fs.flags.c_contiguous else np.ascontiguousarray(fs).reshape(-1)
+    fa, fb = flat.take(at), flat.take(at + n)
     t = t0 + np.where(fb != fa, fa / (fa - fb), 0.5)
     for _ in range(CUBIC_STEPS):
         p = f0 + t * (a + (t - 1.0) * (c + (t - 2.0) * e))
