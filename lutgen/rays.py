@@ -105,41 +105,58 @@ def label_of_b(kind: str, b) -> np.ndarray:
         return np.log(1.0 / q - 1.0) if kind == "P" else np.log(q - 1.0)
 
 
+def _far_sigma_e1(b):
+    """(sigma, e1) of lutgen.orbit.orbit_from_b for turning orbits with impact parameters b > b_crit
+    (r_s): the same operations on the same numbers (the trigonometric form, e1 polished by Newton's
+    method where sigma > 0.5), without the hyperbolic branch or the roots that follow from them."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        y = 4.0 * (b - B_C) * (b + B_C) / (b * b)
+        sq = 0.5 * np.sqrt(np.abs(y))
+        sigma = 4.0 * np.sin(np.arcsin(np.minimum(sq, 1.0)) / 3.0) ** 2
+    e1 = (sigma - 1.0) / 3.0
+    big = np.flatnonzero(sigma > 0.5)
+    if big.size:
+        bb = b.take(big)
+        c = 1.0 / (bb * bb)
+        t = 1.0 / bb
+        e = np.where(bb > 1e3, t * (-1.0 + t * (0.5 - 0.625 * t)), e1.take(big))
+        for _ in range(3):
+            e = e - (e * e * (1.0 - e) - c) / (e * (2.0 - 3.0 * e))
+        e1[big] = e
+        sigma[big] = 1.0 + 3.0 * e
+    return sigma, e1
+
+
+def _turning_sigma_e1(rho):
+    """(sigma, e1) of turning orbits (kinds T, I) with labels rho: from rho next to the critical orbit,
+    as lutgen.orbit.orbit_from_b from b for rho > 0 (far orbits, whose e1 ~ -1/b it polishes)."""
+    x = np.exp(rho)
+    y = 4.0 * x / (1.0 + x)
+    sigma = 4.0 * np.sin(np.arcsin(np.minimum(0.5 * np.sqrt(y), 1.0)) / 3.0) ** 2
+    e1 = (sigma - 1.0) / 3.0
+    far = np.flatnonzero(rho > 0.0)
+    if far.size:
+        sigma[far], e1[far] = _far_sigma_e1(B_C * np.sqrt(1.0 + x.take(far)))
+    return sigma, e1
+
+
 def _orbits(kind, rho) -> _orb.Orbit:
     """Roots of P(u) for labels rho, accurate next to the critical orbit (from rho, not from b)."""
     rho = np.asarray(rho, dtype=float)
-    x = np.exp(rho)
     if kind == "P":  # y = 4 (b^2 - b_c^2) / b^2 = -4 e^rho
-        sigma = -4.0 * np.sinh(np.arcsinh(np.sqrt(x)) / 3.0) ** 2
+        sigma = -4.0 * np.sinh(np.arcsinh(np.sqrt(np.exp(rho))) / 3.0) ** 2
         return _orb._from_sigma_e1(sigma, (sigma - 1.0) / 3.0)
-    far = rho > 0.0
-    y = 4.0 * x / (1.0 + x)
-    sigma = 4.0 * np.sin(np.arcsin(np.minimum(0.5 * np.sqrt(y), 1.0)) / 3.0) ** 2
-    orb = _orb._from_sigma_e1(sigma, (sigma - 1.0) / 3.0)
-    if far.any():  # far orbits: orbit_from_b polishes e1 (~ -1/b)
-        ob = _orb.orbit_from_b(impact_parameter(kind, rho[far]))
-        for f in ("e1", "real", "e2", "e3", "delta", "m", "n"):
-            getattr(orb, f)[far] = getattr(ob, f)
-    return orb
+    return _orb._from_sigma_e1(*_turning_sigma_e1(rho))
 
 
 def _reference_u(kind, rho) -> np.ndarray:
     """u at the reference point of turning orbits of kind "T" (the periapsis, e2) or "I" (the apoapsis,
     e3) with labels rho: the same numbers as :func:`_orbits`'s roots, only the one needed."""
-    rho = np.asarray(rho, dtype=float)
-    far = rho > 0.0
-    x = np.exp(rho)
-    y = 4.0 * x / (1.0 + x)
-    sigma = 4.0 * np.sin(np.arcsin(np.minimum(0.5 * np.sqrt(y), 1.0)) / 3.0) ** 2
-    e1 = (sigma - 1.0) / 3.0
+    sigma, e1 = _turning_sigma_e1(np.asarray(rho, dtype=float))
     one_m = 1.0 - e1
     delta = np.sqrt(one_m * sigma)
     e2 = -2.0 * e1 * one_m / (one_m + delta)
-    out = e2 if kind == "T" else e2 + delta
-    if far.any():  # far orbits: orbit_from_b polishes e1 (~ -1/b)
-        ob = _orb.orbit_from_b(impact_parameter(kind, rho[far]))
-        out[far] = ob.e2 if kind == "T" else ob.e3
-    return out
+    return e2 if kind == "T" else e2 + delta
 
 
 _sweep_inner = _orb.sweep_inner

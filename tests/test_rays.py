@@ -358,6 +358,11 @@ def test_per_radius_shortcuts_equal_the_general_forms():
         rho = np.linspace(rays.RHO_MIN, mx, 2000)
         o = rays._orbits(kind, rho)
         assert np.array_equal(rays._reference_u(kind, rho), o.e2 if kind == "T" else o.e3), kind
+        # far orbits (rho > 0): lutgen.orbit.orbit_from_b's roots from b, bit for bit
+        far = rho > 0.0
+        ob = O.orbit_from_b(rays.impact_parameter(kind, rho[far]))
+        for f in ("e1", "e2", "e3", "delta"):
+            assert np.array_equal(getattr(o, f)[far], getattr(ob, f)), (kind, f)
 
 
 def test_crossing_phase_against_quadrature():
