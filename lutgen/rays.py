@@ -1291,16 +1291,20 @@ class RayMap:
             slope = dp / dd_dt
             seg_i, near_i = pick(seg), pick(near)
             f0, got0 = self._residual(seg_i, d0, pick(u), pick(sweep), want=True, near=near_i)
-            d_i, ok, short = self._secant(seg_i, pick(u), pick(sweep), d0, d_a, d_b, near_i, slope=slope, f0=f0)
+            d_i, ok, (x_rd, th_rd, q_rd) = self._secant(seg_i, pick(u), pick(sweep), d0, d_a, d_b, near_i,
+                                                        slope=slope, f0=f0,
+                                                        read0=(got0["theta"], self._remainder(seg_i, got0, near_i)))
             d[i] = d_i
             inner[i[~ok]] = False
-            # where that Newton step ended the solve, the ray's values come from its read at d0: the
-            # travel-time remainder carried to the ray by its derivative along the four rows (the step
-            # is below NEWTON_DONE of d: what is left is the step times that derivative's error)
-            q_x = self._remainder(seg_i, got0, near_i) + (d_i - d0) * (_cubic_at(qs, t)[1] / dd_dt)
-            c_at = np.flatnonzero(short & np.isfinite(q_x))
+            # the ray's values come from the iteration's reads: where the Newton step ended it, from its
+            # read at d0, the travel-time remainder carried to the ray by its derivative along the four
+            # rows (the step is below NEWTON_DONE of d: what is left is the step times that derivative's
+            # error); where a secant step did, as the secant carried it (x_rd is then the ray's d)
+            q_x = np.where(x_rd == d_i, q_rd, q_rd + (d_i - x_rd) * (_cubic_at(qs, t)[1] / dd_dt))
+            q_x = np.where(np.isnan(qs[0]), np.nan, q_x)  # outside the window: read at the end
+            c_at = np.flatnonzero(ok & np.isfinite(q_x))
             if c_at.size:
-                carried = (i.take(c_at), got0["theta"].take(c_at), q_x.take(c_at))
+                carried = (i.take(c_at), th_rd.take(c_at), q_x.take(c_at))
         e = np.flatnonzero(~none & ~inner)
         if e.size:
             far_d = self.s_far.take(seg[e]) - FAR_GAP_T
@@ -1353,7 +1357,7 @@ class RayMap:
                 d0[end[good]] = x[good]
                 slope = np.full(e.size, np.nan)  # no slope: the plain secant start (see _secant)
                 slope[end[good]] = dp[good]
-            d[e], ok, _ = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6, slope=slope)
+            d[e], ok = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6, slope=slope)
             rest = np.flatnonzero(~ok)
             if rest.size:
                 er = e[rest]
@@ -1361,11 +1365,17 @@ class RayMap:
                                            near[er])
         return self._finish(seg, d, u, r, phi, sweep, order, near, tangents, carried)
 
-    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4, slope=None, f0=None):
+    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4, slope=None, f0=None, read0=None):
         """Secant steps in d from d0 (inside the bracket [d_a, d_b], next to the root) with the bicubic
-        interpolation; returns (d, converged, ended by the first step). With ``slope`` (an estimate of
-        df/dd at d0) the second point is Newton's step from d0 with it (where it falls inside the
-        bracket), else d0 plus 1e-7 of the bracket; ``f0``: f at d0 where known (with ``slope``)."""
+        interpolation; returns (d, converged). With ``slope`` (an estimate of df/dd at d0) the second
+        point is Newton's step from d0 with it (where it falls inside the bracket), else d0 plus 1e-7 of
+        the bracket; ``f0``: f at d0 where known (with ``slope``). With ``read0`` (theta and the
+        travel-time remainder of :meth:`_remainder` at d0; with ``slope``) the steps read the rays'
+        values too and a third value is returned, meaningful where converged: per ray a point x, and
+        theta and the remainder there. Where the Newton step ended the iteration x is d0 (its read);
+        where a secant step did, x is the converged d, the remainder carried from the last point read
+        by the secant through the last two reads (the step is below SECANT_DONE of d, the secant's
+        slope exact to the distance between those reads)."""
         lo, hi = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
         if slope is None:
             x_prev = d0 + 1e-7 * (hi - lo)
@@ -1380,17 +1390,26 @@ class RayMap:
         out = d0.copy()
         ok = np.zeros(u.size, dtype=bool)
         act = np.arange(u.size)
-        first = np.zeros(u.size, dtype=bool)
+        carry = read0 is not None and slope is not None
+        if carry:  # per ray a point read, theta and the remainder there
+            x_rd, th_rd, q_rd = d0.copy(), read0[0].copy(), read0[1].copy()
+            q_prev = read0[1]
         if slope is not None:  # a Newton step this short leaves its length times the slope's error
             done = newton & (np.abs(x - d0) <= NEWTON_DONE * x)
             out[done], ok[done] = x[done], True
-            first = done
             keep = ~done
             act, x_prev, f_prev, x = act[keep], x_prev[keep], f_prev[keep], x[keep]
+            if carry:
+                q_prev = q_prev[keep]
         for _ in range(steps):
             if not act.size:
                 break
-            f = self._residual(seg.take(act), x, u.take(act), sweep.take(act), near=near.take(act))
+            sa, na = seg.take(act), near.take(act)
+            if carry:
+                f, got = self._residual(sa, x, u.take(act), sweep.take(act), want=True, near=na)
+                q = self._remainder(sa, got, na)
+            else:
+                f = self._residual(sa, x, u.take(act), sweep.take(act), near=na)
             x_new = x - f * (x - x_prev) / (f - f_prev)
             x_new = np.where(f == 0.0, x, x_new)
             good = np.isfinite(x_new) & (x_new >= lo.take(act)) & (x_new <= hi.take(act))
@@ -1399,8 +1418,15 @@ class RayMap:
             out[act[done]] = x_new[done]
             ok[act[done]] = True
             keep = good & ~done
+            if carry:
+                ad = act[done]
+                x_rd[ad], th_rd[ad] = x_new[done], got["theta"][done]
+                q_rd[ad] = q[done] + (x_new[done] - x[done]) * ((q[done] - q_prev[done]) / (x[done] - x_prev[done]))
+                q_prev = q[keep]
             act, x_prev, f_prev, x = act[keep], x[keep], f[keep], x_new[keep]
-        return out, ok, first
+        if carry:
+            return out, ok, (x_rd, th_rd, q_rd)
+        return out, ok
 
     def _regula_falsi(self, seg, u, sweep, a, b, f_a, f_b, near):
         """d of the roots bracketed by [a, b] (f values f_a, f_b, possibly infinite): the
