@@ -567,16 +567,22 @@ class _Flat:
     def __init__(self, table: OrbitTable):
         ks = [table.kinds[k] for k in _KINDS]
         self.n_cols = ks[0].n_cols
-        uj = np.empty(sum(k.u.size for k in ks), dtype=np.complex128)
-        uj.real = np.concatenate([k.u.reshape(-1) for k in ks])
-        uj.imag = np.concatenate([k.j.reshape(-1) for k in ks])
-        self.uj = uj
+        self.uj = _complex(np.concatenate([k.u.reshape(-1) for k in ks]), np.concatenate([k.j.reshape(-1) for k in ks]))
         self.start = np.concatenate([k.start for k in ks])
         self.length = np.concatenate([k.length for k in ks])
+        self.sl = _complex(self.start, self.length)  # both from one take per row
         self.offset = np.cumsum([0] + [k.n_rows for k in ks])[:-1]
         self.rho0 = np.array([k.rho0 for k in ks])
         self.step = ks[0].step
         self.n_rows = np.array([k.n_rows for k in ks])
+
+
+def _complex(re, im) -> np.ndarray:
+    """re + i im as one complex array (parts copied as they are: no arithmetic, NaN and infinities kept
+    apart), so that one ``take`` reads two quantities; real weights times it give each part's sum."""
+    out = np.empty(np.shape(re), dtype=np.complex128)
+    out.real, out.imag = re, im
+    return out
 
 
 def _b_of(kind, rho):
@@ -754,18 +760,20 @@ class RayMap:
                              np.concatenate([th_all[i] for i in uniq]), want_j=True, want_u=False)[1]
         pieces = dict(zip(uniq, np.split(j_u, len(uniq))))
         self.node_j = np.concatenate([pieces[twin[i]] for i in range(self.n_seg)])
+        self.node_tj = _complex(self.node_theta, self.node_j)  # both from one take (see _nodes)
         self.s_dz = (self.s_zhi - self.s_zlo) / (n - 1)
 
-    def _nodes(self, seg, z, values, more=None):
-        """``values`` (per segment on its nodes, see :meth:`_setup_nodes`) at z, cubic; with ``more``
-        (another such array) both, from one stencil."""
+    def _nodes(self, seg, z, values, both=False):
+        """``values`` (per segment on its nodes, see :meth:`_setup_nodes`) at z, cubic; with ``both``
+        the observer's phase and J there ((theta_o, J_o); ``values`` unused), from one stencil and one
+        complex take per node (``node_tj``)."""
         n = self.n_z
         g = _clip((z - self.s_zlo.take(seg)) / self.s_dz.take(seg), 0.0, n - 1)
         i0, w = _stencil(g, n)
         base = i0 + seg * n
-        out = [w[0] * v.take(base) + w[1] * v.take(base + 1) + w[2] * v.take(base + 2) + w[3] * v.take(base + 3)
-               for v in ((values,) if more is None else (values, more))]
-        return out[0] if more is None else out
+        v = self.node_tj if both else values
+        out = w[0] * v.take(base) + w[1] * v.take(base + 1) + w[2] * v.take(base + 2) + w[3] * v.take(base + 3)
+        return (out.real, out.imag) if both else out
 
     def _setup_rows(self):
         """Per segment, the table's rows inside it (from the label RHO_MIN + 0.5, the critical end, to the
@@ -798,7 +806,7 @@ class RayMap:
             g = k + fl.offset[kc]
             rows.append(g)
             ds.append(d)
-            th_r, jo_r = self._nodes(seg, z, self.node_theta, self.node_j)
+            th_r, jo_r = self._nodes(seg, z, None, both=True)
             ths.append(th_r)
             jos.append(jo_r)
             bs.append(b)
@@ -809,6 +817,11 @@ class RayMap:
         self.row_g, self.row_d, self.row_theta = np.concatenate(rows), np.concatenate(ds), np.concatenate(ths)
         self.row_b, self.row_start, self.row_length = np.concatenate(bs), np.concatenate(sts), np.concatenate(lns)
         self.row_ld = np.log(self.row_d)
+        # the cubic through ln d on rows k..k+3 (Newton form, as _cubic_at): (f0 + i a, c + i e) per k
+        ld = np.concatenate([self.row_ld, np.full(3, np.nan)])
+        f0, f1, f2, f3 = ld[:-3], ld[1:-2], ld[2:-1], ld[3:]
+        self.row_ld_fa = _complex(f0, f1 - f0)
+        self.row_ld_ce = _complex(0.5 * (f2 - 2.0 * f1 + f0), (f3 - 3.0 * f2 + 3.0 * f1 - f0) * (1.0 / 6.0))
         # per row: J at the observer's phase, and the factor from the stored J to J (r_s/c)
         self.row_jo = np.concatenate(jos)
         self.row_jscale = self.row_length * self.row_b
@@ -961,10 +974,9 @@ class RayMap:
         i0 = i0 + fl.offset.take(kind)
         b = _b_of(kind, rho)
         sc = _scale(kind, b)
-        st = (wr[0] * fl.start.take(i0) + wr[1] * fl.start.take(i0 + 1) + wr[2] * fl.start.take(i0 + 2)
-              + wr[3] * fl.start.take(i0 + 3)) * sc
-        ln = (wr[0] * fl.length.take(i0) + wr[1] * fl.length.take(i0 + 1) + wr[2] * fl.length.take(i0 + 2)
-              + wr[3] * fl.length.take(i0 + 3)) * sc
+        sl = fl.sl  # start + i length: both from one take per row
+        v = (wr[0] * sl.take(i0) + wr[1] * sl.take(i0 + 1) + wr[2] * sl.take(i0 + 2) + wr[3] * sl.take(i0 + 3)) * sc
+        st, ln = v.real, v.imag
         u, j = self._columns(i0, wr, (theta - st) / ln * (n_c - 1), want_j, want_u)
         j_diff = None
         if ref is not None:
@@ -1002,7 +1014,7 @@ class RayMap:
         rho = self._rho(seg, d)
         j_o = None
         if want:  # the observer's phase and J there
-            th_o, j_o = self._nodes(seg, z, self.node_theta, self.node_j)
+            th_o, j_o = self._nodes(seg, z, None, both=True)
         else:
             th_o = self._nodes(seg, z, self.node_theta)
         th = th_o + self.s_dir.take(seg) * sweep
@@ -1281,8 +1293,8 @@ class RayMap:
             # the ray at t: ln d is smooth in the row index (rows uniform in rho, ln d ~ rho next to
             # the critical angle), so the cubic through the four rows' ln d gives d and dd/dt
             r0 = fst_i + kc
-            ld = self.row_ld.take(r0 + np.arange(4)[:, None])
-            p, dp_ld = _cubic_at(ld, t)
+            fa, ce = self.row_ld_fa.take(r0), self.row_ld_ce.take(r0)
+            p, dp_ld = _cubic_at_coefficients(fa.real, fa.imag, ce.real, ce.imag, t)
             d0 = np.exp(p)
             dd_dt = d0 * dp_ld
             d_a, d_b = self.row_d.take(fst_i + lo_i), self.row_d.take(fst_i + pick(hi))
@@ -1524,6 +1536,12 @@ def _cubic_at(fs, t):
     a = f1 - f0
     c = 0.5 * (f2 - 2.0 * f1 + f0)
     e = (f3 - 3.0 * f2 + 3.0 * f1 - f0) * (1.0 / 6.0)
+    return _cubic_at_coefficients(f0, a, c, e, t)
+
+
+def _cubic_at_coefficients(f0, a, c, e, t):
+    """(p(t), p'(t)) of the cubic p(t) = f0 + t (a + (t - 1) (c + (t - 2) e)) (Newton form through
+    nodes 0..3, as :func:`_cubic_at`)."""
     t1 = t - 1.0
     q = c + (t - 2.0) * e
     return f0 + t * (a + t1 * q), a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e
