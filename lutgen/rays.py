@@ -666,6 +666,9 @@ class RayMap:
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # one for all set-up steps
             self._setup_nodes()
             self._setup_rows()
+            for i in range(n_seg):  # the turning rays' segments now, those that cross the photon sphere
+                if self._twins()[i] == i and self.s_kind[i] != 1:  # when a point needs them
+                    self._build(i)
             self._setup_index()
 
     # ---- per segment 1-D arrays -------------------------------------------------------------------
@@ -712,56 +715,74 @@ class RayMap:
         return list(range(self.n_seg))
 
     def _setup_nodes(self):
-        """Per segment, nodes uniform in z = logit(d / far) from the label RHO_MIN + 0.5 to the far end,
-        and the observer's phase theta_o and J there (closed forms)."""
+        """Per segment, nodes uniform in z = logit(d / far) from the label RHO_MIN + 0.5 to the far end
+        (their range; the observer's phase theta_o and J there are made per segment when first needed,
+        :meth:`_build`)."""
         n = SEGMENT_NODES
-        z_all, th_all, rho_all, kind_all = [], [], [], []
+        self.n_z = n
         self.s_zlo, self.s_zhi = np.empty(self.n_seg), np.empty(self.n_seg)
-        uo = self.uo
-        twin = self._twins()
         # every segment's ends in d in one call: the label RHO_MIN + 0.5, and RHO_MAX_P for kind P
         ends = self._d_of_rho(np.repeat(np.arange(self.n_seg), 2),
                               np.tile([RHO_MIN + 0.5, RHO_MAX_P], self.n_seg)).reshape(-1, 2)
         for i in range(self.n_seg):
-            if twin[i] < i:  # the same rays as an earlier segment, traced the other way: same phases
-                j = twin[i]
-                z_all.append(z_all[j])
-                th_all.append(th_all[j])
-                self.s_zlo[i], self.s_zhi[i] = self.s_zlo[j], self.s_zhi[j]
-                continue
             d_lo = ends[i, 0]
             d_hi = ends[i, 1] if self.s_kind[i] == 1 else self.s_far[i] - FAR_GAP_T
             far = self.s_far[i]
-            z = np.linspace(math.log(d_lo / (far - d_lo)), math.log(d_hi / (far - d_hi)), n)
-            d = far / (1.0 + np.exp(-z))
-            rho = self._rho(np.full(n, i), d)
-            name = _KINDS[self.s_kind[i]]
-            orb = _orbits(name, rho)
-            x = self.s_crit[i] + self.s_side[i] * d
-            if name == "P":
-                theta = _crossing_phase(orb, uo)  # the swept angle from the photon sphere to the observer
-            else:
-                p_uo = uo * uo * (1.0 - uo) * (np.cos(x) / np.sin(x)) ** 2  # P(uo), no cancellation
-                if name == "T":
-                    theta = _orb.sweep_from_turning_point(
-                        orb, uo, np.sqrt(p_uo / ((uo - orb.e1) * (orb.e3 - uo))))
-                else:
-                    theta = _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
-            z_all.append(z)
-            th_all.append(theta)
-            rho_all.append(rho)
-            kind_all.append(np.full(n, self.s_kind[i]))
-            self.s_zlo[i], self.s_zhi[i] = z[0], z[-1]
-        self.n_z = n
-        self.node_theta = np.concatenate(th_all)
-        # J on the nodes of every segment in one lookup (a twin repeats its first segment's)
-        uniq = [i for i in range(self.n_seg) if twin[i] == i]
-        j_u = self._evaluate(np.concatenate(kind_all), np.concatenate(rho_all),
-                             np.concatenate([th_all[i] for i in uniq]), want_j=True, want_u=False)[1]
-        pieces = dict(zip(uniq, np.split(j_u, len(uniq))))
-        self.node_j = np.concatenate([pieces[twin[i]] for i in range(self.n_seg)])
-        self.node_tj = _complex(self.node_theta, self.node_j)  # both from one take (see _nodes)
+            self.s_zlo[i], self.s_zhi[i] = math.log(d_lo / (far - d_lo)), math.log(d_hi / (far - d_hi))
+        twin = self._twins()
+        for i in range(self.n_seg):  # a twin: the same rays as an earlier segment, the same nodes
+            self.s_zlo[i], self.s_zhi[i] = self.s_zlo[twin[i]], self.s_zhi[twin[i]]
         self.s_dz = (self.s_zhi - self.s_zlo) / (n - 1)
+        self.node_theta = np.full(self.n_seg * n, np.nan)
+        self.node_j = np.full(self.n_seg * n, np.nan)
+        self.node_tj = _complex(self.node_theta, self.node_j)  # both from one take (see _nodes)
+        self._built = np.zeros(self.n_seg, dtype=bool)  # per segment that is its own twin
+
+    def _phase(self, i, d, rho):
+        """The observer's phase (closed forms: the swept angle from the orbit's reference point to the
+        observer, radians) on the rays d, labels rho of segment ``i`` (one that is its own twin)."""
+        uo = self.uo
+        name = _KINDS[self.s_kind[i]]
+        orb = _orbits(name, rho)
+        if name == "P":
+            return _crossing_phase(orb, uo)  # the swept angle from the photon sphere to the observer
+        x = self.s_crit[i] + self.s_side[i] * d
+        p_uo = uo * uo * (1.0 - uo) * (np.cos(x) / np.sin(x)) ** 2  # P(uo), no cancellation
+        if name == "T":
+            return _orb.sweep_from_turning_point(orb, uo, np.sqrt(p_uo / ((uo - orb.e1) * (orb.e3 - uo))))
+        return _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
+
+    def _build(self, i):
+        """Segment ``i``'s (one that is its own twin) and its twin's nodes: the observer's phase and J
+        there (closed forms; J from the table); then its rows' phase and J, cubic from the nodes. Made
+        when a point's solve first needs the segment: they depend on the observer and the segment
+        only, so a point's ray does not depend on what was looked up before."""
+        n = self.n_z
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            z = np.linspace(self.s_zlo[i], self.s_zhi[i], n)
+            d = self.s_far[i] / (1.0 + np.exp(-z))
+            rho = self._rho(np.full(n, i), d)
+            theta = self._phase(i, d, rho)
+            j = self._evaluate(np.full(n, self.s_kind[i]), rho, theta, want_j=True, want_u=False)[1]
+            for k in np.flatnonzero(np.array(self._twins()) == i):
+                sl = slice(k * n, (k + 1) * n)
+                self.node_theta[sl], self.node_j[sl] = theta, j
+                self.node_tj.real[sl], self.node_tj.imag[sl] = theta, j
+            self._built[i] = True
+            rows = slice(self.r_first[i], self.r_first[i] + self.r_count[i])
+            d_r = self.row_d[rows]
+            z_r = np.log(d_r) - np.log(self.s_far[i] - d_r)
+            self.row_theta[rows], self.row_jo[rows] = self._nodes(np.full(d_r.size, i), z_r, None, both=True)
+
+    def _ensure(self, seg):
+        """Build the segments (:meth:`_build`) of the points' segments ``seg`` not built yet."""
+        if self._built.all():
+            return
+        used = np.bincount(seg, minlength=self.n_seg) > 0
+        twin = self._twins()
+        for i in np.flatnonzero(used):
+            if not self._built[twin[i]]:
+                self._build(twin[i])
 
     def _nodes(self, seg, z, values, both=False):
         """``values`` (per segment on its nodes, see :meth:`_setup_nodes`) at z, cubic; with ``both``
@@ -780,7 +801,7 @@ class RayMap:
         far end): global row index, d, the observer's phase, b, theta start and length. Concatenated;
         ``r_first``, ``r_count`` per segment."""
         fl = self.flat
-        rows, ds, ths, jos, bs, sts, lns = [], [], [], [], [], [], []
+        rows, ds, rhos, bs, sts, lns = [], [], [], [], [], []
         self.r_first, self.r_count = np.empty(self.n_seg, dtype=np.int64), np.empty(self.n_seg, dtype=np.int64)
         total = 0
         twin = self._twins()
@@ -799,22 +820,20 @@ class RayMap:
             rho = fl.rho0[kc] + fl.step * k
             seg = np.full(k.size, i)
             d = self._d_of_rho(seg, rho)
-            far = self.s_far[i]
-            z = np.log(d) - np.log(far - d)
             b = _b_of(np.full(k.size, kc), rho)
             sc = _scale(np.full(k.size, kc), b)
             g = k + fl.offset[kc]
             rows.append(g)
             ds.append(d)
-            th_r, jo_r = self._nodes(seg, z, None, both=True)
-            ths.append(th_r)
-            jos.append(jo_r)
+            rhos.append(rho)
             bs.append(b)
             sts.append(fl.start[g] * sc)
             lns.append(fl.length[g] * sc)
             self.r_first[i], self.r_count[i] = total, k.size
             total += k.size
-        self.row_g, self.row_d, self.row_theta = np.concatenate(rows), np.concatenate(ds), np.concatenate(ths)
+        self.row_g, self.row_d, self.row_rho = np.concatenate(rows), np.concatenate(ds), np.concatenate(rhos)
+        # the observer's phase and J there per row: made with the segment's nodes (_build)
+        self.row_theta, self.row_jo = np.full(total, np.nan), np.full(total, np.nan)
         self.row_b, self.row_start, self.row_length = np.concatenate(bs), np.concatenate(sts), np.concatenate(lns)
         self.row_ld = np.log(self.row_d)
         # the cubic through ln d on rows k..k+3 (Newton form, as _cubic_at): (f0 + i a, c + i e) per k
@@ -822,8 +841,7 @@ class RayMap:
         f0, f1, f2, f3 = ld[:-3], ld[1:-2], ld[2:-1], ld[3:]
         self.row_ld_fa = _complex(f0, f1 - f0)
         self.row_ld_ce = _complex(0.5 * (f2 - 2.0 * f1 + f0), (f3 - 3.0 * f2 + 3.0 * f1 - f0) * (1.0 / 6.0))
-        # per row: J at the observer's phase, and the factor from the stored J to J (r_s/c)
-        self.row_jo = np.concatenate(jos)
+        # per row: the factor from the stored J to J (r_s/c)
         self.row_jscale = self.row_length * self.row_b
         # per row: columns per radian, and the factor from the stored u (u b for T) to u
         self.row_cscale = (fl.n_cols - 1) / self.row_length
@@ -831,8 +849,11 @@ class RayMap:
                                    if twin[i] == i])
         self.row_uscale = np.where(row_kind == 0, 1.0 / self.row_b, 1.0)
         # made when first needed (points outside the seed's window; next to the observer): the ray
-        # tangent at the observer as a row, the table's error at the observer on each row
-        self._tan = self._eps = None
+        # tangent at the observer as a row, the table's error at the observer on each row (per segment)
+        self._tan = None
+        self._eps = np.full(total, np.nan)
+        self._eps_done = np.zeros(self.n_seg, dtype=bool)
+        self._end_eps = {}
 
     @property
     def tan(self):
@@ -841,6 +862,8 @@ class RayMap:
         if self._tan is None and self.n_seg == 4:
             fl = self.flat
             i = 1
+            if not self._built[i]:
+                self._build(i)
             d_far = self.s_far[i] - FAR_GAP_T
             with np.errstate(divide="ignore", invalid="ignore"):
                 rho_t = self._rho(np.array([i]), np.array([d_far]))
@@ -863,13 +886,12 @@ class RayMap:
     def row_eps(self) -> np.ndarray:
         """The table's error at the observer on each row (u on the row at the observer's phase, less
         uo): subtracted next to the observer; made on first use."""
-        if self._eps is None:
-            all_rows = np.arange(self.row_g.size)
-            seg_of_row = np.concatenate([np.full(self.r_count[i], i) for i in range(self.n_seg)
-                                         if self._twins()[i] == i])
+        for i in np.flatnonzero(self._built & ~self._eps_done):  # the built segments' rows
+            rows = np.arange(self.r_first[i], self.r_first[i] + self.r_count[i])
+            self._eps_done[i] = True
             with np.errstate(divide="ignore", invalid="ignore"):
-                self._eps = self._row_residual(all_rows, np.full(all_rows.size, self.uo), np.zeros(all_rows.size),
-                                               seg_of_row)
+                self._eps[rows] = self._row_residual(rows, np.full(rows.size, self.uo), np.zeros(rows.size),
+                                                     np.full(rows.size, i))
         return self._eps
 
     def _setup_index(self):
@@ -898,8 +920,22 @@ class RayMap:
         rows = self.r_first.take(seg) + loc
         n_c, uj = self.flat.n_cols, self.flat.uj
         sweeps = np.linspace(0.0, 2.0 * math.pi, n_s)
+        # the observer's phase on these rows: the rows' own in the segments built now (turning rays),
+        # else by the closed forms (the segments' nodes are made when a point first needs them); and on
+        # each segment's first row (the segment tests of _solve)
+        twin = np.array(self._twins())
+        own = twin.take(seg)
+        theta = self.row_theta.take(rows)
+        self.first_theta = np.empty(self.n_seg)
+        for i in np.unique(own):
+            at = np.flatnonzero(own == i)
+            if not self._built[i]:
+                r_i = rows.take(at)
+                theta[at] = self._phase(i, self.row_d.take(r_i), self.row_rho.take(r_i))
+            self.first_theta[i] = theta[at[np.flatnonzero(loc.take(at) == 0)[0]]]
+        self.first_theta = self.first_theta.take(twin)
         # u along each row, linear between its columns (and beyond them): a seed needs no more
-        th = self.row_theta.take(rows)[None, :] + self.s_dir.take(seg)[None, :] * sweeps[:, None]
+        th = theta[None, :] + self.s_dir.take(seg)[None, :] * sweeps[:, None]
         th = np.where((self.s_kind.take(seg) != 1)[None, :], np.abs(th), th)
         c = (th - self.row_start.take(rows)) * self.row_cscale.take(rows)
         j = _clip(np.floor(c), 0.0, n_c - 2.0).astype(np.int64)
@@ -1031,17 +1067,31 @@ class RayMap:
                                                          b=b, j_o=j_o)
         return u_ray - u
 
-    def _row_residual(self, row, u, sweep, seg, near=None, want_q=False):
+    def _end_residual(self, i, u, sweep, near):
+        """f on segment ``i``'s first row (the segment tests of :meth:`_solve`), with the observer's phase
+        there by the closed forms (``first_theta``) and, for targets next to the observer, the table's
+        error there from it: the tests do not depend on which segments are built."""
+        row, seg = np.full(u.size, self.r_first[i]), np.full(u.size, i)
+        f = self._row_residual(row, u, sweep, seg, theta=np.full(u.size, self.first_theta[i]))
+        if not near.any():
+            return f
+        if i not in self._end_eps:
+            self._end_eps[i] = self._row_residual(row[:1], np.array([self.uo]), np.zeros(1), seg[:1],
+                                                  theta=self.first_theta[i:i + 1])[0]
+        return f - np.where(near, self._end_eps[i], 0.0)
+
+    def _row_residual(self, row, u, sweep, seg, near=None, want_q=False, theta=None):
         """f on the concatenated rows ``row`` (1-D cubic along each row); ``near``: targets next to the
         observer, from whose f the table's error at the observer is subtracted. ``row`` may be (k, N)
         with the targets' arrays (N,): k rows per target (the per-target parts formed once). With
         ``want_q``: (f, q), q the travel-time remainder from the observer to the target along each row,
         J(theta) signed as theta (turning rays: negative past the periapsis / apoapsis) less J at the
         observer's phase (r_s/c; the quantity whose modulus :meth:`_finish` adds to the radial part),
-        from the same column stencil."""
+        from the same column stencil. ``theta``: the observer's phase on the rows where given (else the
+        rows' own, ``row_theta``)."""
         fl = self.flat
         n_c = fl.n_cols
-        th = self.row_theta.take(row) + self.s_dir.take(seg) * sweep
+        th = (self.row_theta.take(row) if theta is None else theta) + self.s_dir.take(seg) * sweep
         past = None
         if self.n_seg > 2:  # turning rays: the angle from the periapsis / apoapsis
             turning = self.s_kind.take(seg) != 1
@@ -1166,6 +1216,7 @@ class RayMap:
         # it (f changes sign once along the rays ordered by xi), the bracket and the cubic's four values
         # are known
         seg, k_row = self._seed(u, sweep)
+        self._ensure(seg)
         first, count = self.r_first.take(seg), self.r_count.take(seg)
         orient = self.s_side.take(seg)  # f grows along the rows when side > 0
         k0 = _clip(k_row.astype(np.int64) - 1, 0, count - 4)  # k_row >= 0: truncation is floor
@@ -1200,12 +1251,10 @@ class RayMap:
                     at = np.flatnonzero(side)
                     if not at.size:  # no point on this side: no call (its fixed cost saved)
                         continue
-                    f = self._row_residual(np.full(at.size, self.r_first[i]), ur[at], sr[at], np.full(at.size, i),
-                                           nr[at])
+                    f = self._end_residual(i, ur[at], sr[at], nr[at])
                     s_rest[at] = np.where(f >= 0.0, i, i + 1)
             else:  # two segments (an observer next to the photon sphere): the first's end
-                f = self._row_residual(np.full(rest.size, self.r_first[0]), ur, sr, np.zeros(rest.size, dtype=np.int64),
-                                       nr)
+                f = self._end_residual(0, ur, sr, nr)
                 s_rest[f >= 0.0] = 0
             same = s_rest == seg.take(rest)
             rs, ro = rest[same], rest[~same]
@@ -1223,6 +1272,7 @@ class RayMap:
             if ro.size:  # another segment: all its rows
                 moved[ro] = True
                 seg[ro] = s_rest[~same]
+                self._ensure(seg[ro])
                 first[ro], count[ro], orient[ro] = (self.r_first.take(seg[ro]), self.r_count.take(seg[ro]),
                                                     self.s_side.take(seg[ro]))
                 hi[ro], f_hi[ro] = count[ro], orient[ro] * np.inf

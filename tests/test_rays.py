@@ -134,6 +134,27 @@ def test_batch_independence_and_determinism():
             assert np.array_equal(getattr(a[o], q)[sub], getattr(b[o], q)), (o, q)
 
 
+@pytest.mark.parametrize("r_obs", [20.0, 2.5, 1.2])
+def test_segments_made_on_first_need(r_obs):
+    """The segments of the rays that cross the photon sphere get their nodes (the observer's phase and J
+    there) when a point's solve first needs them: a point's ray is the same bit for bit whether the
+    segments were made before it (by other points, or all at once) or for it."""
+    rng = np.random.default_rng(9)
+    r, p = _targets(rng, r_obs, 3000)
+    fresh = rays.RayMap(r_obs)
+    assert not fresh._built.all()  # the crossing rays' segment waits for a point
+    every = rays.RayMap(r_obs)
+    for i in np.flatnonzero(~every._built):
+        if every._twins()[i] == i:
+            every._build(i)
+    ref = every.lookup_orders(r, p)
+    for sub in (slice(0, 40), slice(1000, 1300), slice(2900, 3000)):
+        alone = rays.RayMap(r_obs).lookup_orders(r[sub], p[sub])
+        for o in (1, 2):
+            for q in ("xi", "dt", "ux", "uy"):
+                assert np.array_equal(getattr(ref[o], q)[sub], getattr(alone[o], q), equal_nan=True), (o, q)
+
+
 def _no_seed(self, u, sweep):
     """The seed index disabled: every point's window at the first segment's first rows."""
     return np.zeros(u.size, dtype=np.int64), np.zeros(u.size)
@@ -235,6 +256,8 @@ def test_row_search_passes_give_the_bisections_bracket(r_obs, monkeypatch):
 
     monkeypatch.setattr(rays.RayMap, "_row_residual", counting)
     m = rays.RayMap(r_obs)
+    m.lookup_orders(r, p)  # the segments' nodes and the table's error at the observer made (first use)
+    calls.clear()
     got = m.lookup_orders(r, p)
     passes = len(calls)
     monkeypatch.setattr(rays, "SEARCH_BUDGET", 1)
@@ -272,6 +295,9 @@ def test_row_search_probes_from_a_window_off_the_root(r_obs, monkeypatch):
 
     monkeypatch.setattr(rays.RayMap, "_row_residual", counting)
     m = rays.RayMap(r_obs)
+    m.lookup_orders(r, p)  # the segments' nodes and the table's error at the observer made (first use)
+    calls.clear()
+    m.solved = m.windowed = 0
     got = m.lookup_orders(r, p)
     assert m.windowed < 0.5 * m.solved
     assert any(len(c) == 2 and c[0] == len(rays.PROBE_STEPS) for c in calls)  # a probe pass
