@@ -1419,7 +1419,14 @@ class RayMap:
                 d0[end[good]] = x[good]
                 slope = np.full(e.size, np.nan)  # no slope: the plain secant start (see _secant)
                 slope[end[good]] = dp[good]
-            d[e], ok = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6, slope=slope)
+            d_e, ok, (x_rd, th_rd, q_rd) = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6,
+                                                        slope=slope, carry=True)
+            d[e] = d_e
+            # where secant steps ended the iteration, the rays' values as they carried them
+            c_at = np.flatnonzero(ok & (x_rd == d_e) & np.isfinite(q_rd))
+            if c_at.size:
+                more = (e.take(c_at), th_rd.take(c_at), q_rd.take(c_at))
+                carried = more if carried is None else tuple(np.concatenate(p) for p in zip(carried, more))
             rest = np.flatnonzero(~ok)
             if rest.size:
                 er = e[rest]
@@ -1427,35 +1434,49 @@ class RayMap:
                                            near[er])
         return self._finish(seg, d, u, r, phi, sweep, order, near, tangents, carried)
 
-    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4, slope=None, f0=None, read0=None):
+    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4, slope=None, f0=None, read0=None, carry=False):
         """Secant steps in d from d0 (inside the bracket [d_a, d_b], next to the root) with the bicubic
         interpolation; returns (d, converged). With ``slope`` (an estimate of df/dd at d0) the second
         point is Newton's step from d0 with it (where it falls inside the bracket), else d0 plus 1e-7 of
-        the bracket; ``f0``: f at d0 where known (with ``slope``). With ``read0`` (theta and the
-        travel-time remainder of :meth:`_remainder` at d0; with ``slope``) the steps read the rays'
+        the bracket; ``f0``: f at d0 where known (with ``slope``). With ``carry`` or ``read0`` (theta and
+        the travel-time remainder of :meth:`_remainder` at d0, with ``f0``) the steps read the rays'
         values too and a third value is returned, meaningful where converged: per ray a point x, and
         theta and the remainder there. Where the Newton step ended the iteration x is d0 (its read);
         where a secant step did, x is the converged d, the remainder carried from the last point read
         by the secant through the last two reads (the step is below SECANT_DONE of d, the secant's
         slope exact to the distance between those reads)."""
         lo, hi = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
+        carry = carry or read0 is not None
+        q_prev = None
         if slope is None:
             x_prev = d0 + 1e-7 * (hi - lo)
-            f_prev = self._residual(seg, x_prev, u, sweep, near=near)
+            if carry:
+                f_prev, got = self._residual(seg, x_prev, u, sweep, want=True, near=near)
+                q_prev = self._remainder(seg, got, near)
+            else:
+                f_prev = self._residual(seg, x_prev, u, sweep, near=near)
             x = d0
         else:  # (a NaN slope: no Newton step, the second point as without a slope)
             x_prev = d0
-            f_prev = self._residual(seg, d0, u, sweep, near=near) if f0 is None else f0
+            if f0 is not None:
+                f_prev = f0
+            elif carry:
+                f_prev, got = self._residual(seg, d0, u, sweep, want=True, near=near)
+                read0 = (got["theta"], self._remainder(seg, got, near))
+            else:
+                f_prev = self._residual(seg, d0, u, sweep, near=near)
             x = d0 - f_prev / slope
             newton = np.isfinite(x) & (x >= lo) & (x <= hi) & (x != d0)
             x = np.where(newton, x, d0 + 1e-7 * (hi - lo))
         out = d0.copy()
         ok = np.zeros(u.size, dtype=bool)
         act = np.arange(u.size)
-        carry = read0 is not None and slope is not None
         if carry:  # per ray a point read, theta and the remainder there
-            x_rd, th_rd, q_rd = d0.copy(), read0[0].copy(), read0[1].copy()
-            q_prev = read0[1]
+            if read0 is not None:
+                x_rd, th_rd, q_rd = d0.copy(), read0[0].copy(), read0[1].copy()
+                q_prev = read0[1]
+            else:
+                x_rd, th_rd, q_rd = np.full(u.size, np.nan), np.full(u.size, np.nan), np.full(u.size, np.nan)
         if slope is not None:  # a Newton step this short leaves its length times the slope's error
             done = newton & (np.abs(x - d0) <= NEWTON_DONE * x)
             out[done], ok[done] = x[done], True
@@ -1540,8 +1561,10 @@ class RayMap:
             _, got = self._residual(seg, d, u, sweep, want=True, near=near, want_f=False)
             rho, th, b = got["rho"], got["theta"], got["b"]
             dj = self._remainder(seg, got, near)
-        elif carried[0].size == n:  # every ray known (carried[0] is then 0..n-1)
-            _, th, dj = carried
+        elif carried[0].size == n:  # every ray known
+            ci = carried[0]
+            th, dj = np.empty(n), np.empty(n)
+            th[ci], dj[ci] = carried[1], carried[2]
             rho = b = None  # (b from xi below; rho only where needed)
         else:
             ci = carried[0]
