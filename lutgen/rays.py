@@ -696,11 +696,14 @@ class RayMap:
             sd = math.sin(c) * x / ((np.sqrt(math.cos(c) ** 2 + x) + math.cos(c)) * np.sqrt(1.0 + x))
             out[p] = np.arcsin(np.minimum(sd, 1.0))
         if not p.all():
-            # T, I: cos(2c + 2d) = cos 2c - 2 X, X = e^rho sin^2 c (Newton next to the critical angle)
+            # T, I: sin d sin(2c + d) = X, X = e^rho sin^2 c: cos(2c + 2d) = cos 2c - 2 X; where X is small,
+            # d (sin 2c + d cos 2c) = X to second order in d (a start that holds for small c too, far
+            # observers, where d >> c); Newton's method then
             xx = np.exp(rho[~p]) * self.sin2c
+            s2c, c2c = math.sin(self.c2), math.cos(self.c2)
             d_t = np.where(xx > 1e-6,
-                           0.5 * (np.arccos(np.clip(math.cos(self.c2) - 2.0 * xx, -1.0, 1.0)) - self.c2),
-                           xx / math.sin(self.c2))
+                           0.5 * (np.arccos(np.clip(c2c - 2.0 * xx, -1.0, 1.0)) - self.c2),
+                           2.0 * xx / (s2c + np.sqrt(np.maximum(s2c * s2c + 4.0 * xx * c2c, 0.0))))
             for _ in range(3):
                 s_d, s_cd = np.sin(d_t), np.sin(self.c2 + d_t)
                 d_t = d_t - (s_d * s_cd - xx) / (np.cos(d_t) * s_cd + s_d * np.cos(self.c2 + d_t))

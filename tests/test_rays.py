@@ -52,7 +52,7 @@ def _targets(rng, r_obs, n):
     return np.concatenate([r, np.hypot(x, y), [1e9, 1e6]]), np.concatenate([p, np.arctan2(y, x), [1.0, 2.0]])
 
 
-@pytest.mark.parametrize("r_obs", [1e4, 20.0, 6.0, 2.0, 1.6, 1.51])
+@pytest.mark.parametrize("r_obs", [1e7, 1e6, 1e5, 1e4, 20.0, 6.0, 2.0, 1.6, 1.51])
 def test_connecting_rays_outside_photon_sphere(r_obs):
     rng = np.random.default_rng(int(r_obs * 10))
     r, p = _targets(rng, r_obs, 3000)
@@ -193,6 +193,23 @@ def test_seed_index_chooses_only_where_the_search_starts(r_obs, monkeypatch):
         assert np.nanmax(np.abs(got[o].xi - full[o].xi)) < 1e-8, o
         assert np.nanmax(np.abs(got[o].dt / full[o].dt - 1.0)) < 1e-8, o
         assert np.array_equal(np.isnan(got[o].xi), np.isnan(full[o].xi))
+
+
+@pytest.mark.parametrize("r_obs", [1e7, 1e5, 3e3, 20.0, 1.51, 1.4999, 1.2, 1.001])
+def test_turning_ray_of_label_inverts_the_label(r_obs):
+    """RayMap._d_of_rho for turning rays (a row label's ray, d = |xi - critical angle|: Newton's method
+    from a start that holds for far observers too, where d >> the critical angle) against RayMap._rho,
+    the label of a ray (closed form), over the turning segments' labels."""
+    m = rays.RayMap(r_obs)
+    for i in range(m.n_seg):
+        if m.s_kind[i] == 1:
+            continue
+        rho = m.row_rho[m.r_first[i]:m.r_first[i] + m.r_count[i]]
+        rho = np.concatenate([rho, np.linspace(rho[0], rho[-1], 5001)])
+        seg = np.full(rho.size, i)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            back = m._rho(seg, m._d_of_rho(seg, rho))
+        assert np.max(np.abs(back - rho)) < 1e-9, (i, np.max(np.abs(back - rho)))
 
 
 def test_stencil_weights():
