@@ -948,7 +948,7 @@ class RayMap:
         # (n_s, q): monotone along xi, each value the least of those after it (rays that escaped,
         # below every target, may wind up and down below zero: a running minimum from the side of
         # the rays that fell in keeps the values next to every target's root)
-        f = _clip(np.where(np.isnan(f), 2.0, f), -1.0, 2.0)
+        f = np.fmax(np.fmin(f, 2.0), -1.0)  # clipped to [-1, 2], NaN (no value) as 2
         f = np.minimum.accumulate(f[:, ::-1], axis=1)[:, ::-1]
         self.ix_n = seg.size
         self.ix_val = f  # per angle, the coarse rows' u
