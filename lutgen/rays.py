@@ -664,8 +664,8 @@ class RayMap:
         self.c2, self.sin2c = 2.0 * xi_c, sin_c * sin_c
         self.solved = self.windowed = 0  # points solved, and of those bracketed by the seed's window
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # one for all set-up steps
-            self._setup_nodes()
             self._setup_rows()
+            self._setup_nodes()
             for i in range(n_seg):  # the turning rays' segments now, those that cross the photon sphere
                 if self._twins()[i] == i and self.s_kind[i] != 1:  # when a point needs them
                     self._build(i)
@@ -724,12 +724,12 @@ class RayMap:
         n = SEGMENT_NODES
         self.n_z = n
         self.s_zlo, self.s_zhi = np.empty(self.n_seg), np.empty(self.n_seg)
-        # every segment's ends in d in one call: the label RHO_MIN + 0.5, and RHO_MAX_P for kind P
-        ends = self._d_of_rho(np.repeat(np.arange(self.n_seg), 2),
-                              np.tile([RHO_MIN + 0.5, RHO_MAX_P], self.n_seg)).reshape(-1, 2)
+        # every segment's ends in d: its first row's (the label RHO_MIN + 0.5) and, for kind P, its last
+        # row's (RHO_MAX_P)
         for i in range(self.n_seg):
-            d_lo = ends[i, 0]
-            d_hi = ends[i, 1] if self.s_kind[i] == 1 else self.s_far[i] - FAR_GAP_T
+            d_lo = self.row_d[self.r_first[i]]
+            d_hi = self.row_d[self.r_first[i] + self.r_count[i] - 1] if self.s_kind[i] == 1 else \
+                self.s_far[i] - FAR_GAP_T
             far = self.s_far[i]
             self.s_zlo[i], self.s_zhi[i] = math.log(d_lo / (far - d_lo)), math.log(d_hi / (far - d_hi))
         twin = self._twins()
@@ -804,7 +804,7 @@ class RayMap:
         far end): global row index, d, the observer's phase, b, theta start and length. Concatenated;
         ``r_first``, ``r_count`` per segment."""
         fl = self.flat
-        rows, ds, rhos, bs, sts, lns = [], [], [], [], [], []
+        rows, rhos, segs = [], [], []
         self.r_first, self.r_count = np.empty(self.n_seg, dtype=np.int64), np.empty(self.n_seg, dtype=np.int64)
         total = 0
         twin = self._twins()
@@ -820,24 +820,20 @@ class RayMap:
                 rho_far = self._rho(np.array([i]), np.array([self.s_far[i] - FAR_GAP_T]))[0]
                 k_hi = min(int(math.floor((rho_far - fl.rho0[kc]) / fl.step - 1e-9)), fl.n_rows[kc] - 1)
             k = np.arange(k_lo, k_hi + 1)
-            rho = fl.rho0[kc] + fl.step * k
-            seg = np.full(k.size, i)
-            d = self._d_of_rho(seg, rho)
-            b = _b_of(np.full(k.size, kc), rho)
-            sc = _scale(np.full(k.size, kc), b)
-            g = k + fl.offset[kc]
-            rows.append(g)
-            ds.append(d)
-            rhos.append(rho)
-            bs.append(b)
-            sts.append(fl.start[g] * sc)
-            lns.append(fl.length[g] * sc)
+            rows.append(k + fl.offset[kc])
+            rhos.append(fl.rho0[kc] + fl.step * k)
+            segs.append(np.full(k.size, i))
             self.r_first[i], self.r_count[i] = total, k.size
             total += k.size
-        self.row_g, self.row_d, self.row_rho = np.concatenate(rows), np.concatenate(ds), np.concatenate(rhos)
+        # every segment's rows at once: d, b, theta start and length
+        seg, rho, g = np.concatenate(segs), np.concatenate(rhos), np.concatenate(rows)
+        kind = self.s_kind.take(seg)
+        b = _b_of(kind, rho)
+        sc = _scale(kind, b)
+        self.row_g, self.row_d, self.row_rho = g, self._d_of_rho(seg, rho), rho
         # the observer's phase and J there per row: made with the segment's nodes (_build)
         self.row_theta, self.row_jo = np.full(total, np.nan), np.full(total, np.nan)
-        self.row_b, self.row_start, self.row_length = np.concatenate(bs), np.concatenate(sts), np.concatenate(lns)
+        self.row_b, self.row_start, self.row_length = b, fl.start[g] * sc, fl.length[g] * sc
         self.row_ld = np.log(self.row_d)
         # the cubic through ln d on rows k..k+3 (Newton form, as _cubic_at): (f0 + i a, c + i e) per k
         ld = np.concatenate([self.row_ld, np.full(3, np.nan)])
@@ -848,9 +844,7 @@ class RayMap:
         self.row_jscale = self.row_length * self.row_b
         # per row: columns per radian, and the factor from the stored u (u b for T) to u
         self.row_cscale = (fl.n_cols - 1) / self.row_length
-        row_kind = np.concatenate([np.full(self.r_count[i], self.s_kind[i]) for i in range(self.n_seg)
-                                   if twin[i] == i])
-        self.row_uscale = np.where(row_kind == 0, 1.0 / self.row_b, 1.0)
+        self.row_uscale = np.where(kind == 0, 1.0 / self.row_b, 1.0)
         # made when first needed (points outside the seed's window; next to the observer): the ray
         # tangent at the observer as a row, the table's error at the observer on each row (per segment)
         self._tan = None
