@@ -3,7 +3,7 @@ family of exact tables, per frame, against a static camera; and the orbit table'
 
 Part 1 (the options, in the units of docs/tables.md): the orbit table of lutgen.rays (built once per
 process): build time, memory, the per-radius setup of a RayMap (and with the segments it makes when a
-point first needs them, the rays that cross the photon sphere), the lookup time of 1e5 random points
+point first needs them), the lookup time of 1e5 random points
 (both orders, xi/dt/ux/uy; the family's table for the same radius measured in the same run), the
 fixed cost of a lookup call (one point, both orders; the family's too) and the
 largest |xi - xi_exact| against lutgen.connect in docs/tables.md's four regions, observer at 20 r_s.
@@ -234,8 +234,8 @@ def report(opt, shots, frames, acc):
              f"(once) | {opt['mb']:.0f} | {opt['look']:.0f} | "
              + " | ".join(f"{e[k]:.1e}" for k in regions)
              + f" | per new radius {np.median(opt['setup']):.1f} ms (max {opt['setup'].max():.1f}), "
-               f"{np.median(opt['setup_all']):.1f} ms with the nodes of the rays that cross the photon sphere "
-               f"(made when a point first needs them); the family's "
+               f"{np.median(opt['setup_all']):.1f} ms with every segment's nodes (some are made when a point "
+               f"first needs them); the family's "
                f"table for 20 r_s looks the same points up in {opt['fam_look']:.0f} ms in this run; one call "
                f"with one point {opt['call']:.2f} ms (the family's table {opt['fam_call']:.2f} ms) |", "",
              "Inside the photon sphere, the table's rays shot with the DOP853 integrator to the target's swept "

@@ -666,8 +666,11 @@ class RayMap:
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # one for all set-up steps
             self._setup_rows()
             self._setup_nodes()
-            for i in range(n_seg):  # the turning rays' segments now, those that cross the photon sphere
-                if self._twins()[i] == i and self.s_kind[i] != 1:  # when a point needs them
+            # the segments most points of a camera need made now (outside the photon sphere the turning
+            # rays', inside it those that cross it), the others when a point first needs them
+            outside = uo < _orb.U_PHOTON
+            for i in range(n_seg):
+                if self._twins()[i] == i and (self.s_kind[i] != 1) == outside:
                     self._build(i)
             self._setup_index()
 
@@ -917,9 +920,9 @@ class RayMap:
         rows = self.r_first.take(seg) + loc
         n_c, uj = self.flat.n_cols, self.flat.uj
         sweeps = np.linspace(0.0, 2.0 * math.pi, n_s)
-        # the observer's phase on these rows: the rows' own in the segments built now (turning rays),
-        # else by the closed forms (the segments' nodes are made when a point first needs them); and on
-        # each segment's first row (the segment tests of _solve)
+        # the observer's phase on these rows: the rows' own in the segments built now, else by the
+        # closed forms (those segments' nodes are made when a point first needs them); and on each
+        # segment's first row (the segment tests of _solve)
         twin = np.array(self._twins())
         own = twin.take(seg)
         theta = self.row_theta.take(rows)

@@ -136,13 +136,14 @@ def test_batch_independence_and_determinism():
 
 @pytest.mark.parametrize("r_obs", [20.0, 2.5, 1.2])
 def test_segments_made_on_first_need(r_obs):
-    """The segments of the rays that cross the photon sphere get their nodes (the observer's phase and J
-    there) when a point's solve first needs them: a point's ray is the same bit for bit whether the
-    segments were made before it (by other points, or all at once) or for it."""
+    """Some segments (outside the photon sphere those of the rays that cross it, inside it those of the
+    turning rays) get their nodes (the observer's phase and J there) when a point's solve first needs
+    them: a point's ray is the same bit for bit whether the segments were made before it (by other
+    points, or all at once) or for it."""
     rng = np.random.default_rng(9)
     r, p = _targets(rng, r_obs, 3000)
     fresh = rays.RayMap(r_obs)
-    assert not fresh._built.all()  # the crossing rays' segment waits for a point
+    assert not fresh._built.all()  # a segment waits for a point
     every = rays.RayMap(r_obs)
     for i in np.flatnonzero(~every._built):
         if every._twins()[i] == i:
