@@ -596,16 +596,29 @@ def _scale(kind, b):
     return np.where(kind == 0, 1.0, np.where(kind == 1, b, 1.0 / b))
 
 
+_OFF4 = np.arange(4)[:, None]  # the four neighbours of a stencil's first node, as a column
+_OFF16 = {}  # per column count: the offsets of a bicubic stencil's 4 x 4 nodes from its first, (4, 4, 1)
+
+
+def _sum4(w, flat, base):
+    """w[0] flat[base] + w[1] flat[base + 1] + w[2] flat[base + 2] + w[3] flat[base + 3] (w (4, N), base
+    (N,)), summed left to right as written, from one ``take`` of the four neighbours (the same numbers
+    bit for bit as four takes; fewer numpy calls, the fixed cost of a small lookup)."""
+    x = flat.take(base + _OFF4)
+    return w[0] * x[0] + w[1] * x[1] + w[2] * x[2] + w[3] * x[3]
+
+
 def _gather(flat, base, wr, wc, n_c):
     """Bicubic sum of the 4 x 4 nodes of a row-major table (``flat``, ``n_c`` columns; real or complex)
-    from the flat indices ``base`` (N,), with row and column weights wr, wc (4, N)."""
-    v = None
-    for i in range(4):
-        b = base + i * n_c
-        t = wr[i] * (wc[0] * flat.take(b) + wc[1] * flat.take(b + 1) + wc[2] * flat.take(b + 2)
-                     + wc[3] * flat.take(b + 3))
-        v = t if v is None else v + t
-    return v
+    from the flat indices ``base`` (N,), with row and column weights wr, wc (4, N): per row i
+    wr[i] (wc[0] x[i, 0] + ... + wc[3] x[i, 3]), the rows summed in order, all 16 nodes from one ``take``
+    (the same operations on the same numbers as a take per node)."""
+    off = _OFF16.get(n_c)
+    if off is None:
+        off = _OFF16[n_c] = (np.arange(4)[:, None] * n_c + np.arange(4))[:, :, None]
+    x = flat.take(base + off)  # (4, 4, N): rows, columns
+    t = wr * (wc[0] * x[:, 0] + wc[1] * x[:, 1] + wc[2] * x[:, 2] + wc[3] * x[:, 3])
+    return t[0] + t[1] + t[2] + t[3]
 
 
 def _linear_tail(flat, base, n_c, c, cc, wr, v):
@@ -616,9 +629,13 @@ def _linear_tail(flat, base, n_c, c, cc, wr, v):
     if out.size:
         dw = _derivative_weights(cc[out], n_c)
         slope = np.zeros(out.size, dtype=flat.dtype)
-        for i in range(1 if wr is None else wr.shape[0]):
+        n_r = 1 if wr is None else wr.shape[0]
+        # every node of the rows' stencils from one take (n_r, 4, m); the sum in the same order as before
+        x = flat.take(base[out] + (np.arange(n_r)[:, None, None] * n_c + np.arange(4)[:, None]))
+        for i in range(n_r):
+            w_i = 1.0 if wr is None else wr[i, out]
             for j in range(4):
-                slope += (1.0 if wr is None else wr[i, out]) * dw[j] * flat.take(base[out] + (i * n_c + j))
+                slope += w_i * dw[j] * x[i, j]
         v[out] += slope * (c[out] - cc[out])
     return v
 
@@ -799,7 +816,7 @@ class RayMap:
         i0, w = _stencil(g, n)
         base = i0 + seg * n
         v = self.node_tj if both else values
-        out = w[0] * v.take(base) + w[1] * v.take(base + 1) + w[2] * v.take(base + 2) + w[3] * v.take(base + 3)
+        out = _sum4(w, v, base)
         return (out.real, out.imag) if both else out
 
     def _setup_rows(self):
@@ -941,7 +958,8 @@ class RayMap:
         j = _clip(np.floor(c), 0.0, n_c - 2.0).astype(np.int64)
         t = c - j
         base = self.row_g.take(rows) * n_c + j
-        f = (uj.take(base).real * (1.0 - t) + uj.take(base + 1).real * t) * self.row_uscale.take(rows)
+        x = uj.take(base[None] + _OFF4[:2, :, None]).real  # (2, n_s, q): the two columns about c (one take)
+        f = (x[0] * (1.0 - t) + x[1] * t) * self.row_uscale.take(rows)
         # (n_s, q): monotone along xi, each value the least of those after it (rays that escaped,
         # below every target, may wind up and down below zero: a running minimum from the side of
         # the rays that fell in keeps the values next to every target's root)
@@ -1011,7 +1029,7 @@ class RayMap:
         b = _b_of(kind, rho)
         sc = _scale(kind, b)
         sl = fl.sl  # start + i length: both from one take per row
-        v = (wr[0] * sl.take(i0) + wr[1] * sl.take(i0 + 1) + wr[2] * sl.take(i0 + 2) + wr[3] * sl.take(i0 + 3)) * sc
+        v = _sum4(wr, sl, i0) * sc
         st, ln = v.real, v.imag
         u, j = self._columns(i0, wr, (theta - st) / ln * (n_c - 1), want_j, want_u)
         j_diff = None
@@ -1103,7 +1121,7 @@ class RayMap:
         j0, wc = _stencil(cc, n_c)
         base = self.row_g.take(row).reshape(-1) * n_c + j0
         t = fl.uj
-        v = wc[0] * t.take(base) + wc[1] * t.take(base + 1) + wc[2] * t.take(base + 2) + wc[3] * t.take(base + 3)
+        v = _sum4(wc, t, base)
         v = _linear_tail(t, base, n_c, c, cc, None, v).reshape(np.shape(row))  # u + i J
         f = v.real * self.row_uscale.take(row) - u
         if near is not None and near.any():
@@ -1124,13 +1142,10 @@ class RayMap:
         cc = np.clip(c, 0.0, n_c - 1)
         j0, wc = _cubic_stencil(cc, n_c)
         row = t["u"]
-        v = wc[0] * row.take(j0) + wc[1] * row.take(j0 + 1) + wc[2] * row.take(j0 + 2) + wc[3] * row.take(j0 + 3)
+        v = _sum4(wc, row, j0)
         out = np.flatnonzero(c != cc)
         if out.size:
-            dw = _derivative_weights(cc[out], n_c)
-            jo = j0[out]
-            v[out] += (dw[0] * row.take(jo) + dw[1] * row.take(jo + 1) + dw[2] * row.take(jo + 2)
-                       + dw[3] * row.take(jo + 3)) * (c[out] - cc[out])
+            v[out] += _sum4(_derivative_weights(cc[out], n_c), row, j0[out]) * (c[out] - cc[out])
         return (v / t["b"] if t["kind"] == 0 else v) - u
 
     # ---- the solve --------------------------------------------------------------------------------
