@@ -308,10 +308,20 @@ def _stencil(g, n):
     """As :func:`lutgen.lut._cubic_stencil` (first node (N,), cubic Lagrange weights (4, N) for fractional
     grid coordinates g in [0, n - 1]), with fewer array passes (shared products)."""
     i0 = np.minimum(np.maximum(g.astype(np.int64) - 1, 0), n - 4)  # g >= 0: truncation is floor
+    w = np.empty((4, g.size))
+    if g.size <= _STENCIL_SMALL:
+        # few points (a call's fixed cost): w = (p q) k with p = (t1 t2, t t3, t t3, t1 t2), q = (t3, t2, t1,
+        # t), k = (-1/6, 1/2, -1/2, 1/6), the same products in the same order as below, in fewer numpy calls
+        tt = (g - i0) - _STENCIL_SHIFT  # (4, N): t, t - 1, t - 2, t - 3 (x - k is x + (-k): the same numbers)
+        np.multiply(tt[1], tt[2], out=w[0])
+        np.multiply(tt[0], tt[3], out=w[1])
+        w[2], w[3] = w[1], w[0]
+        np.multiply(w, tt[::-1], out=w)
+        w *= _STENCIL_SCALE
+        return i0, w
     t = g - i0
     t1, t2, t3 = t - 1.0, t - 2.0, t - 3.0
     a, c = t1 * t2, t * t3
-    w = np.empty((4, g.size))
     np.multiply(a, t3, out=w[0])
     w[0] *= -1.0 / 6.0
     np.multiply(c, t2, out=w[1])
@@ -321,6 +331,11 @@ def _stencil(g, n):
     np.multiply(a, t, out=w[3])
     w[3] *= 1.0 / 6.0
     return i0, w
+
+
+_STENCIL_SHIFT = np.arange(4.0)[:, None]
+_STENCIL_SMALL = 512  # points up to which _stencil takes its few-calls path (beyond it the (4, N) passes cost more)
+_STENCIL_SCALE = np.array([-1.0 / 6.0, 0.5, -0.5, 1.0 / 6.0])[:, None]
 
 
 def _clip(x, lo, hi):
@@ -1167,7 +1182,9 @@ class RayMap:
         unknown = set(quantities) - set(QUANTITIES)
         if unknown:
             raise ValueError(f"unknown quantities {sorted(unknown)}; choose from {QUANTITIES}")
-        r, phi = np.broadcast_arrays(np.asarray(r, dtype=np.float64), np.asarray(phi, dtype=np.float64))
+        r, phi = np.asarray(r, dtype=np.float64), np.asarray(phi, dtype=np.float64)
+        if r.shape != phi.shape:  # (the same shapes, most often: broadcast_arrays' cost saved)
+            r, phi = np.broadcast_arrays(r, phi)
         shape = r.shape
         r, p = r.ravel(), phi.ravel()
         with np.errstate(invalid="ignore"):
@@ -1175,8 +1192,8 @@ class RayMap:
         idx = np.flatnonzero(ok)
         m = idx.size
         if m:
-            rr = np.tile(r[idx], len(orders))
-            pp = np.tile(p[idx], len(orders))
+            rr = np.concatenate([r.take(idx)] * len(orders))  # per order, as np.tile (fewer calls)
+            pp = np.concatenate([p.take(idx)] * len(orders))
             oo = np.repeat(np.array(orders), m)
             res = self.solve(rr, pp, oo, quantities)
         else:  # nothing to solve (no valid point): the solve's fixed cost saved

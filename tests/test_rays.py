@@ -222,6 +222,39 @@ def test_stencil_weights():
     assert np.array_equal(i_a, i_b)
     assert np.max(np.abs(w_a - w_b)) < 1e-12
     assert np.allclose(w_a.sum(0), 1.0, atol=1e-12)
+    # the few-points path (up to _STENCIL_SMALL points) gives the same weights bit for bit
+    for k in range(0, g.size, rays._STENCIL_SMALL):
+        i_s, w_s = rays._stencil(g[k:k + rays._STENCIL_SMALL], 577)
+        assert np.array_equal(i_s, i_a[k:k + rays._STENCIL_SMALL])
+        assert np.array_equal(w_s, w_a[:, k:k + rays._STENCIL_SMALL])
+
+
+def test_node_sums_one_take():
+    """rays._sum4 and rays._gather (the nodes from one take) against the sums node by node, in order,
+    bit for bit (real and complex tables, a column tail beyond the row's range)."""
+    rng = np.random.default_rng(3)
+    n_c = 37
+    for flat in (rng.normal(size=20 * n_c), rays._complex(rng.normal(size=20 * n_c), rng.normal(size=20 * n_c))):
+        base = rng.integers(0, 16 * n_c, 300)
+        wr, wc = rng.normal(size=(4, 300)), rng.normal(size=(4, 300))
+        want4 = wc[0] * flat[base] + wc[1] * flat[base + 1] + wc[2] * flat[base + 2] + wc[3] * flat[base + 3]
+        assert np.array_equal(rays._sum4(wc, flat, base), want4)
+        want = None
+        for i in range(4):
+            b = base + i * n_c
+            t = wr[i] * (wc[0] * flat[b] + wc[1] * flat[b + 1] + wc[2] * flat[b + 2] + wc[3] * flat[b + 3])
+            want = t if want is None else want + t
+        assert np.array_equal(rays._gather(flat, base, wr, wc, n_c), want)
+        # the linear tail: beyond the columns [0, n_c - 1] the slope there times the excess
+        c = np.concatenate([rng.uniform(-3.0, 0.0, 150), rng.uniform(n_c - 1.0, n_c + 2.0, 150)])
+        cc = np.clip(c, 0.0, n_c - 1.0)
+        dw = rays._derivative_weights(cc, n_c)
+        slope = np.zeros(300, dtype=flat.dtype)
+        for i in range(4):
+            for j in range(4):
+                slope += wr[i] * dw[j] * flat[base + (i * n_c + j)]
+        got = rays._linear_tail(flat, base, n_c, c, cc, wr, want.copy())
+        assert np.array_equal(got, want + slope * (c - cc))
 
 
 def test_observer_range():
