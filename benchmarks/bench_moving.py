@@ -175,6 +175,7 @@ def shot(r0, r1, frames):
     ed_get, ed_fam = every_distance()
     ot_get, _ = one_table()
     solved = windowed = 0  # ONE_TABLE's points, and those its seed window bracketed
+    outside = []  # per frame: ONE_TABLE's points outside the seed's window, segments made on first need
     for label in ("first", "second"):  # interleaved frame by frame: the VM's speed drifts
         st, ed, ot = [], [], []
         for r, src in todo:
@@ -195,6 +196,7 @@ def shot(r0, r1, frames):
                 ot.append(min(ts))
                 solved += rm.solved
                 windowed += rm.windowed
+                outside.append((rm.solved - rm.windowed, int(rm._built.sum() - rays.RayMap(r, table=table)._built.sum())))
                 ot_get(r)  # the second pass's, made outside the timing
             else:
                 ts = []
@@ -215,6 +217,7 @@ def shot(r0, r1, frames):
     out["EVERY_DISTANCE", "built"] = ed_fam.built
     out["ONE_TABLE", "built"] = 0
     out["window"] = windowed / max(solved, 1)
+    out["outside"] = outside
     out["static"] = out["static", "first"]
     return out
 
@@ -276,12 +279,16 @@ def report(opt, shots, frames, acc):
             rf, rs = f / st, s / d["static", "second"]
             lines.append(f"| {name} | {mode} | {np.median(f):.1f} | {f.max():.1f} | {np.median(rf):.2f} | "
                          f"{rf.max():.2f} | {np.median(rs):.2f} | {rs.max():.2f} | {d[mode, 'built']} |")
-    lines += ["", "Per frame of the descent, first pass / static (EVERY_DISTANCE, ONE_TABLE): "
-              + ", ".join(f"{r:.2f} r_s {a:.1f}/{b:.1f}" for r, a, b in zip(
-                  np.linspace(6.0, 1.05, frames), shots["descent 6 to 1.05 r_s"]["EVERY_DISTANCE", "first"]
-                  / shots["descent 6 to 1.05 r_s"]["static"],
-                  shots["descent 6 to 1.05 r_s"]["ONE_TABLE", "first"] / shots["descent 6 to 1.05 r_s"]["static"])),
-              "", "ONE_TABLE's seed index (one per radius, over the whole sky): its window of four rows bracketed "
+    for name, (r0, r1) in (("dolly 30 to 6 r_s", (30.0, 6.0)), ("descent 6 to 1.05 r_s", (6.0, 1.05))):
+        d = shots[name]
+        lines += ["", f"Per frame of the {name.split()[0]}, first pass / static (EVERY_DISTANCE, ONE_TABLE; in "
+                  "brackets ONE_TABLE's points outside the seed's window and, after +, the segments it made when "
+                  "a point first needed them): "
+                  + ", ".join(f"{r:.2f} r_s {a:.1f}/{b:.1f} ({n_out}{f' +{n_seg}' if n_seg else ''})"
+                              for r, a, b, (n_out, n_seg) in zip(
+                                  np.linspace(r0, r1, frames), d["EVERY_DISTANCE", "first"] / d["static"],
+                                  d["ONE_TABLE", "first"] / d["static"], d["outside"]))]
+    lines += ["", "ONE_TABLE's seed index (one per radius, over the whole sky): its window of four rows bracketed "
               + " and ".join(f"{100 * d['window']:.1f}% of the points solved in the {name}"
                              for name, d in shots.items())
               + " (the others: the segments' ends, then a search over the rows).",
