@@ -32,6 +32,8 @@ EVERY_DISTANCE's first pass, in wall time (its table builds use every core).
 
 Usage: ./dev python benchmarks/bench_moving.py [--frames N] [--write]   (--write: its section of
 docs/tables.md, between the markers, replaced)
+       ./dev python benchmarks/bench_moving.py --per-frame N   (only ONE_TABLE's first pass against the
+static camera, each frame alone, N times interleaved: whether a frame's ratio is systematic)
 Units: ms (frames, setup), s (builds), MB, ms per 1e5 points, radians.
 """
 import argparse
@@ -296,12 +298,50 @@ def report(opt, shots, frames, acc):
     return "\n".join(lines) + "\n"
 
 
+def per_frame(repeats, frames):
+    """ONE_TABLE's first pass against the static camera, frame by frame, each frame alone: its static
+    frame and its first pass (a new RayMap) interleaved ``repeats`` times, CPU time; prints per frame the
+    medians [ms], the median of the pairwise ratios and of the set-up [ms], and the points outside the
+    seed's window (whether a frame's ratio is systematic or the machine's noise)."""
+    settings = pipeline.Settings(max_tess_level=64, tess_a=5.0, tess_b=0.75, cull_ratio=8.0,
+                                 pixel_angle=math.radians(19.0) / 360)
+    table = rays.orbit_table()
+    for name, (r0, r1) in (("dolly", (30.0, 6.0)), ("descent", (6.0, 1.05))):
+        fam = lutgen.LUTFamily(max_slices=1000)
+        for r, src in _frames(r0, r1, frames):
+            static = rays.RayMap(r, table=table) if r < FAMILY_MIN else fam.at(r)
+            scene = mapping.Scene([r, 0, 0], [0, 0, 0], 1.0)
+            pipeline.build_images(src, scene, static, settings)
+            st, ot, su = [], [], []
+            for _ in range(repeats):
+                t0 = cpu()
+                pipeline.build_images(src, scene, static, settings)
+                t1 = cpu()
+                rm = rays.RayMap(r, table=table)
+                t2 = cpu()
+                pipeline.build_images(src, scene, rm, settings)
+                t3 = cpu()
+                st.append(t1 - t0)
+                ot.append(t3 - t1)
+                su.append(t2 - t1)
+            st, ot = 1e3 * np.array(st), 1e3 * np.array(ot)
+            print(f"{name} {r:6.2f} r_s: static {np.median(st):5.2f} ms, first pass {np.median(ot):5.2f} ms, ratio "
+                  f"{np.median(ot / st):4.2f} (median of {repeats} pairs), set-up {1e3 * np.median(su):4.2f} ms, "
+                  f"points outside the window {rm.solved - rm.windowed} of {rm.solved}", flush=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=12)
     ap.add_argument("--write", action="store_true", help="replace this benchmark's section of docs/tables.md")
+    ap.add_argument("--per-frame", type=int, default=0, metavar="N",
+                    help="only ONE_TABLE's first pass against the static camera, each frame alone, N times "
+                         "interleaved (prints; nothing written)")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore", RuntimeWarning)
+    if args.per_frame:
+        per_frame(args.per_frame, args.frames)
+        return
     rng = np.random.default_rng(0)
     opt = options(rng)
     acc = inside_accuracy()
