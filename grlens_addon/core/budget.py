@@ -58,7 +58,19 @@ so the tight aim costs little, and a second-order ring is less than a pixel wide
 
 PATCH_BAND_FACTOR = 1.0
 """The innermost circle of a patch lies where its image is within this times the coverage tolerance
-of the Einstein ring (the band inside it is drawn by pieces that span the whole way to the ring)."""
+of the Einstein ring; the band inside it is drawn by pieces that span the whole way to the ring,
+refined in azimuth (axis_patch.band_shape) so that they stay within the tolerance."""
+
+MAX_BAND_AZIMUTHS = 16384
+"""At most this many limit vertices per turn in a patch's band next to the ring (about
+pi ring_px / Settings.max_error_px are needed: 16384 keeps the tolerance up to a ring about 1300 px
+in radius at 0.25 px; beyond, the band's pieces draw their points up to ring_px pi / 16384 pixels off
+along the ring). Trades faces (about three per limit vertex) for the placement next to the ring."""
+
+BAND_INNER_MAX = 0.9
+"""The refined band's inner polygon lies at most this fraction of the way out to the innermost
+circle (axis_patch.band_shape: usually nearer, as the tolerance requires); keeps its fan of pieces
+from becoming slivers where the ring is small on screen."""
 
 UNDER_PATCH_FACTOR = 1.0
 """Pieces that a complete axis patch draws over (inside its outer circle, on a source triangle it
