@@ -290,6 +290,45 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     return best, bary
 
 
+def _locate_points(qx, qy, cand_tris, x, y, z, z_target):
+    """As :func:`_locate` for any points (qx, qy) (M,) in axis coordinates (BU): (index into
+    ``cand_tris`` of the triangle whose projection along the axis contains each, nearest to
+    ``z_target`` along the axis when several do, or -1; barycentrics (M, 3)). Only the triangles
+    within the points' largest distance from the axis are tested, each against the points inside
+    its box (the points sorted along x)."""
+    m = len(qx)
+    best = np.full(m, -1, np.int64)
+    bary = np.full((m, 3), np.nan)
+    if m == 0 or len(cand_tris) == 0:
+        return best, bary
+    reach = float(np.hypot(qx, qy).max())
+    near = np.flatnonzero(within_axis_distance(x, y, cand_tris, reach))
+    if near.size == 0:
+        return best, bary
+    tr = cand_tris[near]
+    px, py = x[tr], y[tr]
+    eps = 1e-12 * max(reach, 1e-300)
+    order = np.argsort(qx, kind="stable")
+    a = np.searchsorted(qx[order], px.min(axis=1) - eps, side="left")
+    count = np.maximum(np.searchsorted(qx[order], px.max(axis=1) + eps, side="right") - a, 0)
+    pt = np.repeat(np.arange(near.size), count)
+    pp = order[np.repeat(a, count) + group_offsets(count)]
+    ok = (qy[pp] >= py.min(axis=1)[pt] - eps) & (qy[pp] <= py.max(axis=1)[pt] + eps)
+    pt, pp = pt[ok], pp[ok]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        lam = _projected_bary(qx[pp], qy[pp], tr[pt], x, y)
+    with np.errstate(invalid="ignore"):
+        inside = (lam >= -1e-12).all(axis=1) & np.isfinite(lam.sum(axis=1))
+    sel = np.flatnonzero(inside)
+    if sel.size == 0:
+        return best, bary
+    gap = np.abs(np.einsum("mk,mk->m", lam[sel], z[tr[pt[sel]]]) - z_target)
+    first = _first_smallest(pp[sel], gap)
+    best[pp[sel][first]] = near[pt[sel][first]]
+    bary[pp[sel][first]] = lam[sel][first]
+    return best, bary
+
+
 def _first_smallest(key, value) -> np.ndarray:
     """Indices of one element per distinct ``key`` (ints): the one of smallest ``value`` (the first in
     order among equals; NaN only where all of its key's values are NaN), in increasing key order. As
@@ -922,6 +961,18 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, mp, orders, clos
     next to the ring refined (:func:`_refine_band`) for ``ring`` = (the ring's radius, the tolerance)
     in pixels (None: not refined). None when the innermost circle is not complete."""
     old_hit, old_lam = hit, lam = _locate(radii, n_az, tris[cand], x, y, z, crossing.along)
+
+    def on_sheet(qx, qy):  # (triangle or -1, barycentrics, position) of points under (qx, qy)
+        h, l = _locate_points(qx, qy, tris[cand], x, y, z, crossing.along)
+        found = h >= 0
+        tri = np.where(found, cand[np.maximum(h, 0)], -1)
+        pos = np.full((len(qx), 3), np.nan)
+        pos[found] = np.einsum("mk,mkx->mx", l[found], points[tris[tri[found]]])
+        return tri, l, pos
+
+    def in_triangles(qx, qy, tri):  # barycentrics of (qx, qy) in the projections of triangles tri
+        return _projected_bary(qx, qy, tris[tri], x, y)
+
     if B.CLIP_TO_TRIANGLES and _plain_reach(hit, radii, n_az) < B.CLIP_REACH:
         cut = _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing)
         if cut is None:
@@ -933,6 +984,7 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, mp, orders, clos
         px, py, _ = axis_coordinates(cut["position"], mp.scene.camera, mp.scene.hole)
         mesh = dict(faces=cut["faces"], face_src=cut["face_src"], bary=cut["bary"], vertex_tri=cut["vertex_tri"],
                     vertex_bary=cut["vertex_bary"], position=cut["position"], xy=np.stack([px, py], -1))
+        ring = None if ring is None else (*ring, on_sheet)  # each face on its sector's triangle
         return _finish(mesh, n_az, flip, crossing, orders, cut["replaced"], ring_radii,
                        np.ones((len(ring_radii) - 1, n_az), bool), ring, points, tris, mp, closed, limit_look)
     radii, new = _refined_radii(radii, n_az, hit, lam, points, tris[cand])
@@ -995,6 +1047,7 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, mp, orders, clos
         bary[f_o, c_o] = _projected_bary(vx[v_o], vy[v_o], tris[face_src[f_o]], x, y)
     mesh = dict(faces=faces.astype(np.int64), face_src=face_src, bary=bary, vertex_tri=vertex_tri,
                 vertex_bary=vertex_bary, position=src_pos, xy=np.stack([vx, vy], -1))
+    ring = None if ring is None else (*ring, on_sheet, in_triangles)  # faces as the grid's: see _refine_band
     return _finish(mesh, n_az, flip, crossing, orders, replaced, ring_radii, cell, ring, points, tris, mp, closed,
                    limit_look)
 
@@ -1048,7 +1101,7 @@ def band_shape(ring_px, max_error_px, n_az) -> tuple[float, float, float] | None
     return step, t, q
 
 
-def _refine_band(mesh, n_az, ring_px, max_error_px):
+def _refine_band(mesh, n_az, ring_px, max_error_px, on_sheet=None, in_triangles=None):
     """The band of a patch next to the Einstein ring redrawn so that every point of it lies within
     ``max_error_px`` of its image, for a ring ``ring_px`` pixels from the hole's direction (the
     largest about it): (mesh, limit azimuths of the appended vertices (NaN for the others), chords
@@ -1071,8 +1124,13 @@ def _refine_band(mesh, n_az, ring_px, max_error_px):
     step of their azimuth), and a fan from X and Y to the chain (its points within the tolerance by
     the ratio q of distances, band_shape). Every new vertex is a combination of P, X and Y, so it
     lies on the face's source triangle (its barycentrics the same combination), and the edges X Y are
-    left as they are: the band joins the grid's other faces as before. About 3 ring_px pi /
-    max_error_px faces per patch."""
+    left as they are: the band joins the grid's other faces as before. Its vertices off the axis are
+    then put on the surface under them as the grid's are (``on_sheet``: (x, y) -> (triangle or -1,
+    barycentrics, position), see :func:`_grid_patch`; where it finds none they stay on the face).
+    With ``in_triangles`` ((x, y, triangles) -> barycentrics), each new face then takes, as the plain
+    grid's faces do, the triangle under its corner farthest from the axis (its corners' barycentrics
+    there, extrapolated); without, it keeps its sector's (a clipped grid's faces lie on it).
+    About 3 ring_px pi / max_error_px faces per patch."""
     shape = band_shape(ring_px, max_error_px, n_az)
     if shape is None:
         return None
@@ -1177,6 +1235,23 @@ def _refine_band(mesh, n_az, ring_px, max_error_px):
                                  np.repeat(p_pos[:1], si.size, axis=0), c_pos]),
         xy=np.concatenate([xy, np.zeros((new_b.size, 2)), t * xy[ub], np.zeros((si.size, 2)),
                            t * ((1.0 - u) * xy[X[sc]] + u * xy[Y[sc]])]))
+    if on_sheet is not None:  # the points off the axis onto the surface under them
+        rows = np.concatenate([base_t + np.arange(ub.size), base_c + np.arange(sc.size)])
+        tri, lam, where = on_sheet(out["xy"][rows, 0], out["xy"][rows, 1])
+        found = tri >= 0
+        rows, tri, lam, where = rows[found], tri[found], lam[found], where[found]
+        out["vertex_tri"][rows], out["vertex_bary"][rows], out["position"][rows] = tri, lam, where
+    if on_sheet is not None and in_triangles is not None:  # each new face on the triangle under its outer corner
+        nf = new_faces
+        far = np.take_along_axis(nf, np.argmax(np.hypot(*out["xy"][nf].transpose(2, 0, 1)), axis=1)[:, None],
+                                 axis=1)[:, 0]
+        tri = out["vertex_tri"][far]
+        tri = np.where(tri >= 0, tri, new_src)
+        new_src = tri
+        cxy = out["xy"][nf]  # (F, 3, 2)
+        new_bary = in_triangles(cxy[..., 0].ravel(), cxy[..., 1].ravel(), np.repeat(tri, 3)).reshape(-1, 3, 3)
+        out["face_src"][len(keep):] = new_src
+        out["bary"][len(keep):] = new_bary
     # the new limit vertices: the crossing point, on the crossed triangle as the grid's are
     lim_rows = np.concatenate([n_v + np.arange(new_b.size), base_i + np.arange(si.size)])
     out["vertex_tri"][lim_rows] = mesh["vertex_tri"][0]
@@ -1184,6 +1259,7 @@ def _refine_band(mesh, n_az, ring_px, max_error_px):
     band_psi = np.full(len(out["position"]) - n_v, np.nan)
     band_psi[:new_b.size] = ub_psi[new_b]
     band_psi[base_i - n_v:base_i - n_v + si.size] = in_psi
+    band_psi = np.mod(band_psi, 2.0 * np.pi)
     largest = float(np.max(span / n_int)) if n_s else 2.0 * np.pi / n_az
     chords = int(np.ceil(2.0 * np.pi / max(largest, 1e-300) * (1.0 - 1e-12)))
     return out, band_psi, max(chords, n_az)
