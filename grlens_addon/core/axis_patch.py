@@ -449,9 +449,13 @@ def grid_shape(ring_radius_px, max_error_px) -> tuple[int, float]:
     n = int(np.clip(np.ceil(2.0 * np.pi / max(s, 1e-12)), 16, B.MAX_AZIMUTHS))
     s = 2.0 * np.pi / n
     # a piece spanning circles delta and q delta and one azimuth step draws its interior up to
-    # R s (q - 1) / (2 (q + 1)) pixels along the ring from where it belongs
-    a = min(0.5, 2.0 * max_error_px / (ring_radius_px * s))
-    return n, (1.0 + a) / (1.0 - a)
+    # R s (sqrt q - 1) / (sqrt q + 1) pixels along the ring from where it belongs (on its diagonal,
+    # whose points the interpolation weights by their distance from the axis); q at most 3
+    b = min(_Q3, B.PATCH_AIM * max_error_px / (ring_radius_px * s))
+    return n, ((1.0 + b) / (1.0 - b)) ** 2
+
+
+_Q3 = (np.sqrt(3.0) - 1.0) / (np.sqrt(3.0) + 1.0)  # grid_shape's bound at q = 3
 
 
 def patching(frame) -> bool:
@@ -1091,10 +1095,11 @@ def band_shape(ring_px, max_error_px, n_az) -> tuple[float, float, float] | None
     draws its points up to ring_px S (sqrt q - 1) / (sqrt q + 1) pixels along the ring from where they
     belong: the interpolation weights its corners' azimuths by their distance from the axis)."""
     s = 2.0 * np.pi / n_az
-    if not ring_px * s > max_error_px:
+    aim = B.PATCH_AIM * max_error_px
+    if not ring_px * s > aim:
         return None
-    step = max(2.0 * max_error_px / ring_px, 2.0 * np.pi / B.MAX_BAND_AZIMUTHS)
-    b = max_error_px / (ring_px * s)
+    step = max(2.0 * aim / ring_px, 2.0 * np.pi / B.MAX_BAND_AZIMUTHS)
+    b = aim / (ring_px * s)
     q = ((1.0 + b) / (1.0 - b)) ** 2
     # the inner polygon's points lie on the chords of the circle t delta: as near as t delta cos(s / 2)
     t = min(B.BAND_INNER_MAX, 1.0 / (q * np.cos(0.5 * s)))

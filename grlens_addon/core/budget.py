@@ -61,6 +61,14 @@ PATCH_BAND_FACTOR = 1.0
 of the Einstein ring; the band inside it is drawn by pieces that span the whole way to the ring,
 refined in azimuth (axis_patch.band_shape) so that they stay within the tolerance."""
 
+PATCH_AIM = 0.95
+"""An axis patch's pieces (its grid's rows and its band's azimuth steps, axis_patch.grid_shape and
+band_shape) keep their points' placement along the ring within this fraction of the tolerance:
+the rest is left for the placement across it (the image's distance from the ring is not linear in
+the distance from the axis, nor is the ring's chord its arc). Lower: more circles and band vertices;
+at 1.0 points of the grid's outer rows were measured up to 0.4% beyond the tolerance
+(tests/test_axis_band.py)."""
+
 MAX_BAND_AZIMUTHS = 16384
 """At most this many limit vertices per turn in a patch's band next to the ring (about
 pi ring_px / Settings.max_error_px are needed: 16384 keeps the tolerance up to a ring about 1300 px
