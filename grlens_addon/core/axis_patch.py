@@ -456,6 +456,7 @@ def grid_shape(ring_radius_px, max_error_px) -> tuple[int, float]:
 
 
 _Q3 = (np.sqrt(3.0) - 1.0) / (np.sqrt(3.0) + 1.0)  # grid_shape's bound at q = 3
+_RING_PROBES = 64  # azimuths at which a moving camera's ring is probed (its scale varies smoothly about it)
 
 
 def patching(frame) -> bool:
@@ -529,16 +530,20 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
                          facing={o: np.zeros(0, bool) for o in orders})
     # the ring's radius on screen, per order: a moving camera (scene.view_beta) sees it at the static
     # radius times the aberration's local scale, which varies about the ring: its largest at
-    # B.PROBE_AZIMUTHS azimuths sizes the grid
+    # _RING_PROBES azimuths sizes the grid, or the ring's length per radian of azimuth where that is
+    # larger (the static sin(theta_E) times the local scale): how far along the ring an azimuth
+    # error draws a point
     look = _limit_look(cr, mp, orders)
     beta = scene.view_beta
-    psi_ring = np.zeros(1) if beta is None else 2.0 * np.pi * np.arange(B.PROBE_AZIMUTHS) / B.PROBE_AZIMUTHS
+    psi_ring = np.zeros(1) if beta is None else 2.0 * np.pi * np.arange(_RING_PROBES) / _RING_PROBES
     ring = {o: limit_images(cr, psi_ring, mp, o, look[o]) for o in orders}
     if not all(bool(im.valid.all()) for im in ring.values()):
         return None
     seen = {o: hole_angle(im.direction, scene.camera, scene.hole, beta) for o, im in ring.items()}
     theta_e = {o: float(seen[o][0] / magnification(ring[o].direction[:1], beta)[0]) for o in orders}  # static
-    ring_px = max(float(v.max()) for v in seen.values()) / pixel_angle
+    rate = {o: magnification(im.direction, beta) * np.sin(np.asarray(look[o].xi, np.float64).ravel()[0])
+            for o, im in ring.items()}
+    ring_px = max(max(float(seen[o].max()), float(rate[o].max())) for o in orders) / pixel_angle
     n_az, q = grid_shape(ring_px, max_error_px)
     # the innermost circle: probe the image at B.PROBE_AZIMUTHS azimuths in the crossed triangle's plane
     k = np.arange(B.MAX_CIRCLES + 1)
@@ -560,15 +565,26 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
         return None
     start = int(bad[-1]) + 1 if bad.size else 0
     radius = float(probe_delta[start])
-    first = np.flatnonzero(gap[start:] <= band)
-    n_circles = int(first[0]) + 1 if first.size else len(k) - start  # circles radius q^-k, k = first .. 0
-    n_circles = max(1, min(n_circles, B.MAX_GRID // n_az))
-    radii = radius * q ** (-np.arange(n_circles - 1, -1, -1, dtype=np.float64))
+
+    def circles(width):  # the circles out to the first within ``width`` (rad) of the ring
+        first = np.flatnonzero(gap[start:] <= width)
+        n_circles = int(first[0]) + 1 if first.size else len(k) - start  # circles radius q^-k, k = first .. 0
+        n_circles = max(1, min(n_circles, B.MAX_GRID // n_az))
+        return radius * q ** (-np.arange(n_circles - 1, -1, -1, dtype=np.float64))
+
     # the surface under the grid
     if cand is None or radius != first_radius:
         cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
-    return _grid_patch(radii, n_az, cand, projected_area(x, y, t0[None])[0] < 0, points, tris, x, y, z,
-                       mp, orders, closed, cr, look, (ring_px, max_error_px))
+    # the wide band first (its faces are as exact as the grid's, and fewer circles are drawn); where
+    # its innermost circle does not go all round the sheet, the narrow one
+    wide = circles(B.BAND_WIDE_FACTOR * band / B.PATCH_BAND_FACTOR)
+    narrow = circles(band)
+    for radii in ((wide, narrow) if len(wide) < len(narrow) else (narrow,)):
+        patch = _grid_patch(radii, n_az, cand, projected_area(x, y, t0[None])[0] < 0, points, tris, x, y, z,
+                            mp, orders, closed, cr, look, (ring_px, max_error_px))
+        if patch is not None:
+            return patch
+    return None
 
 
 def _sheet(cr, radius, tris, of_tri, n_edges, x, y) -> np.ndarray:
