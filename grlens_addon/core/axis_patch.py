@@ -62,7 +62,8 @@ from scipy.sparse.csgraph import connected_components
 from . import budget as B
 from . import mapping, silhouette
 from .observer_view import (any_perpendicular, axis_coordinates, axis_crossing, axis_distance, hole_angle,
-                            longest_side, magnification, max_ring_span, place_images, projected_area, row_norm, within_axis_distance)
+                            longest_side, magnification, max_ring_span, nearest_to_axis, place_images, projected_area,
+                            row_norm, within_axis_distance)
 from .ragged import group_offsets
 
 @dataclass
@@ -566,8 +567,9 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
     start = int(bad[-1]) + 1 if bad.size else 0
     radius = float(probe_delta[start])
 
-    def circles(width):  # the circles out to the first within ``width`` (rad) of the ring
-        first = np.flatnonzero(gap[start:] <= width)
+    def circles(width, reach=np.inf):  # the circles out to the first within ``width`` (rad) of the
+        # ring and ``reach`` (BU) of the axis
+        first = np.flatnonzero((gap[start:] <= width) & (probe_delta[start:] <= reach))
         n_circles = int(first[0]) + 1 if first.size else len(k) - start  # circles radius q^-k, k = first .. 0
         n_circles = max(1, min(n_circles, B.MAX_GRID // n_az))
         return radius * q ** (-np.arange(n_circles - 1, -1, -1, dtype=np.float64))
@@ -575,9 +577,10 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
     # the surface under the grid
     if cand is None or radius != first_radius:
         cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
-    # the wide band first (its faces are as exact as the grid's, and fewer circles are drawn); where
-    # its innermost circle does not go all round the sheet, the narrow one
-    wide = circles(B.BAND_WIDE_FACTOR * band / B.PATCH_BAND_FACTOR)
+    # the wide band first (its faces are as exact as the grid's, and fewer circles are drawn) inside the
+    # sheet's nearest edge to the axis (a mesh boundary, hole or fold: the grid's circles find those);
+    # where its innermost circle does not go all round the sheet, the narrow one
+    wide = circles(B.BAND_WIDE_FACTOR * band / B.PATCH_BAND_FACTOR, _open_reach(cand, tris, of_tri, n_edges, x, y))
     narrow = circles(band)
     for radii in ((wide, narrow) if len(wide) < len(narrow) else (narrow,)):
         patch = _grid_patch(radii, n_az, cand, projected_area(x, y, t0[None])[0] < 0, points, tris, x, y, z,
@@ -585,6 +588,20 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
         if patch is not None:
             return patch
     return None
+
+
+def _open_reach(cand, tris, of_tri, n_edges, x, y) -> float:
+    """The distance (BU) from the axis to the nearest edge of the sheet ``cand`` (triangles) that only
+    one of its triangles has: the mesh's boundary, a hole, or a fold (the triangles beyond it wound
+    the other way in projection are not on the sheet); inf where none. (The sheet's rim, where it
+    meets triangles farther than its radius, lies beyond the radius.)"""
+    if len(cand) == 0:
+        return 0.0
+    sides = of_tri[cand]
+    once = np.bincount(sides.ravel(), minlength=n_edges)[sides] == 1
+    if not once.any():
+        return np.inf
+    return float(nearest_to_axis(x, y, tris[cand])[2][once].min())
 
 
 def _sheet(cr, radius, tris, of_tri, n_edges, x, y) -> np.ndarray:

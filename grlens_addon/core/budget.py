@@ -65,8 +65,10 @@ BAND_WIDE_FACTOR = 16.0
 """The same as PATCH_BAND_FACTOR for the wide band a patch tries first: its innermost circle where the
 image is within this times the coverage tolerance of the ring (a pixel at the add-on's tolerance).
 The refined band draws its points as exactly as the grid's circles would, so a wide band only saves
-circles (up to half a patch's faces next to a large ring); where its innermost circle does not go
-all round the sheet (a fold or the mesh's edge near the axis) the patch takes the narrow band."""
+circles (up to half a patch's faces next to a large ring). It is taken only as far as the crossed
+triangle reaches round the axis (a flat piece of surface: the grid's circles find the mesh's edges,
+folds and holes), and where its innermost circle does not go all round the sheet the patch takes
+the narrow band."""
 
 PATCH_AIM = 0.95
 """An axis patch's pieces (its grid's rows and its band's azimuth steps, axis_patch.grid_shape and
