@@ -21,9 +21,15 @@ quads (two triangles each) between consecutive circles, so:
   they sag by at most budget.Budget.patch_edge_px pixels; the points are moved off the circle by
   B.CHORD_OUTSET of that sag, so that the chords cross it (limit_images);
 * the ratio q keeps the tangential error of the linear interpolation inside a piece (a point of the
-  surface is drawn at the azimuth of its corners' mean, not its own) within ``max_error_px``;
-* the innermost circle is where the image is within ``BAND_FACTOR * max_error_px`` pixels of theta_E,
-  so the band between it and the limit vertices is thinner than that.
+  surface is drawn at the azimuth of its corners' mean weighted by their distances from the axis, not
+  its own) within B.PATCH_AIM of ``max_error_px`` (grid_shape);
+* the innermost circle is where the image is within B.BAND_WIDE_FACTOR (as far as the sheet has no
+  edge near the axis, else B.PATCH_BAND_FACTOR) times the coverage tolerance of theta_E;
+* the band between it and the ring is refined in azimuth (band_shape, _refine_band): its faces touch
+  the ring, where all their corners are the one point P, so they draw their points with the azimuth of
+  their other corners: each spans at most 2 B.PATCH_AIM max_error_px / ring_px (about pi ring_px /
+  (B.PATCH_AIM max_error_px) limit vertices per turn, three faces each), joined to the innermost
+  circle by a fan.
 
 The source triangles entirely inside the patch's drawn cells (connected to the crossed one, and
 wound like it in projection, i.e. on the same sheet of the surface) are *replaced*: the pipeline does
