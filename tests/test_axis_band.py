@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from grlens_addon.core import axis_patch, budget, frame, frame_check, mapping, observer_view, pipeline, raytrace, visibility
+from grlens_addon.core import (axis_patch, budget, frame, frame_check, mapping, observer_view, pipeline, raytrace,
+                               visibility)
 from lutgen import build_lut, connect
 from meshes import uv_sphere
 

@@ -1272,7 +1272,8 @@ def _refine_band(mesh, n_az, ring_px, max_error_px, on_sheet=None, in_triangles=
         faces=np.concatenate([faces[keep], new_faces]),
         face_src=np.concatenate([mesh["face_src"][keep], new_src]),
         bary=np.concatenate([bary[keep], ring_bary, chain_bary, fan_bary, mid_bary]),
-        vertex_tri=np.concatenate([mesh["vertex_tri"], np.full(new_b.size, -1), src[fs], np.full(si.size, -1), src[sc]]),
+        vertex_tri=np.concatenate([mesh["vertex_tri"], np.full(new_b.size, -1), src[fs], np.full(si.size, -1),
+                                   src[sc]]),
         vertex_bary=np.concatenate([mesh["vertex_bary"], np.zeros((new_b.size, 3)), t_bary, np.zeros((si.size, 3)),
                                     c_bary]),
         position=np.concatenate([pos, np.repeat(p_pos[:1], new_b.size, axis=0), t_pos,
@@ -1318,7 +1319,8 @@ def _shade(patch: Patch, points, tris, mp, orders, closed, limit_look=None) -> P
     lim_at = np.flatnonzero(lim)
     grid_at = np.flatnonzero(~lim)
     grid_pos = patch.source_position[grid_at]
-    psi = patch.limit_psi[lim_at] if patch.limit_psi is not None else 2.0 * np.pi * np.arange(lim_at.size) / max(lim_at.size, 1)
+    psi = (patch.limit_psi[lim_at] if patch.limit_psi is not None
+           else 2.0 * np.pi * np.arange(lim_at.size) / max(lim_at.size, 1))
     scene = mp.scene
     plane = mapping.plane_coordinates(grid_pos, scene)
     looked = None
