@@ -119,7 +119,8 @@ def _plain_band(table, settings):
     orders (px), the
     patches' limit vertices and band faces (faces touching the ring or the refined band's vertices,
     one patch per camera here) and image triangles of both orders, refined / plain, and the per-frame
-    cost (best of 5 in turn, ms) refined / plain; and those figures per angle and variant."""
+    CPU time (best of REPEATS, the variants in turn, ms) refined / plain; and those figures per angle
+    and variant."""
     def patch_counts(src, scene):
         fr = frame.frame_context(scene, table, dataclasses.replace(settings, pixel_angle=CAM.pixel_angle),
                                  CAM.frustum_planes())
@@ -134,35 +135,39 @@ def _plain_band(table, settings):
                 band += int((p.limit | extra)[p.tris].any(axis=1).sum())
         return lim, band
 
-    rows, summary, keep = [], {}, axis_patch.band_shape
+    rows, summary, keep, wide = [], {}, axis_patch.band_shape, budget.BAND_WIDE_FACTOR
+
+    def variant(name):  # the band refined (the add-on's), or plain and narrow as before the refinement
+        axis_patch.band_shape = keep if name == "refined" else (lambda *a, **k: None)
+        budget.BAND_WIDE_FACTOR = wide if name == "refined" else budget.PATCH_BAND_FACTOR
+
     for angle in (179, 180):
         src = BA.sphere_scene(angle)[0]
         scenes = {n: mapping.Scene(CAM.position, np.zeros(3), BA.R_S, beta=b) for n, b in CAMERAS.items()}
         cells = {}
-        for variant in ("refined", "plain"):
-            wide = budget.BAND_WIDE_FACTOR
-            if variant == "plain":  # the plain band, as narrow as it was drawn before the refinement
-                axis_patch.band_shape = lambda *a, **k: None
-                budget.BAND_WIDE_FACTOR = budget.PATCH_BAND_FACTOR
-            try:
+        runs = {(v, n): [] for v in ("refined", "plain") for n in scenes}
+        try:
+            for name in ("refined", "plain"):
+                variant(name)
                 scr = {n: max(frame_check.check_frame([src], sc, table, settings, CAM).metrics["orders"][o]
                               .get("screen_px", {}).get("max", 0.0) for o in (1, 2)) for n, sc in scenes.items()}
                 counts = {n: patch_counts(src, sc) for n, sc in scenes.items()}
                 tris = {n: sum(len(i.tris) for i in pipeline.build_images(src, sc, table, settings, None,
                                                                           CAM.frustum_planes()).values())
                         for n, sc in scenes.items()}
-                runs = {n: [] for n in scenes}
-                for _ in range(5):
+                cells[name] = dict(scr=scr, lim={n: c[0] for n, c in counts.items()},
+                                   band={n: c[1] for n, c in counts.items()}, tris=tris)
+            for _ in range(REPEATS):  # both variants in turn (CPU time: the machine is shared)
+                for name in ("refined", "plain"):
+                    variant(name)
                     for n, sc in scenes.items():
-                        t0 = time.perf_counter()
+                        t0 = time.process_time()
                         pipeline.build_images(src, sc, table, settings, None, CAM.frustum_planes())
-                        runs[n].append(time.perf_counter() - t0)
-            finally:
-                axis_patch.band_shape = keep
-                budget.BAND_WIDE_FACTOR = wide
-            cells[variant] = dict(scr=scr, lim={n: c[0] for n, c in counts.items()},
-                                  band={n: c[1] for n, c in counts.items()}, tris=tris,
-                                  t={n: min(r) for n, r in runs.items()})
+                        runs[(name, n)].append(time.process_time() - t0)
+        finally:
+            variant("refined")
+        for name in cells:
+            cells[name]["t"] = {n: min(runs[(name, n)]) for n in scenes}
         r, pl = cells["refined"], cells["plain"]
         row = [f"{angle}"]
         for key, fmt in (("scr", "{:.2f}"), ("lim", "{}"), ("band", "{}"), ("tris", "{}")):
@@ -322,8 +327,8 @@ def main(out_path):
         "The same next to the ring with the band refined (the add-on) and, in brackets, plain (narrow, each of its "
         "faces spanning one of the grid's azimuth steps; axis_patch.band_shape answering None), at rest / out / in: "
         "largest screen error of both orders (px), the patch's limit vertices and band faces (those touching the "
-        "ring or the refined band's vertices), image triangles of both orders, and the per-frame cost (best of 5 "
-        "in turn, ms):", "",
+        "ring or the refined band's vertices), image triangles of both orders, and the per-frame CPU time (best "
+        f"of {REPEATS}, the two in turn, ms):", "",
         "| orbit angle (deg) | screen max | limit vertices | band faces | image triangles | frame (ms) |",
         "|---|---|---|---|---|---|", *band, "",
         "## Saturated colours", "",
