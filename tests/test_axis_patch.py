@@ -166,8 +166,8 @@ def test_patch_on_a_tilted_plane(lut):
         np.testing.assert_allclose((theta - exact) / PIXEL, budget.CHORD_OUTSET * sag.max(), rtol=1e-3, atol=1e-6)
         np.testing.assert_allclose((mid - exact) / PIXEL, budget.CHORD_OUTSET * sag.max() - sag, rtol=1e-3, atol=1e-6)
         assert np.all(mid < exact)
-        # the innermost circle is within the wide band (BAND_WIDE_FACTOR of the coverage tolerance, the
-        # plane has no edge near the axis) of the ring
+        # the innermost circle is within the band (the wide one where the plane has no edge near the
+        # axis: BAND_WIDE_FACTOR of the coverage tolerance) of the ring
         inner = _angle_from_hole(im.direction[p.grid_vertices][:n])
         wide = budget.BAND_WIDE_FACTOR * budget.COVERAGE_FACTOR * MAX_ERROR
         assert np.abs(inner - theta[0]).max() / PIXEL <= wide * 1.5
@@ -270,7 +270,7 @@ def test_patch_faces_take_their_corners_values_from_the_triangles_under_them(lut
     # away from the seam, every corner has the source's own value
     side = island[t].reshape(-1, 3)
     crosses = side.any(axis=1) & ~side.all(axis=1)
-    assert (~crosses).sum() > 0.8 * n_p  # (the seam runs through the crossing: the band's faces beside it cross)
+    assert (~crosses).sum() > 0.9 * n_p
     np.testing.assert_allclose(corner_uv[~crosses], pl[~crosses], atol=1e-9)
 
 
@@ -500,12 +500,12 @@ def test_back_faces_of_a_closed_sphere(lut):
 def test_patch_images_and_facing_from_one_lookup(lut):
     """On a closed surface a patch's faces are tested for facing from the rays' tangents, looked up
     with the vertices' images (one interpolation stencil); the images are map_vertices' to the bit. The
-    sphere is where the benchmark orbit's 174 deg frame puts it: the far crossing's patch shows under
-    a third of its faces in order 1 (its outer rows) and a few in order 2."""
+    sphere is where the benchmark orbit's 174 deg frame puts it: the far crossing's patch shows a fifth
+    of its faces in order 1 and a few in order 2."""
     a = math.radians(174.0)
     pts, tris = _sphere([3.0 * math.cos(a), 3.0 * math.sin(a), 0.01])
     far, near = sorted(_patches(pts, tris, lut, closed=True), key=lambda p: p.crossing.along)
-    assert 0 < far.facing[1].sum() < 0.35 * len(far.tris) and far.facing[2].sum() < 0.03 * len(far.tris)
+    assert 0 < far.facing[1].sum() < 0.3 * len(far.tris) and far.facing[2].sum() < 0.01 * len(far.tris)
     for p in (far, near):
         off = ~p.limit  # the vertices off the axis (the limit vertices' images are the ring's points)
         for o, im in p.images.items():

@@ -61,14 +61,14 @@ PATCH_BAND_FACTOR = 1.0
 of the Einstein ring; the band inside it is drawn by pieces that span the whole way to the ring,
 refined in azimuth (axis_patch.band_shape) so that they stay within the tolerance."""
 
-BAND_WIDE_FACTOR = 16.0
-"""The same as PATCH_BAND_FACTOR for the wide band a patch tries first: its innermost circle where the
-image is within this times the coverage tolerance of the ring (a pixel at the add-on's tolerance).
-The refined band draws its points as exactly as the grid's circles would, so a wide band only saves
-circles (up to half a patch's faces next to a large ring). It is taken only as far as the crossed
-triangle reaches round the axis (a flat piece of surface: the grid's circles find the mesh's edges,
-folds and holes), and where its innermost circle does not go all round the sheet the patch takes
-the narrow band."""
+BAND_WIDE_FACTOR = 1.0
+"""The same as PATCH_BAND_FACTOR for a wide band a patch tries first (where the sheet has no edge
+near the axis; where its innermost circle does not go all round the sheet it takes the narrow
+band). The refined band draws its points as exactly as the grid's circles, so a wide band would only
+save circles (16: up to half a patch's faces next to a large ring), but its faces then reach over
+many source triangles and carry their corner values (UVs) extrapolated from one of them: across the
+benchmark sphere's UV seam next to the axis that drew textures 2-80 pixels off at 4-16
+(benchmarks/bench_accuracy.py, 0 and 180 deg). 1.0: off, the band as narrow as PATCH_BAND_FACTOR."""
 
 PATCH_AIM = 0.95
 """An axis patch's pieces (its grid's rows and its band's azimuth steps, axis_patch.grid_shape and
