@@ -297,3 +297,40 @@ def test_gather_reuses_what_it_derived_from_equal_arrays_only():
         bpy.data.meshes.remove(me)
         gather._KNOWN.clear()
         gather._LAST_NORMALS.clear()
+
+
+def test_gather_reuse_is_dropped_on_file_load_and_unregister():
+    """The gather's reuse (gather._KNOWN, _LAST_NORMALS: up to two meshes' arrays) is dropped when a
+    file is loaded (the load_pre handler) and when the add-on is unregistered: the last file's meshes
+    are not kept alive."""
+    bpy = pytest.importorskip("bpy")
+    import bmesh
+
+    import grlens_addon
+    from grlens_addon.blender import gather, handlers
+
+    grlens_addon.register()
+
+    def fill():
+        me = bpy.data.meshes.new("gather forget")
+        bm = bmesh.new()
+        bm.loops.layers.uv.new("UVMap")
+        bmesh.ops.create_uvsphere(bm, u_segments=8, v_segments=4, radius=1.0, calc_uvs=True)
+        bm.to_mesh(me)
+        bm.free()
+        part = gather.mesh_part(me)
+        gather._world_normals(part.corner_normals, np.eye(3))
+        bpy.data.meshes.remove(me)
+        assert gather._KNOWN and any(gather._KNOWN) and gather._LAST_NORMALS
+
+    try:
+        fill()
+        assert handlers.on_load_pre in bpy.app.handlers.load_pre
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)  # (load_pre runs)
+        assert not any(gather._KNOWN) and not gather._LAST_NORMALS
+        fill()
+        grlens_addon.unregister()
+        assert not any(gather._KNOWN) and not gather._LAST_NORMALS
+    finally:
+        grlens_addon.register()
+        gather.forget_all()

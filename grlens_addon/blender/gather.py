@@ -122,6 +122,14 @@ its triangles' corners, UVs and normals instead of deriving them again (comparin
 speed; the quads' split and the corners' gathers are not)."""
 
 
+def forget_all() -> None:
+    """Drop the arrays kept for reuse (_KNOWN, _LAST_NORMALS: up to two meshes' arrays): a file being
+    loaded or the add-on being disabled (rebuild.forget_all, registration.unregister) must not keep
+    the last file's meshes alive."""
+    _KNOWN.clear()
+    _LAST_NORMALS.clear()
+
+
 def _equal(a, b) -> bool:
     return a is not None and b is not None and a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b)
 

@@ -385,6 +385,7 @@ def forget_all() -> None:
     on their first update)."""
     _INPUTS.clear()
     upload.forget_all()
+    gather.forget_all()
 
 
 def _equal_inputs(a, b) -> bool:
