@@ -98,10 +98,12 @@ def test_closed_volume_from_shared_normals():
 
 
 def test_block_passes_are_the_plain_arithmetic_to_the_bit(monkeypatch):
-    """The dense passes in blocks (frame.edge_lengths, visibility's normals and back-face masks) give
-    exactly what the plain whole-array arithmetic gives (observer_view.chord_length, silhouette.normals,
-    the corner-by-corner n . d test), NaN and degenerate triangles included, whatever the block size;
-    their checkpoint is called between blocks."""
+    """The dense passes in blocks (frame.edge_lengths, visibility's pass over the triangles) give
+    exactly what the plain whole-array arithmetic gives (observer_view.chord_length; the back-face
+    masks of visibility._away_rows), NaN and degenerate triangles included, whatever the block size,
+    the closed surface's volume that sum to rounding, and the back-face masks those of the unit
+    leaving directions dotted with the unit normals (but within 1e-12 of the margin); their
+    checkpoint is called between blocks."""
     from grlens_addon.core import frame as F
     from grlens_addon.core import observer_view
 
@@ -114,6 +116,15 @@ def test_block_passes_are_the_plain_arithmetic_to_the_bit(monkeypatch):
     d /= np.linalg.norm(d, axis=1)[:, None]
     d[11] = np.nan
     ev = rng.integers(0, len(pts), (7000, 2))
+    # the back-face test's inputs: an orthonormal pair e1, e2 per vertex and unit in-plane directions
+    e1 = np.array([0.6, 0.0, 0.8])
+    e2 = rng.normal(size=(len(pts), 3))
+    e2 -= np.multiply.outer(e2 @ e1, e1)
+    e2 /= np.linalg.norm(e2, axis=1)[:, None]
+    ang = rng.uniform(0, 2 * np.pi, (2, len(pts)))
+    in_plane = {1: (np.cos(ang[0]), np.sin(ang[0])), 2: (np.cos(ang[1]), np.sin(ang[1]))}
+    in_plane[2][0][11] = np.nan
+    ok = np.isfinite(pts).all(axis=1)[tris].all(axis=1)
     for block in (1000, 1 << 15):
         monkeypatch.setattr(F, "EDGE_BLOCK", block)
         monkeypatch.setattr(visibility, "TRI_BLOCK", block)
@@ -122,17 +133,30 @@ def test_block_passes_are_the_plain_arithmetic_to_the_bit(monkeypatch):
         assert len(calls) == (len(ev) - 1) // block
         np.testing.assert_array_equal(chord, observer_view.chord_length(d[ev[:, 1]], d[ev[:, 0]]))
         assert np.array_equal(length, observer_view.row_norm(pts[ev[:, 1]] - pts[ev[:, 0]]), equal_nan=True)
-        raw, unit = visibility._normals_in_blocks(pts, tris, lambda q: calls.append(q))
+        n_calls = len(calls)
+        six, away = visibility._whole_pass(pts, tris, e1, e2, in_plane, True, lambda q: calls.append(q))
+        assert len(calls) - n_calls == (len(tris) - 1) // block
         want = visibility.silhouette.normals(pts, tris)
-        assert np.array_equal(raw, want, equal_nan=True)
+        p0 = pts[tris[:, 0]] - pts[tris[0, 0]]
+        whole = np.einsum("ij,ij->", p0[ok], want[ok])  # (the triangles without a NaN corner)
+        clean = visibility._whole_pass(pts, tris[ok], e1, e2, {}, True)[0]
+        assert abs(clean - whole) <= 1e-12 * np.abs(np.einsum("ij,ij->i", p0[ok], want[ok])).sum()
+        assert np.isnan(six)  # (a NaN corner)
         with np.errstate(invalid="ignore", divide="ignore"):
-            want_unit = want / observer_view.row_norm(want)[:, None]
-        assert np.array_equal(unit, want_unit, equal_nan=True)
-        away = visibility._away_in_blocks(unit, tris, d)
-        with np.errstate(invalid="ignore"):
-            dots = np.stack([np.einsum("fx,fx->f", unit, d[tris[:, k]]) for k in range(3)], axis=1)
-        np.testing.assert_array_equal(away, (dots < -visibility.B.BACK_FACE_MARGIN).all(axis=1))
-        assert 0 < away.sum() < len(tris)
+            unit = want / observer_view.row_norm(want)[:, None]
+        assert set(away) == {1, 2}
+        for o in (1, 2):
+            # the same arithmetic on whole arrays, to the bit
+            np.testing.assert_array_equal(away[o], visibility._away_rows(unit, tris, e1, e2, in_plane)[o])
+            # against the unit directions d = (a e1 + b e2) / |a e1 + b e2| dotted with n
+            a, b = in_plane[o]
+            u = np.multiply.outer(a, e1) + b[:, None] * e2
+            with np.errstate(invalid="ignore", divide="ignore"):
+                u /= observer_view.row_norm(u)[:, None]
+                dots = np.stack([np.einsum("fx,fx->f", unit, u[tris[:, k]]) for k in range(3)], axis=1)
+            near = (np.abs(dots + visibility.B.BACK_FACE_MARGIN) < 1e-12).any(axis=1)
+            np.testing.assert_array_equal(away[o][~near], (dots < -visibility.B.BACK_FACE_MARGIN).all(axis=1)[~near])
+            assert 0 < away[o].sum() < len(tris)
 
 
 def test_the_map_in_chunks_is_one_call_to_the_bit(table, monkeypatch):
