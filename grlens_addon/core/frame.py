@@ -303,28 +303,49 @@ def images_in_chunks(frame: Frame, points, plane=None, tangents: bool = False, p
     n = len(points)
     if n <= MAP_CHUNK:
         return frame.map.images(points, frame.orders, plane, tangents=tangents)
-    parts = []
+    out = None  # {order: mapping.Images} of all the points, made at the first call, filled chunk by chunk
     for s in range(0, n, MAP_CHUNK):
         if s:
             frame.checkpoint(part[0] + (part[1] - part[0]) * s / n)
         e = min(s + MAP_CHUNK, n)
         sub = None if plane is None else mapping.PlaneCoordinates(
             r=plane.r[s:e], phi=plane.phi[s:e], e2=plane.e2[s:e], on_axis=plane.on_axis[s:e])
-        parts.append(frame.map.images(points[s:e], frame.orders, sub, tangents=tangents))
-    out = {}
-    for o in frame.orders:
-        values = {}
-        for f in dataclasses.fields(mapping.Images):
-            got = [getattr(p[o], f.name) for p in parts]
-            if f.name == "plane":
-                values[f.name] = plane if plane is not None else mapping.PlaneCoordinates(
-                    *(np.concatenate([getattr(g, k) for g in got]) for k in ("r", "phi", "e2", "on_axis")))
-            elif all(isinstance(g, np.ndarray) for g in got):
-                values[f.name] = np.concatenate(got)
-            else:
-                values[f.name] = got[0]  # (None)
-        out[o] = mapping.Images(**values)
+        got = frame.map.images(points[s:e], frame.orders, sub, tangents=tangents)
+        if out is None:  # (each chunk copied in as it comes: its own arrays are freed for the next
+            # chunk's, not all kept until a concatenation)
+            out = {o: _empty_like_images(img, n, plane) for o, img in got.items()}
+            if plane is None:  # (one PlaneCoordinates for every order)
+                for o in out:
+                    out[o].plane = out[frame.orders[0]].plane
+        for o, img in got.items():
+            _copy_images(out[o], img, s, e, with_plane=plane is None and o == frame.orders[0])
     return out
+
+
+_PLANE_FIELDS = ("r", "phi", "e2", "on_axis")
+
+
+def _empty_like_images(img, n, plane):
+    """mapping.Images of ``n`` points with uninitialised arrays shaped and typed like ``img``'s (None
+    where ``img`` has None), and ``plane`` (or new arrays like ``img.plane``'s when None)."""
+    def like(a):
+        return None if a is None else np.empty((n,) + a.shape[1:], a.dtype)
+
+    values = {f.name: like(getattr(img, f.name)) for f in dataclasses.fields(mapping.Images) if f.name != "plane"}
+    values["plane"] = plane if plane is not None else mapping.PlaneCoordinates(
+        *(like(getattr(img.plane, k)) for k in _PLANE_FIELDS))
+    return mapping.Images(**values)
+
+
+def _copy_images(dst, src, s, e, with_plane=False):
+    """``src``'s arrays (mapping.Images of points s to e) into rows s:e of ``dst``'s (and its plane's)."""
+    for f in dataclasses.fields(mapping.Images):
+        a = getattr(src, f.name)
+        if isinstance(a, np.ndarray):
+            getattr(dst, f.name)[s:e] = a
+    if with_plane:
+        for k in _PLANE_FIELDS:
+            getattr(dst.plane, k)[s:e] = getattr(src.plane, k)
 
 
 EDGE_BLOCK = 1 << 15

@@ -127,9 +127,7 @@ def plan_levels(frame: Frame, source: Source, coarse: SourceImages, sight, patch
         by_patch = replaced[selected]
         plan.set_aside["patch_replaced"] = int(by_patch.sum())
         selected = selected[~by_patch]
-    lv = levels.take(edges.of_tri.take(selected, axis=0))
-    tri_level = np.maximum(np.maximum(lv[:, 0], lv[:, 1]), lv[:, 2])
-    away = sight.back_faces(selected, tri_level, order)
+    away = sight.back_faces(selected, levels, order)
     plan.set_aside["back_face"] = int(away.size)
     if away.size:
         drop = np.zeros(len(tris), bool)

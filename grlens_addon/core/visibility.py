@@ -149,15 +149,18 @@ class Sight:
         sign = silhouette.facing_signs(pts, local, self.leaving(corners, order))
         return (sign == sign[:, :1]).all(axis=1) & (sign[:, 0] != 0)
 
-    def back_faces(self, selected, tri_level, order) -> np.ndarray:
-        """The indices among ``selected`` (source triangles, with their levels ``tri_level``) hidden
-        behind the surface's front in ``order``, looked for only when their pieces would be many
-        (BACK_FACE_MIN_PIECES): among the split ones, or among all of them on a mesh that has that many
-        triangles itself (a dense mesh, whose back faces would otherwise all be drawn)."""
-        split = selected[tri_level > 1]
-        n_tris = len(self.source.tris)
+    def back_faces(self, selected, levels, order) -> np.ndarray:
+        """The indices among ``selected`` (source triangles; ``levels`` (E,): the plan's per-edge levels)
+        hidden behind the surface's front in ``order``, looked for only when their pieces would be many
+        (BACK_FACE_MIN_PIECES): among all of them on a mesh that has that many triangles itself (a
+        dense mesh, whose back faces would otherwise all be drawn), or among the split ones (a
+        triangle's level: its edges' largest)."""
         if len(selected) >= B.BACK_FACE_MIN_PIECES and self.closed():  # a dense mesh: every triangle
             return selected[self.turned_away(selected, (order,))]
+        lv = levels.take(self.source.edges.of_tri.take(selected, axis=0))
+        tri_level = np.maximum(np.maximum(lv[:, 0], lv[:, 1]), lv[:, 2])
+        split = selected[tri_level > 1]
+        n_tris = len(self.source.tris)
         if split.size and int((tri_level[tri_level > 1] ** 2).sum()) >= max(B.BACK_FACE_MIN_PIECES, n_tris) \
                 and self.closed():
             return split[self.turned_away(split, (order,))]
