@@ -233,6 +233,31 @@ def test_float32_uvs_give_the_same_image_uvs(table, name):
         assert b[o].corner_uv.dtype in (np.float32, np.float64)
 
 
+@pytest.mark.parametrize("name", ["sphere 180 (patches)", "floor (cut, strips)", "sphere 45"])
+def test_float32_normals_give_the_float32_of_the_image_normals(table, name):
+    """Corner normals given in float32 (as the gather passes them on) give, for whole source
+    triangles, the float32 of the image normals the same values in float64 give (what the upload
+    wrote before), and for cut pieces and patch faces normals interpolated in float64 from the same
+    values (equal to rounding); the GR irradiance from them is equal to 1e-6 relative."""
+    src = SCENES[name]()
+    rng = np.random.default_rng(4)
+    n = rng.normal(size=(len(src.tris), 3, 3))
+    n /= np.linalg.norm(n, axis=2, keepdims=True)
+    n32 = n.astype(np.float32)
+    settings = BA.make_settings(CAM)
+    light = pipeline.Light(np.array([0.0, 0.0, 30.0]), 1.0, LUTFamily().at(30.0))
+    a = pipeline.build_images(pipeline.SourceMesh(src.positions, src.tris, None, None, n32.astype(np.float64)),
+                              SCENE, table, settings, light, CAM.frustum_planes())
+    b = pipeline.build_images(pipeline.SourceMesh(src.positions, src.tris, None, None, n32), SCENE, table,
+                              settings, light, CAM.frustum_planes())
+    for o in a:
+        np.testing.assert_array_equal(a[o].tris, b[o].tris)
+        assert a[o].corner_normal.shape == b[o].corner_normal.shape
+        np.testing.assert_array_equal(np.asarray(a[o].corner_normal, np.float32),
+                                      np.asarray(b[o].corner_normal, np.float32))
+        np.testing.assert_allclose(b[o].irradiance, a[o].irradiance, rtol=1e-6, atol=0)
+
+
 def test_image_edges_upload_into_a_valid_blender_mesh(table):
     """The edges written by upload.upload are a valid mesh for Blender (validate() changes nothing)
     and the ones Blender finds itself."""
@@ -315,8 +340,14 @@ def test_gather_reuses_what_it_derived_from_equal_arrays_only():
         inv_t = np.linalg.inv(np.diag([1.0, 2.0, 3.0])).T
         direct = first.corner_normals @ inv_t.T
         direct /= np.linalg.norm(direct, axis=-1, keepdims=True)
-        np.testing.assert_allclose(n2, direct, atol=1e-15)
-        np.testing.assert_allclose(np.linalg.norm(n1, axis=-1), 1.0, atol=1e-15)
+        # float32, as Blender stores normals: the float64 transform rounded once
+        assert n1.dtype == n2.dtype == first.corner_normals.dtype == np.float32
+        np.testing.assert_allclose(n2, direct, rtol=0, atol=6e-8)
+        np.testing.assert_allclose(np.linalg.norm(n1.astype(np.float64), axis=-1), 1.0, atol=2e-7)
+        rot_t = np.linalg.inv(rot).T
+        want = first.corner_normals.astype(np.float64) @ rot_t.T
+        want /= np.linalg.norm(want, axis=-1, keepdims=True)
+        np.testing.assert_allclose(n1, want, rtol=0, atol=2e-7)  # (Blender's own normals unit to float32)
     finally:
         bpy.data.meshes.remove(me)
         gather._KNOWN.clear()
