@@ -4,7 +4,7 @@ comparisons of pipeline.build_images: ``--compare A B``).
 
 The inputs of ``pipeline.build_images`` are captured once from Blender (benchmarks/bench_dense.py's
 scene: ``bpy.ops.grlens.demo_scene``, 1920x1080, the sphere's frames, the render tolerance, or the
-viewport's with ``--preview``) into an .npz (``--capture``, default /tmp/grlens_dense_<size>_<frames>.npz,
+viewport's with ``--preview``) into an .npz (``--capture``, default /tmp/grlens_dense_<CAPTURE_VERSION>_<size>_<frames>.npz,
 reused if present); the core then runs bpy-free on them, with the family's table for the camera's
 radius (lutgen.LUTFamily, the add-on's default). Stage times come from the progress hook
 (pipeline.Progress is called before every stage and inside long ones): time from one stage's call
@@ -23,6 +23,11 @@ import numpy as np
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
+
+
+CAPTURE_VERSION = "v2"
+"""In the default capture's file name: captures of an earlier gather (float64 UVs and normals) are not
+reused."""
 
 
 def capture(path, size, frames, preview):
@@ -121,7 +126,7 @@ def main(argv=None):
     if args.compare:
         return compare(*args.compare)
     frames = [int(f) for f in args.frames.split(",")]
-    path = args.capture or (f"/tmp/grlens_dense_{args.size}{'_preview' if args.preview else ''}_"
+    path = args.capture or (f"/tmp/grlens_dense_{CAPTURE_VERSION}_{args.size}{'_preview' if args.preview else ''}_"
                             f"{'_'.join(map(str, frames))}.npz")
     if not os.path.exists(path):
         capture(path, args.size, frames, args.preview)

@@ -159,10 +159,15 @@ def test_block_passes_are_the_plain_arithmetic_to_the_bit(monkeypatch):
             assert 0 < away[o].sum() < len(tris)
 
 
-def test_the_map_in_chunks_is_one_call_to_the_bit(table, monkeypatch):
+@pytest.mark.parametrize("threads", [1, 2])
+def test_the_map_in_chunks_is_one_call_to_the_bit(table, monkeypatch, threads):
     """frame.images_in_chunks (a dense mesh's vertices and edge midpoints in calls of MAP_CHUNK points,
-    a checkpoint between calls) gives exactly the values of one call, tangents and plane included."""
+    a checkpoint between calls, or between pairs of calls run in two threads) gives exactly the
+    values of one call, tangents and plane included."""
     from grlens_addon.core import frame as F
+
+    monkeypatch.setattr(F, "THREADS", threads)
+    assert F.threads_for(table)
 
     src = _dense_sphere(60)
     fr = F.frame_context(SCENE, table, BA.make_settings(CAM), None, CAM.frustum_planes())
@@ -174,12 +179,37 @@ def test_the_map_in_chunks_is_one_call_to_the_bit(table, monkeypatch):
     for given in (plane, None):
         calls.clear()
         parts = F.images_in_chunks(fr, src.positions, given, True, (0.0, 0.5))
-        assert len(calls) == (len(src.positions) - 1) // 3000 and all(0 < c < 0.5 for c in calls)
+        n_calls = -(-len(src.positions) // 3000)
+        assert len(calls) == (n_calls - 1) // threads and all(0 < c < 0.5 for c in calls)
         for o in fr.orders:
             for name in ("position", "direction", "distance", "valid", "xi", "dt", "ux", "uy"):
                 assert np.array_equal(getattr(parts[o], name), getattr(whole[o], name), equal_nan=True), name
             for name in ("r", "phi", "e2", "on_axis"):
                 assert np.array_equal(getattr(parts[o].plane, name), getattr(plane, name)), name
+
+
+@pytest.mark.parametrize("name", ["sphere 180 (patches)", "dense sphere 60"])
+def test_two_threads_build_the_images_of_one(table, monkeypatch, name):
+    """build_images with frame.THREADS = 2 (the map's chunks two at a time, both orders assembled at
+    once) gives exactly the images of the calling thread alone, a light's irradiance included."""
+    from grlens_addon.core import frame as F
+
+    src = SCENES[name]()
+    rng = np.random.default_rng(6)
+    src.corner_normals = rng.normal(size=(len(src.tris), 3, 3)).astype(np.float32)
+    monkeypatch.setattr(pipeline, "ASSEMBLE_THREADS_MIN", 0)
+    monkeypatch.setattr(F, "MAP_CHUNK", 3000)
+    light = pipeline.Light(np.array([0.0, 0.0, 30.0]), 1.0, LUTFamily().at(30.0))
+    got = {}
+    for threads in (1, 2):
+        monkeypatch.setattr(F, "THREADS", threads)
+        got[threads] = pipeline.build_images(src, SCENE, table, BA.make_settings(CAM), light, CAM.frustum_planes())
+    assert list(got[1]) == list(got[2]) == [1, 2]
+    for o in got[1]:
+        for k, v in vars(got[1][o]).items():
+            if isinstance(v, np.ndarray):
+                assert np.array_equal(v, getattr(got[2][o], k), equal_nan=True), k
+        assert len(got[1][o].tris) > 0 and got[1][o].irradiance is not None
 
 
 def test_cleaning_shortcuts_keep_what_the_full_tests_keep():

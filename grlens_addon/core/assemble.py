@@ -167,7 +167,7 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
         rows = (sub.row_bary, pieces.selected.take(sub.row_src),
                 sub.corner_row if everything else sub.corner_row.take(kept, axis=0), sub.n_unit_rows)
     v_pos, v_dir = img.position.take(used, axis=0), img.direction.take(used, axis=0)
-    v_dist, v_src = img.distance[used], sub.positions.take(used, axis=0)
+    v_dist, v_src = img.distance.take(used), sub.positions.take(used, axis=0)
     patch_corners = None
     order_patches = [p for p in patches if order in p.orders]
     parts = _patch_parts(order_patches, patch_keep, order, len(used)) if order_patches else None
@@ -222,8 +222,8 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
     if redshift is not None:
         redshift = np.where(np.isnan(redshift), 0.0, redshift)  # 0: no circular orbit there (r <= 1.5 r_s, axis)
     return ImageMesh(order=order, positions=v_pos, tris=image_tris, corner_uv=corner_uv,
-                     material=mesh.material[src_tri], light_travel_time=v_dist, irradiance=irr, report=report,
-                     source_tri=source.origin[src_tri], source_position=v_src, redshift=redshift,
+                     material=mesh.material.take(src_tri), light_travel_time=v_dist, irradiance=irr, report=report,
+                     source_tri=source.origin.take(src_tri), source_position=v_src, redshift=redshift,
                      disc_colour=colour, corner_normal=n, redshift_gravity=gravity,
                      edge_basis=(vertex_source, src_tri, source.tris, source.edges))
 

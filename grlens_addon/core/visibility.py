@@ -30,6 +30,7 @@ class Sight:
         self._in_plane = {}
         self._away = {}
         self._six_volume = None
+        self._trig = None
 
     def closed(self) -> bool:
         """True for a closed, outward-wound surface seen from outside (computed once)."""
@@ -73,7 +74,9 @@ class Sight:
         plane's, source.plane.e2; mapping.leaving_in_plane divided by its length sqrt(a^2 + b^2): e1
         and e2 are orthonormal); NaN where there is no ray."""
         if order not in self._in_plane:
-            a, b = mapping.leaving_in_plane(self.source.plane, *self._tangents(order))
+            if self._trig is None:  # (the same for every order)
+                self._trig = mapping.plane_trig(self.source.plane)
+            a, b = mapping.leaving_in_plane(self.source.plane, *self._tangents(order), self._trig)
             with np.errstate(invalid="ignore", divide="ignore"):
                 h = np.sqrt(a * a + b * b)
                 a /= h
