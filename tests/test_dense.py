@@ -45,6 +45,7 @@ SCENES = {
 
 def _check_edges(img):
     verts, corner_edge = img.edges()
+    assert img.edges()[0] is verts  # (found once: a worker thread's build finds them for the upload)
     tris = img.tris
     assert corner_edge.shape == tris.shape
     ends = verts[corner_edge]  # (F, 3, 2): each corner's edge joins that corner and the next

@@ -57,16 +57,22 @@ class ImageMesh:
     subdivision.Edges), from which :meth:`edges` takes the edges of whole source triangles; None: the
     edges are found from the faces alone."""
 
+    _edges: tuple | None = field(repr=False, default=None, compare=False)
+
     def edges(self) -> tuple[np.ndarray, np.ndarray]:
         """(verts (E, 2), corner_edge (F, 3)): the mesh's unique undirected edges (vertex indices) and
         for each face corner k the edge joining corners k and (k + 1) % 3, as Blender stores a mesh. A
         dense source's faces are mostly whole source triangles, whose edges are the source's (kept
-        per topology): only the other faces' edges are sorted out (:func:`image_edges`)."""
-        if self.edge_basis is None:
-            e = subdivision.mesh_edges(self.tris) if len(self.tris) else subdivision.Edges(
-                np.zeros((0, 2), np.int64), np.zeros((0, 3), np.int64))
-            return e.verts, e.of_tri
-        return image_edges(self.tris, *self.edge_basis)
+        per topology): only the other faces' edges are sorted out (:func:`image_edges`). Found once
+        (a build in a worker thread finds them there, before the upload reads them)."""
+        if self._edges is None:
+            if self.edge_basis is None:
+                e = subdivision.mesh_edges(self.tris) if len(self.tris) else subdivision.Edges(
+                    np.zeros((0, 2), np.int64), np.zeros((0, 3), np.int64))
+                self._edges = (e.verts, e.of_tri)
+            else:
+                self._edges = image_edges(self.tris, *self.edge_basis)
+        return self._edges
 
 
 def image_edges(tris, vertex_source, face_source, source_tris, source_edges) -> tuple[np.ndarray, np.ndarray]:
