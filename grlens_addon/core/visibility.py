@@ -189,7 +189,8 @@ class Sight:
             return np.arange(len(tris)), None
         out_v = culling.outside_bits(vertex_images.position, planes)  # (N,) bit k: outside plane k
         e = edges.of_tri
-        common = out_v[tris[:, 0]] & out_v[tris[:, 1]] & out_v[tris[:, 2]]
+        c = out_v.take(tris)  # (one gather of every corner)
+        common = c[:, 0] & c[:, 1] & c[:, 2]
         cand = np.flatnonzero(common)
         if cand.size == 0:
             return np.arange(len(tris)), out_v
