@@ -153,21 +153,22 @@ class Sight:
         return (sign == sign[:, :1]).all(axis=1) & (sign[:, 0] != 0)
 
     def back_faces(self, selected, levels, order) -> np.ndarray:
-        """The indices among ``selected`` (source triangles; ``levels`` (E,): the plan's per-edge levels)
-        hidden behind the surface's front in ``order``, looked for only when their pieces would be many
-        (BACK_FACE_MIN_PIECES): among all of them on a mesh that has that many triangles itself (a
-        dense mesh, whose back faces would otherwise all be drawn), or among the split ones (a
-        triangle's level: its edges' largest)."""
+        """(len(selected),) bool: the triangles among ``selected`` (source triangles; ``levels`` (E,): the
+        plan's per-edge levels) hidden behind the surface's front in ``order``, looked for only when
+        their pieces would be many (BACK_FACE_MIN_PIECES): among all of them on a mesh that has that
+        many triangles itself (a dense mesh, whose back faces would otherwise all be drawn), or among
+        the split ones (a triangle's level: its edges' largest)."""
+        hidden = np.zeros(len(selected), bool)
         if len(selected) >= B.BACK_FACE_MIN_PIECES and self.closed():  # a dense mesh: every triangle
-            return selected[self.turned_away(selected, (order,))]
+            return self.turned_away(selected, (order,))
         lv = levels.take(self.source.edges.of_tri.take(selected, axis=0))
         tri_level = np.maximum(np.maximum(lv[:, 0], lv[:, 1]), lv[:, 2])
-        split = selected[tri_level > 1]
+        split = np.flatnonzero(tri_level > 1)
         n_tris = len(self.source.tris)
-        if split.size and int((tri_level[tri_level > 1] ** 2).sum()) >= max(B.BACK_FACE_MIN_PIECES, n_tris) \
+        if split.size and int((tri_level.take(split) ** 2).sum()) >= max(B.BACK_FACE_MIN_PIECES, n_tris) \
                 and self.closed():
-            return split[self.turned_away(split, (order,))]
-        return np.zeros(0, np.int64)
+            hidden[split] = self.turned_away(selected.take(split), (order,))
+        return hidden
 
     def below_pixel(self, order, vertex_images: mapping.Images, mid_images: mapping.Images) -> bool:
         """True when ``order`` is 2 and all valid image points (vertices and probed edge midpoints) lie
