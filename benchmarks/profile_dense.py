@@ -12,7 +12,7 @@ to the next stage's, per stage and pass, and how far the progress fraction shown
 the next) strays from the fraction of the build's time gone.
 
 Usage: ./dev python benchmarks/profile_dense.py [--size 1M] [--frames 30] [--repeat 3] [--preview]
-       [--cprofile N] [--dump FILE] [--compare A B] [--write]
+       [--threads N] [--cprofile N] [--dump FILE] [--compare A B] [--write]
 """
 import argparse
 import os
@@ -117,6 +117,8 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--preview", action="store_true", help="the viewport's tolerance")
     ap.add_argument("--capture", default=None, help="the captured inputs (.npz)")
+    ap.add_argument("--threads", type=int, default=None, metavar="N",
+                    help="grlens_addon.core.frame.THREADS for the builds (default: as the add-on has it)")
     ap.add_argument("--cprofile", type=int, default=0, metavar="N", help="print the N costliest functions")
     ap.add_argument("--dump", default=None, help="write the image meshes' arrays to this .npz")
     ap.add_argument("--compare", nargs=2, default=None, metavar=("A", "B"), help="compare two dumps")
@@ -131,6 +133,10 @@ def main(argv=None):
     if not os.path.exists(path):
         capture(path, args.size, frames, args.preview)
     runs = load(path)
+    if args.threads is not None:
+        from grlens_addon.core import frame
+
+        frame.THREADS = args.threads
     for run in runs:
         timed_build(run)  # (tables and caches first)
     dump = {}
