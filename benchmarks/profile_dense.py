@@ -189,10 +189,13 @@ def write(table, frame, total, tris, args):
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     from provenance import write_section
 
+    from grlens_addon.core import frame as core_frame
+
     write_section(OUT, BEGIN, END, "benchmarks/profile_dense.py", [
         f"Where the core's time goes (`./dev python benchmarks/profile_dense.py --write`: bench_dense's "
         f"{args.size} sphere, frame {frame}, the {'viewport' if args.preview else 'render'} tolerance, "
-        f"pipeline.build_images bpy-free on the inputs captured from Blender; medians of {args.repeat} builds, "
+        f"pipeline.build_images bpy-free on the inputs captured from Blender, {core_frame.THREADS} thread(s) "
+        f"(frame.THREADS); medians of {args.repeat} builds, "
         f"{total:.2f} s, image triangles {tris}; per stage, the time from its progress call to the "
         "next stage's):", "",
         "| stage (both orders' passes) | median [s] | share of the median build | STAGE_WEIGHTS share |",
