@@ -105,47 +105,113 @@ def label_of_b(kind: str, b) -> np.ndarray:
         return np.log(1.0 / q - 1.0) if kind == "P" else np.log(q - 1.0)
 
 
+def _far_sigma_e1(b):
+    """(sigma, e1) of lutgen.orbit.orbit_from_b for turning orbits with impact parameters b > b_crit
+    (r_s): the same operations on the same numbers (the trigonometric form, e1 polished by Newton's
+    method where sigma > 0.5), without the hyperbolic branch or the roots that follow from them."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        y = 4.0 * (b - B_C) * (b + B_C) / (b * b)
+        sq = 0.5 * np.sqrt(np.abs(y))
+        sigma = 4.0 * np.sin(np.arcsin(np.minimum(sq, 1.0)) / 3.0) ** 2
+    e1 = (sigma - 1.0) / 3.0
+    big = np.flatnonzero(sigma > 0.5)
+    if big.size:
+        bb = b.take(big)
+        c = 1.0 / (bb * bb)
+        t = 1.0 / bb
+        e = np.where(bb > 1e3, t * (-1.0 + t * (0.5 - 0.625 * t)), e1.take(big))
+        for _ in range(3):
+            e = e - (e * e * (1.0 - e) - c) / (e * (2.0 - 3.0 * e))
+        e1[big] = e
+        sigma[big] = 1.0 + 3.0 * e
+    return sigma, e1
+
+
+def _turning_sigma_e1(rho):
+    """(sigma, e1) of turning orbits (kinds T, I) with labels rho: from rho next to the critical orbit,
+    as lutgen.orbit.orbit_from_b from b for rho > 0 (far orbits, whose e1 ~ -1/b it polishes)."""
+    x = np.exp(rho)
+    y = 4.0 * x / (1.0 + x)
+    sigma = 4.0 * np.sin(np.arcsin(np.minimum(0.5 * np.sqrt(y), 1.0)) / 3.0) ** 2
+    e1 = (sigma - 1.0) / 3.0
+    far = np.flatnonzero(rho > 0.0)
+    if far.size:
+        sigma[far], e1[far] = _far_sigma_e1(B_C * np.sqrt(1.0 + x.take(far)))
+    return sigma, e1
+
+
 def _orbits(kind, rho) -> _orb.Orbit:
     """Roots of P(u) for labels rho, accurate next to the critical orbit (from rho, not from b)."""
     rho = np.asarray(rho, dtype=float)
-    x = np.exp(rho)
     if kind == "P":  # y = 4 (b^2 - b_c^2) / b^2 = -4 e^rho
-        sigma = -4.0 * np.sinh(np.arcsinh(np.sqrt(x)) / 3.0) ** 2
+        sigma = -4.0 * np.sinh(np.arcsinh(np.sqrt(np.exp(rho))) / 3.0) ** 2
         return _orb._from_sigma_e1(sigma, (sigma - 1.0) / 3.0)
-    far = rho > 0.0
-    y = 4.0 * x / (1.0 + x)
-    sigma = 4.0 * np.sin(np.arcsin(np.minimum(0.5 * np.sqrt(y), 1.0)) / 3.0) ** 2
-    orb = _orb._from_sigma_e1(sigma, (sigma - 1.0) / 3.0)
-    if far.any():  # far orbits: orbit_from_b polishes e1 (~ -1/b)
-        ob = _orb.orbit_from_b(impact_parameter(kind, rho[far]))
-        for f in ("e1", "real", "e2", "e3", "delta", "m", "n"):
-            getattr(orb, f)[far] = getattr(ob, f)
-    return orb
+    return _orb._from_sigma_e1(*_turning_sigma_e1(rho))
 
 
 def _reference_u(kind, rho) -> np.ndarray:
     """u at the reference point of turning orbits of kind "T" (the periapsis, e2) or "I" (the apoapsis,
     e3) with labels rho: the same numbers as :func:`_orbits`'s roots, only the one needed."""
-    rho = np.asarray(rho, dtype=float)
-    far = rho > 0.0
-    x = np.exp(rho)
-    y = 4.0 * x / (1.0 + x)
-    sigma = 4.0 * np.sin(np.arcsin(np.minimum(0.5 * np.sqrt(y), 1.0)) / 3.0) ** 2
-    e1 = (sigma - 1.0) / 3.0
+    sigma, e1 = _turning_sigma_e1(np.asarray(rho, dtype=float))
     one_m = 1.0 - e1
     delta = np.sqrt(one_m * sigma)
     e2 = -2.0 * e1 * one_m / (one_m + delta)
-    out = e2 if kind == "T" else e2 + delta
-    if far.any():  # far orbits: orbit_from_b polishes e1 (~ -1/b)
-        ob = _orb.orbit_from_b(impact_parameter(kind, rho[far]))
-        out[far] = ob.e2 if kind == "T" else ob.e3
-    return out
+    return e2 if kind == "T" else e2 + delta
 
 
 _sweep_inner = _orb.sweep_inner
 
 
+SINGLE_PHASE_RANGE = (1.1, 2.0)
+"""Observers (r_s) at or inside the first or at or beyond the second radius get the crossing rays' phase
+from one elliptic integral (:func:`_crossing_phase_single`); between them, next to the photon sphere,
+from two (:func:`_crossing_phase_pair`), whose difference keeps full accuracy there."""
+
+
 def _crossing_phase(orb, uo) -> np.ndarray:
+    """The angle orbits of kind P (complex roots, ``orb`` from :func:`_orbits`) sweep from the photon
+    sphere to inverse radius ``uo`` (radians): :func:`_crossing_phase_single` away from the photon
+    sphere (SINGLE_PHASE_RANGE), :func:`_crossing_phase_pair` next to it."""
+    lo, hi = SINGLE_PHASE_RANGE
+    if 1.0 / lo <= uo or uo <= 1.0 / hi:
+        return _crossing_phase_single(orb, uo)
+    return _crossing_phase_pair(orb, uo)
+
+
+def _crossing_phase_single(orb, uo) -> np.ndarray:
+    """The angle orbits of kind P (complex roots, ``orb`` from :func:`_orbits`) sweep from the photon
+    sphere to inverse radius ``uo`` (radians): lutgen.orbit.sweep(orb, uo) - sweep(orb, 2/3), as one
+    elliptic integral. Both are F(phi|k^2) / sqrt(A) in Legendre's form (cos phi = (A - x)/(A + x),
+    x = u - e1, amplitudes in [0, pi)); the addition theorem gives F(a) - F(c) = F(g) with
+    sin g = (sin a cos c D_c - sin c cos a D_a) / E, cos g = (cos a cos c + sin a sin c D_a D_c) / E,
+    D = sqrt(1 - k^2 sin^2), E = 1 - k^2 sin^2 a sin^2 c, and g in (-pi, pi) (F(a) - F(c) lies in
+    (-2K, 2K)); F(g) by Carlson's R_F, 2K - F(pi - |g|) where cos g < 0, odd in g. One R_F per orbit
+    (and R_F(0, 1 - k^2, 1) = K where cos g < 0) instead of two; 1 - k^2 is formed without
+    cancellation and D^2 = cos^2 + (1 - k^2) sin^2. Next to the photon sphere both amplitudes approach
+    pi/2 as k -> 1 and sin g cancels: used only beyond SINGLE_PHASE_RANGE (within 1e-12 rad of the
+    pair there, tests/test_rays.py)."""
+    a, me1, n = orb.e1, orb.m - orb.e1, orb.n
+    big_a = np.sqrt(me1 ** 2 + n ** 2)
+    k2c = n ** 2 / (2.0 * big_a * (big_a + me1))
+    k2 = 1.0 - k2c
+    x_o, x_c = uo - a, _orb.U_PHOTON - a
+    c_o, c_c = (big_a - x_o) / (big_a + x_o), (big_a - x_c) / (big_a + x_c)
+    s_o, s_c = 2.0 * np.sqrt(big_a * x_o) / (big_a + x_o), 2.0 * np.sqrt(big_a * x_c) / (big_a + x_c)
+    so2, sc2 = s_o * s_o, s_c * s_c
+    dd_o, dd_c = np.sqrt(c_o * c_o + k2c * so2), np.sqrt(c_c * c_c + k2c * sc2)
+    den = 1.0 - k2 * so2 * sc2
+    sg = (s_o * c_c * dd_c - s_c * c_o * dd_o) / den
+    cg = (c_o * c_c + s_o * s_c * dd_o * dd_c) / den
+    c2 = cg * cg
+    s_abs = np.abs(sg)
+    half = s_abs * elliprf(c2, c2 + k2c * s_abs * s_abs, 1.0)
+    neg = np.flatnonzero(cg < 0.0)
+    if neg.size:
+        half[neg] = 2.0 * elliprf(0.0, k2c.take(neg), 1.0) - half.take(neg)
+    return np.copysign(half, sg) / np.sqrt(big_a)
+
+
+def _crossing_phase_pair(orb, uo) -> np.ndarray:
     """The angle orbits of kind P (complex roots, ``orb`` from :func:`_orbits`) sweep from the photon
     sphere to inverse radius ``uo``: lutgen.orbit.sweep(orb, uo) - sweep(orb, 2/3) with the same
     operations on the same numbers (Legendre's form of Carlson's R_F), the terms that do not depend
@@ -494,19 +560,29 @@ def check_any_observer(r_obs) -> float:
 
 class _Flat:
     """The orbit table's three kinds as one array of rows (same columns), for lookups that mix kinds:
-    per kind its first row, label origin and count."""
+    per kind its first row, label origin and count. ``uj``: each node's u (the stored u) and J as one
+    complex number u + i J (row-major, flat), so that one ``take`` reads both (the interpolation
+    weights are real: the sums' real and imaginary parts are those of u and of J, bit for bit)."""
 
     def __init__(self, table: OrbitTable):
         ks = [table.kinds[k] for k in _KINDS]
         self.n_cols = ks[0].n_cols
-        self.u = np.ascontiguousarray(np.concatenate([k.u for k in ks])).reshape(-1)
-        self.j = np.ascontiguousarray(np.concatenate([k.j for k in ks])).reshape(-1)
+        self.uj = _complex(np.concatenate([k.u.reshape(-1) for k in ks]), np.concatenate([k.j.reshape(-1) for k in ks]))
         self.start = np.concatenate([k.start for k in ks])
         self.length = np.concatenate([k.length for k in ks])
+        self.sl = _complex(self.start, self.length)  # both from one take per row
         self.offset = np.cumsum([0] + [k.n_rows for k in ks])[:-1]
         self.rho0 = np.array([k.rho0 for k in ks])
         self.step = ks[0].step
         self.n_rows = np.array([k.n_rows for k in ks])
+
+
+def _complex(re, im) -> np.ndarray:
+    """re + i im as one complex array (parts copied as they are: no arithmetic, NaN and infinities kept
+    apart), so that one ``take`` reads two quantities; real weights times it give each part's sum."""
+    out = np.empty(np.shape(re), dtype=np.complex128)
+    out.real, out.imag = re, im
+    return out
 
 
 def _b_of(kind, rho):
@@ -521,13 +597,14 @@ def _scale(kind, b):
 
 
 def _gather(flat, base, wr, wc, n_c):
-    """Bicubic sum of the 4 x 4 nodes of a row-major table (``flat``, ``n_c`` columns) from the flat
-    indices ``base`` (N,), with row and column weights wr, wc (4, N)."""
-    v = np.zeros(base.size)
+    """Bicubic sum of the 4 x 4 nodes of a row-major table (``flat``, ``n_c`` columns; real or complex)
+    from the flat indices ``base`` (N,), with row and column weights wr, wc (4, N)."""
+    v = None
     for i in range(4):
         b = base + i * n_c
-        v += wr[i] * (wc[0] * flat.take(b) + wc[1] * flat.take(b + 1) + wc[2] * flat.take(b + 2)
-                      + wc[3] * flat.take(b + 3))
+        t = wr[i] * (wc[0] * flat.take(b) + wc[1] * flat.take(b + 1) + wc[2] * flat.take(b + 2)
+                     + wc[3] * flat.take(b + 3))
+        v = t if v is None else v + t
     return v
 
 
@@ -538,7 +615,7 @@ def _linear_tail(flat, base, n_c, c, cc, wr, v):
     out = np.flatnonzero(c != cc)
     if out.size:
         dw = _derivative_weights(cc[out], n_c)
-        slope = np.zeros(out.size)
+        slope = np.zeros(out.size, dtype=flat.dtype)
         for i in range(1 if wr is None else wr.shape[0]):
             for j in range(4):
                 slope += (1.0 if wr is None else wr[i, out]) * dw[j] * flat.take(base[out] + (i * n_c + j))
@@ -587,8 +664,14 @@ class RayMap:
         self.c2, self.sin2c = 2.0 * xi_c, sin_c * sin_c
         self.solved = self.windowed = 0  # points solved, and of those bracketed by the seed's window
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # one for all set-up steps
-            self._setup_nodes()
             self._setup_rows()
+            self._setup_nodes()
+            # the segments most points of a camera need made now (outside the photon sphere the turning
+            # rays', inside it those that cross it), the others when a point first needs them
+            outside = uo < _orb.U_PHOTON
+            for i in range(n_seg):
+                if self._twins()[i] == i and (self.s_kind[i] != 1) == outside:
+                    self._build(i)
             self._setup_index()
 
     # ---- per segment 1-D arrays -------------------------------------------------------------------
@@ -616,11 +699,14 @@ class RayMap:
             sd = math.sin(c) * x / ((np.sqrt(math.cos(c) ** 2 + x) + math.cos(c)) * np.sqrt(1.0 + x))
             out[p] = np.arcsin(np.minimum(sd, 1.0))
         if not p.all():
-            # T, I: cos(2c + 2d) = cos 2c - 2 X, X = e^rho sin^2 c (Newton next to the critical angle)
+            # T, I: sin d sin(2c + d) = X, X = e^rho sin^2 c: cos(2c + 2d) = cos 2c - 2 X; where X is small,
+            # d (sin 2c + d cos 2c) = X to second order in d (a start that holds for small c too, far
+            # observers, where d >> c); Newton's method then
             xx = np.exp(rho[~p]) * self.sin2c
+            s2c, c2c = math.sin(self.c2), math.cos(self.c2)
             d_t = np.where(xx > 1e-6,
-                           0.5 * (np.arccos(np.clip(math.cos(self.c2) - 2.0 * xx, -1.0, 1.0)) - self.c2),
-                           xx / math.sin(self.c2))
+                           0.5 * (np.arccos(np.clip(c2c - 2.0 * xx, -1.0, 1.0)) - self.c2),
+                           2.0 * xx / (s2c + np.sqrt(np.maximum(s2c * s2c + 4.0 * xx * c2c, 0.0))))
             for _ in range(3):
                 s_d, s_cd = np.sin(d_t), np.sin(self.c2 + d_t)
                 d_t = d_t - (s_d * s_cd - xx) / (np.cos(d_t) * s_cd + s_d * np.cos(self.c2 + d_t))
@@ -635,73 +721,93 @@ class RayMap:
         return list(range(self.n_seg))
 
     def _setup_nodes(self):
-        """Per segment, nodes uniform in z = logit(d / far) from the label RHO_MIN + 0.5 to the far end,
-        and the observer's phase theta_o and J there (closed forms)."""
+        """Per segment, nodes uniform in z = logit(d / far) from the label RHO_MIN + 0.5 to the far end
+        (their range; the observer's phase theta_o and J there are made per segment when first needed,
+        :meth:`_build`)."""
         n = SEGMENT_NODES
-        z_all, th_all, rho_all, kind_all = [], [], [], []
-        self.s_zlo, self.s_zhi = np.empty(self.n_seg), np.empty(self.n_seg)
-        uo = self.uo
-        twin = self._twins()
-        # every segment's ends in d in one call: the label RHO_MIN + 0.5, and RHO_MAX_P for kind P
-        ends = self._d_of_rho(np.repeat(np.arange(self.n_seg), 2),
-                              np.tile([RHO_MIN + 0.5, RHO_MAX_P], self.n_seg)).reshape(-1, 2)
-        for i in range(self.n_seg):
-            if twin[i] < i:  # the same rays as an earlier segment, traced the other way: same phases
-                j = twin[i]
-                z_all.append(z_all[j])
-                th_all.append(th_all[j])
-                self.s_zlo[i], self.s_zhi[i] = self.s_zlo[j], self.s_zhi[j]
-                continue
-            d_lo = ends[i, 0]
-            d_hi = ends[i, 1] if self.s_kind[i] == 1 else self.s_far[i] - FAR_GAP_T
-            far = self.s_far[i]
-            z = np.linspace(math.log(d_lo / (far - d_lo)), math.log(d_hi / (far - d_hi)), n)
-            d = far / (1.0 + np.exp(-z))
-            rho = self._rho(np.full(n, i), d)
-            name = _KINDS[self.s_kind[i]]
-            orb = _orbits(name, rho)
-            x = self.s_crit[i] + self.s_side[i] * d
-            if name == "P":
-                theta = _crossing_phase(orb, uo)  # the swept angle from the photon sphere to the observer
-            else:
-                p_uo = uo * uo * (1.0 - uo) * (np.cos(x) / np.sin(x)) ** 2  # P(uo), no cancellation
-                if name == "T":
-                    theta = _orb.sweep_from_turning_point(
-                        orb, uo, np.sqrt(p_uo / ((uo - orb.e1) * (orb.e3 - uo))))
-                else:
-                    theta = _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
-            z_all.append(z)
-            th_all.append(theta)
-            rho_all.append(rho)
-            kind_all.append(np.full(n, self.s_kind[i]))
-            self.s_zlo[i], self.s_zhi[i] = z[0], z[-1]
         self.n_z = n
-        self.node_theta = np.concatenate(th_all)
-        # J on the nodes of every segment in one lookup (a twin repeats its first segment's)
-        uniq = [i for i in range(self.n_seg) if twin[i] == i]
-        j_u = self._evaluate(np.concatenate(kind_all), np.concatenate(rho_all),
-                             np.concatenate([th_all[i] for i in uniq]), want_j=True, want_u=False)[1]
-        pieces = dict(zip(uniq, np.split(j_u, len(uniq))))
-        self.node_j = np.concatenate([pieces[twin[i]] for i in range(self.n_seg)])
+        self.s_zlo, self.s_zhi = np.empty(self.n_seg), np.empty(self.n_seg)
+        # every segment's ends in d: its first row's (the label RHO_MIN + 0.5) and, for kind P, its last
+        # row's (RHO_MAX_P)
+        for i in range(self.n_seg):
+            d_lo = self.row_d[self.r_first[i]]
+            d_hi = self.row_d[self.r_first[i] + self.r_count[i] - 1] if self.s_kind[i] == 1 else \
+                self.s_far[i] - FAR_GAP_T
+            far = self.s_far[i]
+            self.s_zlo[i], self.s_zhi[i] = math.log(d_lo / (far - d_lo)), math.log(d_hi / (far - d_hi))
+        twin = self._twins()
+        for i in range(self.n_seg):  # a twin: the same rays as an earlier segment, the same nodes
+            self.s_zlo[i], self.s_zhi[i] = self.s_zlo[twin[i]], self.s_zhi[twin[i]]
         self.s_dz = (self.s_zhi - self.s_zlo) / (n - 1)
+        self.node_theta = np.full(self.n_seg * n, np.nan)
+        self.node_j = np.full(self.n_seg * n, np.nan)
+        self.node_tj = _complex(self.node_theta, self.node_j)  # both from one take (see _nodes)
+        self._built = np.zeros(self.n_seg, dtype=bool)  # per segment that is its own twin
 
-    def _nodes(self, seg, z, values, more=None):
-        """``values`` (per segment on its nodes, see :meth:`_setup_nodes`) at z, cubic; with ``more``
-        (another such array) both, from one stencil."""
+    def _phase(self, i, d, rho):
+        """The observer's phase (closed forms: the swept angle from the orbit's reference point to the
+        observer, radians) on the rays d, labels rho of segment ``i`` (one that is its own twin)."""
+        uo = self.uo
+        name = _KINDS[self.s_kind[i]]
+        orb = _orbits(name, rho)
+        if name == "P":
+            return _crossing_phase(orb, uo)  # the swept angle from the photon sphere to the observer
+        x = self.s_crit[i] + self.s_side[i] * d
+        p_uo = uo * uo * (1.0 - uo) * (np.cos(x) / np.sin(x)) ** 2  # P(uo), no cancellation
+        if name == "T":
+            return _orb.sweep_from_turning_point(orb, uo, np.sqrt(p_uo / ((uo - orb.e1) * (orb.e3 - uo))))
+        return _sweep_inner(orb, uo, p_uo / ((uo - orb.e1) * (uo - orb.e2)))
+
+    def _build(self, i):
+        """Segment ``i``'s (one that is its own twin) and its twin's nodes: the observer's phase and J
+        there (closed forms; J from the table); then its rows' phase and J, cubic from the nodes. Made
+        when a point's solve first needs the segment: they depend on the observer and the segment
+        only, so a point's ray does not depend on what was looked up before."""
+        n = self.n_z
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            z = np.linspace(self.s_zlo[i], self.s_zhi[i], n)
+            d = self.s_far[i] / (1.0 + np.exp(-z))
+            rho = self._rho(np.full(n, i), d)
+            theta = self._phase(i, d, rho)
+            j = self._evaluate(np.full(n, self.s_kind[i]), rho, theta, want_j=True, want_u=False)[1]
+            for k in np.flatnonzero(np.array(self._twins()) == i):
+                sl = slice(k * n, (k + 1) * n)
+                self.node_theta[sl], self.node_j[sl] = theta, j
+                self.node_tj.real[sl], self.node_tj.imag[sl] = theta, j
+            self._built[i] = True
+            rows = slice(self.r_first[i], self.r_first[i] + self.r_count[i])
+            d_r = self.row_d[rows]
+            z_r = np.log(d_r) - np.log(self.s_far[i] - d_r)
+            self.row_theta[rows], self.row_jo[rows] = self._nodes(np.full(d_r.size, i), z_r, None, both=True)
+
+    def _ensure(self, seg):
+        """Build the segments (:meth:`_build`) of the points' segments ``seg`` not built yet."""
+        if self._built.all():
+            return
+        used = np.bincount(seg, minlength=self.n_seg) > 0
+        twin = self._twins()
+        for i in np.flatnonzero(used):
+            if not self._built[twin[i]]:
+                self._build(twin[i])
+
+    def _nodes(self, seg, z, values, both=False):
+        """``values`` (per segment on its nodes, see :meth:`_setup_nodes`) at z, cubic; with ``both``
+        the observer's phase and J there ((theta_o, J_o); ``values`` unused), from one stencil and one
+        complex take per node (``node_tj``)."""
         n = self.n_z
         g = _clip((z - self.s_zlo.take(seg)) / self.s_dz.take(seg), 0.0, n - 1)
         i0, w = _stencil(g, n)
         base = i0 + seg * n
-        out = [w[0] * v.take(base) + w[1] * v.take(base + 1) + w[2] * v.take(base + 2) + w[3] * v.take(base + 3)
-               for v in ((values,) if more is None else (values, more))]
-        return out[0] if more is None else out
+        v = self.node_tj if both else values
+        out = w[0] * v.take(base) + w[1] * v.take(base + 1) + w[2] * v.take(base + 2) + w[3] * v.take(base + 3)
+        return (out.real, out.imag) if both else out
 
     def _setup_rows(self):
         """Per segment, the table's rows inside it (from the label RHO_MIN + 0.5, the critical end, to the
         far end): global row index, d, the observer's phase, b, theta start and length. Concatenated;
         ``r_first``, ``r_count`` per segment."""
         fl = self.flat
-        rows, ds, ths, bs, sts, lns = [], [], [], [], [], []
+        rows, rhos, segs = [], [], []
         self.r_first, self.r_count = np.empty(self.n_seg, dtype=np.int64), np.empty(self.n_seg, dtype=np.int64)
         total = 0
         twin = self._twins()
@@ -717,33 +823,37 @@ class RayMap:
                 rho_far = self._rho(np.array([i]), np.array([self.s_far[i] - FAR_GAP_T]))[0]
                 k_hi = min(int(math.floor((rho_far - fl.rho0[kc]) / fl.step - 1e-9)), fl.n_rows[kc] - 1)
             k = np.arange(k_lo, k_hi + 1)
-            rho = fl.rho0[kc] + fl.step * k
-            seg = np.full(k.size, i)
-            d = self._d_of_rho(seg, rho)
-            far = self.s_far[i]
-            z = np.log(d) - np.log(far - d)
-            b = _b_of(np.full(k.size, kc), rho)
-            sc = _scale(np.full(k.size, kc), b)
-            g = k + fl.offset[kc]
-            rows.append(g)
-            ds.append(d)
-            ths.append(self._nodes(seg, z, self.node_theta))
-            bs.append(b)
-            sts.append(fl.start[g] * sc)
-            lns.append(fl.length[g] * sc)
+            rows.append(k + fl.offset[kc])
+            rhos.append(fl.rho0[kc] + fl.step * k)
+            segs.append(np.full(k.size, i))
             self.r_first[i], self.r_count[i] = total, k.size
             total += k.size
-        self.row_g, self.row_d, self.row_theta = np.concatenate(rows), np.concatenate(ds), np.concatenate(ths)
-        self.row_b, self.row_start, self.row_length = np.concatenate(bs), np.concatenate(sts), np.concatenate(lns)
+        # every segment's rows at once: d, b, theta start and length
+        seg, rho, g = np.concatenate(segs), np.concatenate(rhos), np.concatenate(rows)
+        kind = self.s_kind.take(seg)
+        b = _b_of(kind, rho)
+        sc = _scale(kind, b)
+        self.row_g, self.row_d, self.row_rho = g, self._d_of_rho(seg, rho), rho
+        # the observer's phase and J there per row: made with the segment's nodes (_build)
+        self.row_theta, self.row_jo = np.full(total, np.nan), np.full(total, np.nan)
+        self.row_b, self.row_start, self.row_length = b, fl.start[g] * sc, fl.length[g] * sc
         self.row_ld = np.log(self.row_d)
+        # the cubic through ln d on rows k..k+3 (Newton form, as _cubic_at): (f0 + i a, c + i e) per k
+        ld = np.concatenate([self.row_ld, np.full(3, np.nan)])
+        f0, f1, f2, f3 = ld[:-3], ld[1:-2], ld[2:-1], ld[3:]
+        self.row_ld_fa = _complex(f0, f1 - f0)
+        self.row_ld_ce = _complex(0.5 * (f2 - 2.0 * f1 + f0), (f3 - 3.0 * f2 + 3.0 * f1 - f0) * (1.0 / 6.0))
+        # per row: the factor from the stored J to J (r_s/c)
+        self.row_jscale = self.row_length * self.row_b
         # per row: columns per radian, and the factor from the stored u (u b for T) to u
         self.row_cscale = (fl.n_cols - 1) / self.row_length
-        row_kind = np.concatenate([np.full(self.r_count[i], self.s_kind[i]) for i in range(self.n_seg)
-                                   if twin[i] == i])
-        self.row_uscale = np.where(row_kind == 0, 1.0 / self.row_b, 1.0)
+        self.row_uscale = np.where(kind == 0, 1.0 / self.row_b, 1.0)
         # made when first needed (points outside the seed's window; next to the observer): the ray
-        # tangent at the observer as a row, the table's error at the observer on each row
-        self._tan = self._eps = None
+        # tangent at the observer as a row, the table's error at the observer on each row (per segment)
+        self._tan = None
+        self._eps = np.full(total, np.nan)
+        self._eps_done = np.zeros(self.n_seg, dtype=bool)
+        self._end_eps = {}
 
     @property
     def tan(self):
@@ -752,6 +862,8 @@ class RayMap:
         if self._tan is None and self.n_seg == 4:
             fl = self.flat
             i = 1
+            if not self._built[i]:
+                self._build(i)
             d_far = self.s_far[i] - FAR_GAP_T
             with np.errstate(divide="ignore", invalid="ignore"):
                 rho_t = self._rho(np.array([i]), np.array([d_far]))
@@ -765,7 +877,7 @@ class RayMap:
             sc = _scale(np.array([kc]), np.array([b]))[0]
             st = float(w @ fl.start[rows_t]) * sc
             ln = float(w @ fl.length[rows_t]) * sc
-            u_rows = fl.u.reshape(-1, n_c)[rows_t]
+            u_rows = np.ascontiguousarray(fl.uj.reshape(-1, n_c)[rows_t].real)
             self._tan = dict(u=w @ u_rows, b=b, start=st, length=ln, kind=kc,
                              theta=self.node_theta[(i + 1) * self.n_z - 1])
         return self._tan
@@ -774,13 +886,12 @@ class RayMap:
     def row_eps(self) -> np.ndarray:
         """The table's error at the observer on each row (u on the row at the observer's phase, less
         uo): subtracted next to the observer; made on first use."""
-        if self._eps is None:
-            all_rows = np.arange(self.row_g.size)
-            seg_of_row = np.concatenate([np.full(self.r_count[i], i) for i in range(self.n_seg)
-                                         if self._twins()[i] == i])
+        for i in np.flatnonzero(self._built & ~self._eps_done):  # the built segments' rows
+            rows = np.arange(self.r_first[i], self.r_first[i] + self.r_count[i])
+            self._eps_done[i] = True
             with np.errstate(divide="ignore", invalid="ignore"):
-                self._eps = self._row_residual(all_rows, np.full(all_rows.size, self.uo), np.zeros(all_rows.size),
-                                               seg_of_row)
+                self._eps[rows] = self._row_residual(rows, np.full(rows.size, self.uo), np.zeros(rows.size),
+                                                     np.full(rows.size, i))
         return self._eps
 
     def _setup_index(self):
@@ -807,20 +918,34 @@ class RayMap:
             locs.append(p)
         seg, loc = np.concatenate(segs), np.concatenate(locs)
         rows = self.r_first.take(seg) + loc
-        n_c, u_flat = self.flat.n_cols, self.flat.u
+        n_c, uj = self.flat.n_cols, self.flat.uj
         sweeps = np.linspace(0.0, 2.0 * math.pi, n_s)
+        # the observer's phase on these rows: the rows' own in the segments built now, else by the
+        # closed forms (those segments' nodes are made when a point first needs them); and on each
+        # segment's first row (the segment tests of _solve)
+        twin = np.array(self._twins())
+        own = twin.take(seg)
+        theta = self.row_theta.take(rows)
+        self.first_theta = np.empty(self.n_seg)
+        for i in np.unique(own):
+            at = np.flatnonzero(own == i)
+            if not self._built[i]:
+                r_i = rows.take(at)
+                theta[at] = self._phase(i, self.row_d.take(r_i), self.row_rho.take(r_i))
+            self.first_theta[i] = theta[at[np.flatnonzero(loc.take(at) == 0)[0]]]
+        self.first_theta = self.first_theta.take(twin)
         # u along each row, linear between its columns (and beyond them): a seed needs no more
-        th = self.row_theta.take(rows)[None, :] + self.s_dir.take(seg)[None, :] * sweeps[:, None]
+        th = theta[None, :] + self.s_dir.take(seg)[None, :] * sweeps[:, None]
         th = np.where((self.s_kind.take(seg) != 1)[None, :], np.abs(th), th)
         c = (th - self.row_start.take(rows)) * self.row_cscale.take(rows)
         j = _clip(np.floor(c), 0.0, n_c - 2.0).astype(np.int64)
         t = c - j
         base = self.row_g.take(rows) * n_c + j
-        f = (u_flat.take(base) * (1.0 - t) + u_flat.take(base + 1) * t) * self.row_uscale.take(rows)
+        f = (uj.take(base).real * (1.0 - t) + uj.take(base + 1).real * t) * self.row_uscale.take(rows)
         # (n_s, q): monotone along xi, each value the least of those after it (rays that escaped,
         # below every target, may wind up and down below zero: a running minimum from the side of
         # the rays that fell in keeps the values next to every target's root)
-        f = _clip(np.where(np.isnan(f), 2.0, f), -1.0, 2.0)
+        f = np.fmax(np.fmin(f, 2.0), -1.0)  # clipped to [-1, 2], NaN (no value) as 2
         f = np.minimum.accumulate(f[:, ::-1], axis=1)[:, ::-1]
         self.ix_n = seg.size
         self.ix_val = f  # per angle, the coarse rows' u
@@ -885,10 +1010,9 @@ class RayMap:
         i0 = i0 + fl.offset.take(kind)
         b = _b_of(kind, rho)
         sc = _scale(kind, b)
-        st = (wr[0] * fl.start.take(i0) + wr[1] * fl.start.take(i0 + 1) + wr[2] * fl.start.take(i0 + 2)
-              + wr[3] * fl.start.take(i0 + 3)) * sc
-        ln = (wr[0] * fl.length.take(i0) + wr[1] * fl.length.take(i0 + 1) + wr[2] * fl.length.take(i0 + 2)
-              + wr[3] * fl.length.take(i0 + 3)) * sc
+        sl = fl.sl  # start + i length: both from one take per row
+        v = (wr[0] * sl.take(i0) + wr[1] * sl.take(i0 + 1) + wr[2] * sl.take(i0 + 2) + wr[3] * sl.take(i0 + 3)) * sc
+        st, ln = v.real, v.imag
         u, j = self._columns(i0, wr, (theta - st) / ln * (n_c - 1), want_j, want_u)
         j_diff = None
         if ref is not None:
@@ -913,10 +1037,8 @@ class RayMap:
         cc = _clip(c, 0.0, n_c - 1)
         j0, wc = _stencil(cc, n_c)
         base = i0 * n_c + j0
-        u = _linear_tail(fl.u, base, n_c, c, cc, wr, _gather(fl.u, base, wr, wc, n_c)) if want_u else None
-        if not want_j:
-            return u, None
-        return u, _linear_tail(fl.j, base, n_c, c, cc, wr, _gather(fl.j, base, wr, wc, n_c))
+        v = _linear_tail(fl.uj, base, n_c, c, cc, wr, _gather(fl.uj, base, wr, wc, n_c))  # u + i J
+        return (v.real if want_u else None), (v.imag if want_j else None)
 
     def _residual(self, seg, d, u, sweep, want=False, near=None, want_f=True):
         """f = u_ray - u on the rays d of segments ``seg`` for targets (u, sweep); ``near`` (mask):
@@ -928,7 +1050,7 @@ class RayMap:
         rho = self._rho(seg, d)
         j_o = None
         if want:  # the observer's phase and J there
-            th_o, j_o = self._nodes(seg, z, self.node_theta, self.node_j)
+            th_o, j_o = self._nodes(seg, z, None, both=True)
         else:
             th_o = self._nodes(seg, z, self.node_theta)
         th = th_o + self.s_dir.take(seg) * sweep
@@ -945,26 +1067,53 @@ class RayMap:
                                                          b=b, j_o=j_o)
         return u_ray - u
 
-    def _row_residual(self, row, u, sweep, seg, near=None):
+    def _end_residual(self, i, u, sweep, near):
+        """f on segment ``i``'s first row (the segment tests of :meth:`_solve`), with the observer's phase
+        there by the closed forms (``first_theta``) and, for targets next to the observer, the table's
+        error there from it: the tests do not depend on which segments are built."""
+        row, seg = np.full(u.size, self.r_first[i]), np.full(u.size, i)
+        f = self._row_residual(row, u, sweep, seg, theta=np.full(u.size, self.first_theta[i]))
+        if not near.any():
+            return f
+        if i not in self._end_eps:
+            self._end_eps[i] = self._row_residual(row[:1], np.array([self.uo]), np.zeros(1), seg[:1],
+                                                  theta=self.first_theta[i:i + 1])[0]
+        return f - np.where(near, self._end_eps[i], 0.0)
+
+    def _row_residual(self, row, u, sweep, seg, near=None, want_q=False, theta=None):
         """f on the concatenated rows ``row`` (1-D cubic along each row); ``near``: targets next to the
         observer, from whose f the table's error at the observer is subtracted. ``row`` may be (k, N)
-        with the targets' arrays (N,): k rows per target (the per-target parts formed once)."""
+        with the targets' arrays (N,): k rows per target (the per-target parts formed once). With
+        ``want_q``: (f, q), q the travel-time remainder from the observer to the target along each row,
+        J(theta) signed as theta (turning rays: negative past the periapsis / apoapsis) less J at the
+        observer's phase (r_s/c; the quantity whose modulus :meth:`_finish` adds to the radial part),
+        from the same column stencil. ``theta``: the observer's phase on the rows where given (else the
+        rows' own, ``row_theta``)."""
         fl = self.flat
         n_c = fl.n_cols
-        th = self.row_theta.take(row) + self.s_dir.take(seg) * sweep
+        th = (self.row_theta.take(row) if theta is None else theta) + self.s_dir.take(seg) * sweep
+        past = None
         if self.n_seg > 2:  # turning rays: the angle from the periapsis / apoapsis
-            th = np.where(self.s_kind.take(seg) != 1, np.abs(th), th)
+            turning = self.s_kind.take(seg) != 1
+            if want_q:
+                past = turning & (th < 0.0)
+            th = np.where(turning, np.abs(th), th)
         c = ((th - self.row_start.take(row)) * self.row_cscale.take(row)).reshape(-1)
         cc = _clip(c, 0.0, n_c - 1)
         j0, wc = _stencil(cc, n_c)
         base = self.row_g.take(row).reshape(-1) * n_c + j0
-        v = wc[0] * fl.u.take(base) + wc[1] * fl.u.take(base + 1) + wc[2] * fl.u.take(base + 2) + \
-            wc[3] * fl.u.take(base + 3)
-        v = _linear_tail(fl.u, base, n_c, c, cc, None, v).reshape(np.shape(row))
-        f = v * self.row_uscale.take(row) - u
-        if near is None or not near.any():
+        t = fl.uj
+        v = wc[0] * t.take(base) + wc[1] * t.take(base + 1) + wc[2] * t.take(base + 2) + wc[3] * t.take(base + 3)
+        v = _linear_tail(t, base, n_c, c, cc, None, v).reshape(np.shape(row))  # u + i J
+        f = v.real * self.row_uscale.take(row) - u
+        if near is not None and near.any():
+            f = f - np.where(near, self.row_eps.take(row), 0.0)
+        if not want_q:
             return f
-        return f - np.where(near, self.row_eps.take(row), 0.0)
+        vj = v.imag * self.row_jscale.take(row)
+        if past is not None:
+            vj = np.where(past, -vj, vj)
+        return f, vj - self.row_jo.take(row)
 
     def _tangent_residual(self, u, sweep, direction):
         """f on the ray tangent at the observer (1-D cubic along its interpolated row)."""
@@ -1067,19 +1216,23 @@ class RayMap:
         # it (f changes sign once along the rays ordered by xi), the bracket and the cubic's four values
         # are known
         seg, k_row = self._seed(u, sweep)
+        self._ensure(seg)
         first, count = self.r_first.take(seg), self.r_count.take(seg)
         orient = self.s_side.take(seg)  # f grows along the rows when side > 0
         k0 = _clip(k_row.astype(np.int64) - 1, 0, count - 4)  # k_row >= 0: truncation is floor
-        fw = self._row_residual(first + k0 + np.arange(4)[:, None], u, sweep, seg, near)  # (4, n)
+        fw, qw = self._row_residual(first + k0 + np.arange(4)[:, None], u, sweep, seg, near, want_q=True)  # (4, n)
         bw = orient * fw < 0.0
-        lo, hi = np.zeros(n, dtype=np.int64), count.copy()
-        f_lo = np.full(n, np.nan)  # node 0's value: computed below where the search never moved lo
-        f_hi = orient * np.inf
-        window = np.zeros(n, dtype=bool)
-        for j in (2, 1, 0):  # f changes sign between rows k0 + j and k0 + j + 1
-            at = bw[j] & ~bw[j + 1]
-            lo[at], hi[at], f_lo[at], f_hi[at] = k0[at] + j, k0[at] + j + 1, fw[j, at], fw[j + 1, at]
-            window |= at
+        # f changes sign between rows k0 + j and k0 + j + 1 (the first such j); elsewhere lo, hi span the
+        # segment, f_lo NaN (node 0's value: computed below where the search never moved lo)
+        cand = bw[:3] & ~bw[1:]
+        window = cand[0] | cand[1] | cand[2]
+        js = cand.argmax(0)
+        at_lo = js * n + np.arange(n)
+        lo = np.where(window, k0 + js, 0)
+        hi = np.where(window, lo + 1, count)
+        fw_flat = fw.reshape(-1)
+        f_lo = np.where(window, fw_flat.take(at_lo), np.nan)
+        f_hi = np.where(window, fw_flat.take(at_lo + n), orient * np.inf)
         rest = np.flatnonzero(~window)
         moved = np.zeros(n, dtype=bool)  # points whose segment is not the seed's (their window is not theirs)
         self.solved += n
@@ -1098,12 +1251,10 @@ class RayMap:
                     at = np.flatnonzero(side)
                     if not at.size:  # no point on this side: no call (its fixed cost saved)
                         continue
-                    f = self._row_residual(np.full(at.size, self.r_first[i]), ur[at], sr[at], np.full(at.size, i),
-                                           nr[at])
+                    f = self._end_residual(i, ur[at], sr[at], nr[at])
                     s_rest[at] = np.where(f >= 0.0, i, i + 1)
             else:  # two segments (an observer next to the photon sphere): the first's end
-                f = self._row_residual(np.full(rest.size, self.r_first[0]), ur, sr, np.zeros(rest.size, dtype=np.int64),
-                                       nr)
+                f = self._end_residual(0, ur, sr, nr)
                 s_rest[f >= 0.0] = 0
             same = s_rest == seg.take(rest)
             rs, ro = rest[same], rest[~same]
@@ -1121,6 +1272,7 @@ class RayMap:
             if ro.size:  # another segment: all its rows
                 moved[ro] = True
                 seg[ro] = s_rest[~same]
+                self._ensure(seg[ro])
                 first[ro], count[ro], orient[ro] = (self.r_first.take(seg[ro]), self.r_count.take(seg[ro]),
                                                     self.s_side.take(seg[ro]))
                 hi[ro], f_hi[ro] = count[ro], orient[ro] * np.inf
@@ -1156,6 +1308,7 @@ class RayMap:
         if at0.size:
             f_lo[at0] = self._row_residual(first[at0], u[at0], sweep[at0], seg[at0], near[at0])
         d = np.empty(n)
+        carried = None  # the rays whose values the Newton step's read gave (see below)
         none = orient * f_lo >= 0.0  # a root at the critical end (within rounding)
         d[none] = self.row_d.take(first[none])
         # the end intervals: the far end (pi/2) and the two rows before it
@@ -1167,8 +1320,9 @@ class RayMap:
             pick = (lambda a: a) if i.size == n else (lambda a: a.take(i, axis=-1))
             wi, lo_i, fst_i = pick(window), pick(lo), pick(first)
             if wi.all():
-                kc, fs = pick(k0), pick(fw)
+                kc, fs, qs = pick(k0), pick(fw), pick(qw)
             else:
+                qs = np.where(wi, pick(qw), np.nan)  # outside the window: no rows' q (values read at the end)
                 kc = np.where(wi, pick(k0), _clip(lo_i - 1, 0, pick(count) - 4))
                 fs = np.where(wi, pick(fw), np.nan)
                 m_all = np.flatnonzero(~wi)
@@ -1189,16 +1343,30 @@ class RayMap:
             # the ray at t: ln d is smooth in the row index (rows uniform in rho, ln d ~ rho next to
             # the critical angle), so the cubic through the four rows' ln d gives d and dd/dt
             r0 = fst_i + kc
-            ld = self.row_ld.take(r0 + np.arange(4)[:, None])
-            p, dp_ld = _cubic_at(ld, t)
+            fa, ce = self.row_ld_fa.take(r0), self.row_ld_ce.take(r0)
+            p, dp_ld = _cubic_at_coefficients(fa.real, fa.imag, ce.real, ce.imag, t)
             d0 = np.exp(p)
             dd_dt = d0 * dp_ld
             d_a, d_b = self.row_d.take(fst_i + lo_i), self.row_d.take(fst_i + pick(hi))
             d0 = np.clip(d0, np.minimum(d_a, d_b), np.maximum(d_a, d_b))
             # the cubic's slope as df/dd: the first step is Newton's with it
             slope = dp / dd_dt
-            d[i], ok = self._secant(pick(seg), pick(u), pick(sweep), d0, d_a, d_b, pick(near), slope=slope)
+            seg_i, near_i = pick(seg), pick(near)
+            f0, got0 = self._residual(seg_i, d0, pick(u), pick(sweep), want=True, near=near_i)
+            d_i, ok, (x_rd, th_rd, q_rd) = self._secant(seg_i, pick(u), pick(sweep), d0, d_a, d_b, near_i,
+                                                        slope=slope, f0=f0,
+                                                        read0=(got0["theta"], self._remainder(seg_i, got0, near_i)))
+            d[i] = d_i
             inner[i[~ok]] = False
+            # the ray's values come from the iteration's reads: where the Newton step ended it, from its
+            # read at d0, the travel-time remainder carried to the ray by its derivative along the four
+            # rows (the step is below NEWTON_DONE of d: what is left is the step times that derivative's
+            # error); where a secant step did, as the secant carried it (x_rd is then the ray's d)
+            q_x = np.where(x_rd == d_i, q_rd, q_rd + (d_i - x_rd) * (_cubic_at(qs, t)[1] / dd_dt))
+            q_x = np.where(np.isnan(qs[0]), np.nan, q_x)  # outside the window: read at the end
+            c_at = np.flatnonzero(ok & np.isfinite(q_x))
+            if c_at.size:
+                carried = (i.take(c_at), th_rd.take(c_at), q_x.take(c_at))
         e = np.flatnonzero(~none & ~inner)
         if e.size:
             far_d = self.s_far.take(seg[e]) - FAR_GAP_T
@@ -1251,42 +1419,80 @@ class RayMap:
                 d0[end[good]] = x[good]
                 slope = np.full(e.size, np.nan)  # no slope: the plain secant start (see _secant)
                 slope[end[good]] = dp[good]
-            d[e], ok = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6, slope=slope)
+            d_e, ok, (x_rd, th_rd, q_rd) = self._secant(seg[e], u[e], sweep[e], d0, d_a, d_b, near[e], steps=6,
+                                                        slope=slope, carry=True)
+            d[e] = d_e
+            # where secant steps ended the iteration, the rays' values as they carried them
+            c_at = np.flatnonzero(ok & (x_rd == d_e) & np.isfinite(q_rd))
+            if c_at.size:
+                more = (e.take(c_at), th_rd.take(c_at), q_rd.take(c_at))
+                carried = more if carried is None else tuple(np.concatenate(p) for p in zip(carried, more))
             rest = np.flatnonzero(~ok)
             if rest.size:
                 er = e[rest]
                 d[er] = self._regula_falsi(seg[er], u[er], sweep[er], d_a[rest], d_b[rest], f_a[rest], f_b[rest],
                                            near[er])
-        return self._finish(seg, d, u, r, phi, sweep, order, near, tangents)
+        return self._finish(seg, d, u, r, phi, sweep, order, near, tangents, carried)
 
-    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4, slope=None):
+    def _secant(self, seg, u, sweep, d0, d_a, d_b, near, steps=4, slope=None, f0=None, read0=None, carry=False):
         """Secant steps in d from d0 (inside the bracket [d_a, d_b], next to the root) with the bicubic
         interpolation; returns (d, converged). With ``slope`` (an estimate of df/dd at d0) the second
         point is Newton's step from d0 with it (where it falls inside the bracket), else d0 plus 1e-7 of
-        the bracket."""
+        the bracket; ``f0``: f at d0 where known (with ``slope``). With ``carry`` or ``read0`` (theta and
+        the travel-time remainder of :meth:`_remainder` at d0, with ``f0``) the steps read the rays'
+        values too and a third value is returned, meaningful where converged: per ray a point x, and
+        theta and the remainder there. Where the Newton step ended the iteration x is d0 (its read);
+        where a secant step did, x is the converged d, the remainder carried from the last point read
+        by the secant through the last two reads (the step is below SECANT_DONE of d, the secant's
+        slope exact to the distance between those reads)."""
         lo, hi = np.minimum(d_a, d_b), np.maximum(d_a, d_b)
+        carry = carry or read0 is not None
+        q_prev = None
         if slope is None:
             x_prev = d0 + 1e-7 * (hi - lo)
-            f_prev = self._residual(seg, x_prev, u, sweep, near=near)
+            if carry:
+                f_prev, got = self._residual(seg, x_prev, u, sweep, want=True, near=near)
+                q_prev = self._remainder(seg, got, near)
+            else:
+                f_prev = self._residual(seg, x_prev, u, sweep, near=near)
             x = d0
         else:  # (a NaN slope: no Newton step, the second point as without a slope)
             x_prev = d0
-            f_prev = self._residual(seg, d0, u, sweep, near=near)
+            if f0 is not None:
+                f_prev = f0
+            elif carry:
+                f_prev, got = self._residual(seg, d0, u, sweep, want=True, near=near)
+                read0 = (got["theta"], self._remainder(seg, got, near))
+            else:
+                f_prev = self._residual(seg, d0, u, sweep, near=near)
             x = d0 - f_prev / slope
             newton = np.isfinite(x) & (x >= lo) & (x <= hi) & (x != d0)
             x = np.where(newton, x, d0 + 1e-7 * (hi - lo))
         out = d0.copy()
         ok = np.zeros(u.size, dtype=bool)
         act = np.arange(u.size)
+        if carry:  # per ray a point read, theta and the remainder there
+            if read0 is not None:
+                x_rd, th_rd, q_rd = d0.copy(), read0[0].copy(), read0[1].copy()
+                q_prev = read0[1]
+            else:
+                x_rd, th_rd, q_rd = np.full(u.size, np.nan), np.full(u.size, np.nan), np.full(u.size, np.nan)
         if slope is not None:  # a Newton step this short leaves its length times the slope's error
             done = newton & (np.abs(x - d0) <= NEWTON_DONE * x)
             out[done], ok[done] = x[done], True
             keep = ~done
             act, x_prev, f_prev, x = act[keep], x_prev[keep], f_prev[keep], x[keep]
+            if carry:
+                q_prev = q_prev[keep]
         for _ in range(steps):
             if not act.size:
                 break
-            f = self._residual(seg.take(act), x, u.take(act), sweep.take(act), near=near.take(act))
+            sa, na = seg.take(act), near.take(act)
+            if carry:
+                f, got = self._residual(sa, x, u.take(act), sweep.take(act), want=True, near=na)
+                q = self._remainder(sa, got, na)
+            else:
+                f = self._residual(sa, x, u.take(act), sweep.take(act), near=na)
             x_new = x - f * (x - x_prev) / (f - f_prev)
             x_new = np.where(f == 0.0, x, x_new)
             good = np.isfinite(x_new) & (x_new >= lo.take(act)) & (x_new <= hi.take(act))
@@ -1295,7 +1501,14 @@ class RayMap:
             out[act[done]] = x_new[done]
             ok[act[done]] = True
             keep = good & ~done
+            if carry:
+                ad = act[done]
+                x_rd[ad], th_rd[ad] = x_new[done], got["theta"][done]
+                q_rd[ad] = q[done] + (x_new[done] - x[done]) * ((q[done] - q_prev[done]) / (x[done] - x_prev[done]))
+                q_prev = q[keep]
             act, x_prev, f_prev, x = act[keep], x[keep], f[keep], x_new[keep]
+        if carry:
+            return out, ok, (x_rd, th_rd, q_rd)
         return out, ok
 
     def _regula_falsi(self, seg, u, sweep, a, b, f_a, f_b, near):
@@ -1323,32 +1536,64 @@ class RayMap:
         out[act] = b
         return out
 
-    def _finish(self, seg, d, u, r, phi, sweep, order, near, tangents=True) -> dict:
-        """xi, dt and (with ``tangents``) ux, uy of the rays d of segments ``seg``."""
+    def _remainder(self, seg, got, near):
+        """The travel-time remainder (r_s/c) of rays read by :meth:`_residual` (``got``): J at the target
+        signed as theta (turning rays: negative past the periapsis / apoapsis) less J at the observer;
+        next to the observer J's difference from one stencil. :meth:`_finish` adds its modulus to the
+        radial part."""
+        th = got["theta"]
+        turning = self.s_kind.take(seg) != 1
+        dj = np.where(turning, np.sign(th), 1.0) * got["j"] - got["j_o"]
+        if got["j_diff"] is not None:  # next to the observer: J(theta) - J(theta_o) from one stencil
+            same = near & ((th >= 0.0) | ~turning)
+            dj = np.where(same, got["j_diff"], dj)
+        return dj
+
+    def _finish(self, seg, d, u, r, phi, sweep, order, near, tangents=True, carried=None) -> dict:
+        """xi, dt and (with ``tangents``) ux, uy of the rays d of segments ``seg``. ``carried``: (indices,
+        theta, remainder) of rays whose values are known (see :meth:`_solve`); the others' are read."""
         k = self.k
         kind = self.s_kind.take(seg)
-        xi = self.s_crit.take(seg) + self.s_side.take(seg) * d
-        _, got = self._residual(seg, d, u, sweep, want=True, near=near, want_f=False)
-        rho, th, b = got["rho"], got["theta"], got["b"]
-        j_o = got["j_o"]
         turning = kind != 1
-        j_t = np.where(turning, np.sign(th), 1.0) * got["j"]
+        xi = self.s_crit.take(seg) + self.s_side.take(seg) * d
+        n = d.size
+        if carried is None or not carried[0].size:
+            _, got = self._residual(seg, d, u, sweep, want=True, near=near, want_f=False)
+            rho, th, b = got["rho"], got["theta"], got["b"]
+            dj = self._remainder(seg, got, near)
+        elif carried[0].size == n:  # every ray known
+            ci = carried[0]
+            th, dj = np.empty(n), np.empty(n)
+            th[ci], dj[ci] = carried[1], carried[2]
+            rho = b = None  # (b from xi below; rho only where needed)
+        else:
+            ci = carried[0]
+            th, dj = np.empty(n), np.empty(n)
+            th[ci], dj[ci] = carried[1], carried[2]
+            rho = b = None
+            rest = np.ones(n, dtype=bool)
+            rest[ci] = False
+            rest = np.flatnonzero(rest)
+            sr = seg.take(rest)
+            _, got = self._residual(sr, d.take(rest), u.take(rest), sweep.take(rest), want=True,
+                                    near=near.take(rest), want_f=False)
+            th[rest] = got["theta"]
+            dj[rest] = self._remainder(sr, got, near.take(rest))
         rs_o = self.r_obs + math.log(self.r_obs - 1.0)
         rs_t = r + np.log(r - 1.0)
         radial = np.abs(rs_t - rs_o)
         tt = np.flatnonzero(turning & (th < 0.0))  # the ray passed its periapsis / apoapsis
         if tt.size:
-            r_ref = 1.0 / _reference_u("T" if kind[tt[0]] == 0 else "I", rho[tt])
+            rho_tt = self._rho(seg.take(tt), d.take(tt)) if rho is None else rho.take(tt)
+            r_ref = 1.0 / _reference_u("T" if kind[tt[0]] == 0 else "I", rho_tt)
             rs_ref = r_ref + np.log(r_ref - 1.0)
             radial[tt] = np.abs(rs_t[tt] - rs_ref) + np.abs(rs_o - rs_ref)
-        dj = j_t - j_o
-        if got["j_diff"] is not None:  # next to the observer: J(theta) - J(theta_o) from one stencil
-            same = near & ((th >= 0.0) | ~turning)
-            dj = np.where(same, got["j_diff"], dj)
         dt = radial + np.abs(dj)
         dt = np.where(np.isinf(r), np.inf, dt)
         if not tangents:
             return dict(xi=xi, dt=dt)
+        if b is None:  # the impact parameter of the ray leaving the static observer at xi
+            b = np.sin(xi) * (self.r_obs / k)
         direction = self.s_dir.take(seg)
         outward = np.where(turning, (np.sign(th) * direction > 0) == (kind == 0), direction < 0)
         s2 = np.maximum(1.0 - b * b * u * u * (1.0 - u), 0.0)
@@ -1364,6 +1609,12 @@ def _cubic_at(fs, t):
     a = f1 - f0
     c = 0.5 * (f2 - 2.0 * f1 + f0)
     e = (f3 - 3.0 * f2 + 3.0 * f1 - f0) * (1.0 / 6.0)
+    return _cubic_at_coefficients(f0, a, c, e, t)
+
+
+def _cubic_at_coefficients(f0, a, c, e, t):
+    """(p(t), p'(t)) of the cubic p(t) = f0 + t (a + (t - 1) (c + (t - 2) e)) (Newton form through
+    nodes 0..3, as :func:`_cubic_at`)."""
     t1 = t - 1.0
     q = c + (t - 2.0) * e
     return f0 + t * (a + t1 * q), a + (2.0 * t - 1.0) * c + (3.0 * t * t - 6.0 * t + 2.0) * e
@@ -1398,8 +1649,10 @@ def _cubic_root(fs, t0, slope=False):
     a = f1 - f0
     c = 0.5 * (f2 - 2.0 * f1 + f0)
     e = (f3 - 3.0 * f2 + 3.0 * f1 - f0) / 6.0
-    fa = np.where(t0 == 0, f0, np.where(t0 == 1, f1, f2))
-    fb = np.where(t0 == 0, f1, np.where(t0 == 1, f2, f3))
+    n = t0.size
+    at = t0.astype(np.int64) * n + np.arange(n)  # the bracket's nodes t0, t0 + 1
+    flat = fs.reshape(-1) if fs.flags.c_contiguous else np.ascontiguousarray(fs).reshape(-1)
+    fa, fb = flat.take(at), flat.take(at + n)
     t = t0 + np.where(fb != fa, fa / (fa - fb), 0.5)
     for _ in range(CUBIC_STEPS):
         p = f0 + t * (a + (t - 1.0) * (c + (t - 2.0) * e))

@@ -52,7 +52,7 @@ def _targets(rng, r_obs, n):
     return np.concatenate([r, np.hypot(x, y), [1e9, 1e6]]), np.concatenate([p, np.arctan2(y, x), [1.0, 2.0]])
 
 
-@pytest.mark.parametrize("r_obs", [1e4, 20.0, 6.0, 2.0, 1.6, 1.51])
+@pytest.mark.parametrize("r_obs", [1e7, 1e6, 1e5, 1e4, 20.0, 6.0, 2.0, 1.6, 1.51])
 def test_connecting_rays_outside_photon_sphere(r_obs):
     rng = np.random.default_rng(int(r_obs * 10))
     r, p = _targets(rng, r_obs, 3000)
@@ -134,6 +134,28 @@ def test_batch_independence_and_determinism():
             assert np.array_equal(getattr(a[o], q)[sub], getattr(b[o], q)), (o, q)
 
 
+@pytest.mark.parametrize("r_obs", [20.0, 2.5, 1.2])
+def test_segments_made_on_first_need(r_obs):
+    """Some segments (outside the photon sphere those of the rays that cross it, inside it those of the
+    turning rays) get their nodes (the observer's phase and J there) when a point's solve first needs
+    them: a point's ray is the same bit for bit whether the segments were made before it (by other
+    points, or all at once) or for it."""
+    rng = np.random.default_rng(9)
+    r, p = _targets(rng, r_obs, 3000)
+    fresh = rays.RayMap(r_obs)
+    assert not fresh._built.all()  # a segment waits for a point
+    every = rays.RayMap(r_obs)
+    for i in np.flatnonzero(~every._built):
+        if every._twins()[i] == i:
+            every._build(i)
+    ref = every.lookup_orders(r, p)
+    for sub in (slice(0, 40), slice(1000, 1300), slice(2900, 3000)):
+        alone = rays.RayMap(r_obs).lookup_orders(r[sub], p[sub])
+        for o in (1, 2):
+            for q in ("xi", "dt", "ux", "uy"):
+                assert np.array_equal(getattr(ref[o], q)[sub], getattr(alone[o], q), equal_nan=True), (o, q)
+
+
 def _no_seed(self, u, sweep):
     """The seed index disabled: every point's window at the first segment's first rows."""
     return np.zeros(u.size, dtype=np.int64), np.zeros(u.size)
@@ -172,6 +194,23 @@ def test_seed_index_chooses_only_where_the_search_starts(r_obs, monkeypatch):
         assert np.nanmax(np.abs(got[o].xi - full[o].xi)) < 1e-8, o
         assert np.nanmax(np.abs(got[o].dt / full[o].dt - 1.0)) < 1e-8, o
         assert np.array_equal(np.isnan(got[o].xi), np.isnan(full[o].xi))
+
+
+@pytest.mark.parametrize("r_obs", [1e7, 1e5, 3e3, 20.0, 1.51, 1.4999, 1.2, 1.001])
+def test_turning_ray_of_label_inverts_the_label(r_obs):
+    """RayMap._d_of_rho for turning rays (a row label's ray, d = |xi - critical angle|: Newton's method
+    from a start that holds for far observers too, where d >> the critical angle) against RayMap._rho,
+    the label of a ray (closed form), over the turning segments' labels."""
+    m = rays.RayMap(r_obs)
+    for i in range(m.n_seg):
+        if m.s_kind[i] == 1:
+            continue
+        rho = m.row_rho[m.r_first[i]:m.r_first[i] + m.r_count[i]]
+        rho = np.concatenate([rho, np.linspace(rho[0], rho[-1], 5001)])
+        seg = np.full(rho.size, i)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            back = m._rho(seg, m._d_of_rho(seg, rho))
+        assert np.max(np.abs(back - rho)) < 1e-9, (i, np.max(np.abs(back - rho)))
 
 
 def test_stencil_weights():
@@ -235,6 +274,8 @@ def test_row_search_passes_give_the_bisections_bracket(r_obs, monkeypatch):
 
     monkeypatch.setattr(rays.RayMap, "_row_residual", counting)
     m = rays.RayMap(r_obs)
+    m.lookup_orders(r, p)  # the segments' nodes and the table's error at the observer made (first use)
+    calls.clear()
     got = m.lookup_orders(r, p)
     passes = len(calls)
     monkeypatch.setattr(rays, "SEARCH_BUDGET", 1)
@@ -272,6 +313,9 @@ def test_row_search_probes_from_a_window_off_the_root(r_obs, monkeypatch):
 
     monkeypatch.setattr(rays.RayMap, "_row_residual", counting)
     m = rays.RayMap(r_obs)
+    m.lookup_orders(r, p)  # the segments' nodes and the table's error at the observer made (first use)
+    calls.clear()
+    m.solved = m.windowed = 0
     got = m.lookup_orders(r, p)
     assert m.windowed < 0.5 * m.solved
     assert any(len(c) == 2 and c[0] == len(rays.PROBE_STEPS) for c in calls)  # a probe pass
@@ -337,21 +381,57 @@ def test_quantities_asked_for():
 
 
 def test_per_radius_shortcuts_equal_the_general_forms():
-    """The set-up's and the solve's shortcuts give the general closed forms' numbers bit for bit: the
-    crossing rays' phase at the observer (lutgen.orbit.sweep at the observer less at the photon sphere,
-    both sides of the photon sphere and beyond pi/2 in Legendre's amplitude), and the turning orbits'
-    reference points (the roots of _orbits)."""
+    """The set-up's and the solve's shortcuts give the general closed forms' numbers: the crossing rays'
+    phase at the observer next to the photon sphere bit for bit (lutgen.orbit.sweep at the observer
+    less at the photon sphere, both sides of the photon sphere and beyond pi/2 in Legendre's
+    amplitude), away from it (one integral by the addition theorem) within 2e-12 rad; and the turning
+    orbits' reference points (the roots of _orbits) bit for bit."""
     rho = np.linspace(rays.RHO_MIN, rays.RHO_MAX_P, 2000)
     orb = rays._orbits("P", rho)
-    for r_obs in (1.001, 1.2, 1.5, 3.0, 1e4, 1e7):
+    lo, hi = rays.SINGLE_PHASE_RANGE
+    for r_obs in (1.001, 1.05, lo, lo * 1.001, 1.2, 1.5, hi * 0.999, hi, 3.0, 1e4, 1e7):
         uo = 1.0 / r_obs
         with np.errstate(invalid="ignore", divide="ignore"):
             ends = O.sweep(orb, np.array([[uo], [O.U_PHOTON]]) * np.ones(rho.size))
-            assert np.array_equal(rays._crossing_phase(orb, uo), ends[0] - ends[1], equal_nan=True), r_obs
+            got = rays._crossing_phase(orb, uo)
+            if lo < r_obs < hi:
+                assert np.array_equal(got, ends[0] - ends[1], equal_nan=True), r_obs
+            else:
+                assert np.max(np.abs(got - (ends[0] - ends[1]))) < 2e-12, r_obs
     for kind, mx in (("T", rays.RHO_MAX_T), ("I", rays.RHO_MAX_I)):
         rho = np.linspace(rays.RHO_MIN, mx, 2000)
         o = rays._orbits(kind, rho)
         assert np.array_equal(rays._reference_u(kind, rho), o.e2 if kind == "T" else o.e3), kind
+        # far orbits (rho > 0): lutgen.orbit.orbit_from_b's roots from b, bit for bit
+        far = rho > 0.0
+        ob = O.orbit_from_b(rays.impact_parameter(kind, rho[far]))
+        for f in ("e1", "e2", "e3", "delta"):
+            assert np.array_equal(getattr(o, f)[far], getattr(ob, f)), (kind, f)
+
+
+def test_crossing_phase_against_quadrature():
+    """The crossing rays' phase at the observer, both forms (one integral by the addition theorem, and
+    the difference of two), against scipy's adaptive quadrature of dtheta = du / sqrt(e^2 - u^2 (1 - u))
+    from the photon sphere to the observer: with u = 2/3 + w, e^2 - u^2 (1 - u) = eps + w^2 + w^3 exactly
+    (eps = e^2 - 4/27 = 4/27 e^rho for these labels), and w = sqrt(eps) sinh(v) takes the near double
+    root of orbits that wind out of the integrand, 1 / sqrt(1 + w^3 / (eps cosh^2 v)) dv."""
+    from scipy.integrate import quad
+    rho = np.array([-20.0, -8.0, -2.0, 0.0, 3.0, 12.0])
+    orb = rays._orbits("P", rho)
+    for r_obs in (1.01, 1.05, 2.0, 3.0, 30.0, 1e4):
+        uo = 1.0 / r_obs
+        single, pair = rays._crossing_phase_single(orb, uo), rays._crossing_phase_pair(orb, uo)
+        for i in range(rho.size):
+            eps = 4.0 / 27.0 * math.exp(rho[i])
+            sq = math.sqrt(eps)
+
+            def f(v):
+                w = sq * math.sinh(v)
+                return 1.0 / math.sqrt(1.0 + w ** 3 / (eps * math.cosh(v) ** 2))
+            exact = quad(f, 0.0, math.asinh((uo - O.U_PHOTON) / sq), epsabs=0.0, epsrel=1e-13, limit=200)[0]
+            tol = 1e-12 + 1e-11 * abs(exact)
+            assert abs(single[i] - exact) < tol, (r_obs, rho[i], single[i], exact)
+            assert abs(pair[i] - exact) < tol, (r_obs, rho[i], pair[i], exact)
 
 
 def test_cubic_root_through_uneven_nodes():
