@@ -43,6 +43,7 @@ def unregister():
     world.restore_all()  # the user's worlds come back when the add-on is disabled
     if isinstance(bpy.data, bpy.types.BlendData):  # (not while Blender starts or quits)
         rebuild.remove_all_images()  # no frozen images; the sources render again
+    rebuild.forget_all()  # (nothing of the last builds kept: inputs, topologies, the gather's arrays)
     properties.detach()
     for cls in reversed(_CLASSES):
         bpy.utils.unregister_class(cls)
