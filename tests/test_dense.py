@@ -420,3 +420,27 @@ def test_gather_reuse_is_dropped_on_file_load_and_unregister():
     finally:
         grlens_addon.register()
         gather.forget_all()
+
+
+def test_unregister_stops_the_cores_worker_thread():
+    """Disabling the add-on shuts the core's worker thread for dense meshes down (frame.stop_threads):
+    no thread of grlens' is left running, and the next dense build makes a new one."""
+    pytest.importorskip("bpy")
+    import threading
+
+    import grlens_addon
+    from grlens_addon.core import frame
+
+    def workers():
+        return [t for t in threading.enumerate() if t.name.startswith("grlens-core") and t.is_alive()]
+
+    grlens_addon.register()
+    try:
+        pool = frame.beside()
+        assert pool is not None and pool.submit(lambda: 1).result() == 1
+        assert workers()
+        grlens_addon.unregister()
+        assert not workers() and not frame._POOL
+    finally:
+        grlens_addon.register()
+    assert frame.beside() is not pool

@@ -34,6 +34,9 @@ def unregister():
     from . import background
 
     background.stop()  # (a build beside the interface: cancelled, its worker waited for)
+    from ..core import frame
+
+    frame.stop_threads()  # (the core's worker thread for dense meshes, idle after background.stop)
     handlers.detach()
     bpy.types.VIEW3D_MT_add.remove(operators.menu_add)
     if bpy.app.timers.is_registered(_rebuild_after_enable):

@@ -313,6 +313,13 @@ def beside():
     return _POOL[0]
 
 
+def stop_threads() -> None:
+    """Shut the worker thread down (waiting for work it runs); the next dense build makes a new one.
+    For the add-on's unregister, so that disabling or reloading it leaves no thread of its own behind."""
+    while _POOL:
+        _POOL.pop().shutdown(wait=True)
+
+
 def threads_for(table) -> bool:
     """Whether lookups in ``table`` may run in two threads at once: lutgen's LUT and WideLUT (a
     family's tables make their rows under a lock); not the orbit table's RayMap (it counts its
