@@ -36,7 +36,8 @@ sys.path.insert(0, HERE)
 
 import bench_accuracy as BA  # noqa: E402
 from provenance import code_version  # noqa: E402
-from grlens_addon.core import budget, frame_check, mapping, observer_view, pipeline, raytrace, spectrum  # noqa: E402
+from grlens_addon.core import (axis_patch, budget, frame, frame_check, mapping, observer_view, pipeline,  # noqa: E402
+                               raytrace, spectrum, visibility)
 from lutgen import LUTFamily, connect  # noqa: E402
 
 R_OBS = 20.0
@@ -90,7 +91,6 @@ ANGLES = (45, 170, 179, 180)
 REPEATS = 15  # timings per camera, best taken (the machine is shared: a busy moment slows one run)
 
 
-TIGHT_BAND = 0.25
 SATURATED = {"red (1, 0, 0)": (1.0, 0.0, 0.0), "green (0, 1, 0)": (0.0, 1.0, 0.0), "blue (0, 0, 1)": (0.0, 0.0, 1.0),
              "orange (1, 0.4, 0.05)": (1.0, 0.4, 0.05), "grey (0.5, 0.5, 0.5)": (0.5, 0.5, 0.5)}
 LUMA = np.array([0.2126, 0.7152, 0.0722])  # linear Rec.709 luminance weights
@@ -112,41 +112,84 @@ def _clipping():
     return rows
 
 
-def _tighter_band(table, settings):
-    """Rows of the near-ring angles' screen errors and costs with budget.PATCH_BAND_FACTOR = TIGHT_BAND."""
-    rows, keep = [], budget.PATCH_BAND_FACTOR
-    budget.PATCH_BAND_FACTOR = TIGHT_BAND
-    try:
-        for angle in (179, 180):
-            src = BA.sphere_scene(angle)[0]
-            scenes = {n: mapping.Scene(CAM.position, np.zeros(3), BA.R_S, beta=b) for n, b in CAMERAS.items()}
-            scr = {n: max(frame_check.check_frame([src], sc, table, settings, CAM).metrics["orders"][o]
-                          .get("screen_px", {}).get("max", 0.0) for o in (1, 2)) for n, sc in scenes.items()}
-            runs = {n: [] for n in scenes}
-            for _ in range(5):
-                for n, sc in scenes.items():
-                    t0 = time.perf_counter()
-                    pipeline.build_images(src, sc, table, settings, None, CAM.frustum_planes())
-                    runs[n].append(time.perf_counter() - t0)
-            t = {n: min(r) for n, r in runs.items()}
-            rows.append(f"| {angle} | " + " / ".join(f"{scr[n]:.2f}" for n in scenes) + " | "
-                        + " / ".join(f"{1e3 * t[n]:.1f}" for n in scenes)
-                        + f" | {max(t['out'], t['in']) / t['at rest']:.2f} |")
-            print(rows[-1], flush=True)
-    finally:
-        budget.PATCH_BAND_FACTOR = keep
-    return rows
+def _plain_band(table, settings):
+    """Rows of the near-ring angles, per camera (at rest / out / in), with the patch's band refined
+    (the add-on) and plain (axis_patch.band_shape made to answer None and the narrow band only: the
+    band's faces span the grid's azimuth steps, as before the refinement): largest screen error of both
+    orders (px), the
+    patches' limit vertices and band faces (faces touching the ring or the refined band's vertices,
+    one patch per camera here) and image triangles of both orders, refined / plain, and the per-frame
+    CPU time (best of REPEATS, the variants in turn, ms) refined / plain; and those figures per angle
+    and variant."""
+    def patch_counts(src, scene):
+        fr = frame.frame_context(scene, table, dataclasses.replace(settings, pixel_angle=CAM.pixel_angle),
+                                 CAM.frustum_planes())
+        source = frame.prepare_source(fr, src)
+        sight = visibility.see(fr, source, frame.map_source(fr, source))
+        lim = band = 0
+        for p in axis_patch.build_patches(fr, source, sight):
+            if len(p.tris):
+                extra = np.zeros(len(p.source_position), bool)
+                extra[len(p.source_position) - p.band:] = True
+                lim += int(p.limit[np.unique(p.tris)].sum())
+                band += int((p.limit | extra)[p.tris].any(axis=1).sum())
+        return lim, band
+
+    rows, summary, keep, wide = [], {}, axis_patch.band_shape, budget.BAND_WIDE_FACTOR
+
+    def variant(name):  # the band refined (the add-on's), or plain and narrow as before the refinement
+        axis_patch.band_shape = keep if name == "refined" else (lambda *a, **k: None)
+        budget.BAND_WIDE_FACTOR = wide if name == "refined" else budget.PATCH_BAND_FACTOR
+
+    for angle in (179, 180):
+        src = BA.sphere_scene(angle)[0]
+        scenes = {n: mapping.Scene(CAM.position, np.zeros(3), BA.R_S, beta=b) for n, b in CAMERAS.items()}
+        cells = {}
+        runs = {(v, n): [] for v in ("refined", "plain") for n in scenes}
+        try:
+            for name in ("refined", "plain"):
+                variant(name)
+                scr = {n: max(frame_check.check_frame([src], sc, table, settings, CAM).metrics["orders"][o]
+                              .get("screen_px", {}).get("max", 0.0) for o in (1, 2)) for n, sc in scenes.items()}
+                counts = {n: patch_counts(src, sc) for n, sc in scenes.items()}
+                tris = {n: sum(len(i.tris) for i in pipeline.build_images(src, sc, table, settings, None,
+                                                                          CAM.frustum_planes()).values())
+                        for n, sc in scenes.items()}
+                cells[name] = dict(scr=scr, lim={n: c[0] for n, c in counts.items()},
+                                   band={n: c[1] for n, c in counts.items()}, tris=tris)
+            for _ in range(REPEATS):  # both variants in turn (CPU time: the machine is shared)
+                for name in ("refined", "plain"):
+                    variant(name)
+                    for n, sc in scenes.items():
+                        t0 = time.process_time()
+                        pipeline.build_images(src, sc, table, settings, None, CAM.frustum_planes())
+                        runs[(name, n)].append(time.process_time() - t0)
+        finally:
+            variant("refined")
+        for name in cells:
+            cells[name]["t"] = {n: min(runs[(name, n)]) for n in scenes}
+        r, pl = cells["refined"], cells["plain"]
+        row = [f"{angle}"]
+        for key, fmt in (("scr", "{:.2f}"), ("lim", "{}"), ("band", "{}"), ("tris", "{}")):
+            row.append(" / ".join(fmt.format(r[key][n]) for n in scenes) + " (" + " / ".join(
+                fmt.format(pl[key][n]) for n in scenes) + ")")
+        row.append(" / ".join(f"{1e3 * r['t'][n]:.1f}" for n in scenes) + " (" + " / ".join(
+            f"{1e3 * pl['t'][n]:.1f}" for n in scenes) + ")")
+        rows.append("| " + " | ".join(row) + " |")
+        print(rows[-1], flush=True)
+        summary[angle] = cells
+    return rows, summary
 
 
-def _reading(st, tol):
-    """The reading of the tables, its figures from this run (``st``: per angle, see main)."""
+def _reading(st, tol, band=None):
+    """The reading of the tables, its figures from this run (``st``: per angle, see main; ``band``: per
+    angle, _plain_band's figures)."""
     def span(values, fmt="{:.2f}"):
         values = [v for v in values if np.isfinite(v)]
         lo, hi = min(values), max(values)
         return fmt.format(lo) if fmt.format(lo) == fmt.format(hi) else f"{fmt.format(lo)}-{fmt.format(hi)}"
 
     same = [a for a, v in st.items() if len(set(v["tris"].values())) == 1]
-    over = {a: v["screen"] for a, v in st.items() if max(v["screen"]["out"], v["screen"]["in"]) > tol}
     text = (f"Reading. Per frame the larger of the two moving cameras costs {span([v['ratio'] for v in st.values()])} "
             f"times the camera at rest. ")
     if same:
@@ -174,18 +217,25 @@ def _reading(st, tol):
              "its azimuth and goes back onto the ring), for "
              f"{span([v['exact_over_out'] for v in st.values()])} times the moving frame without it "
              f"({span([v['exact_over_rest'] for v in st.values()])} times the camera at rest's).")
-    if over:
-        text += (" Next to the Einstein ring single pixels of the moving cameras' images are placed beyond the "
-                 f"{tol:g} px tolerance (" + "; ".join(f"{a} degrees: out {v['out']:.2f} px, in {v['in']:.2f} px, "
-                                                        f"at rest {v['at rest']:.2f} px" for a, v in over.items())
-                 + "), where the patch's innermost circle leaves a band to the ring drawn by pieces spanning it "
-                 "(budget.PATCH_BAND_FACTOR). Every point of that band lies within the innermost circle's radius of "
-                 "the axis crossing, a point whose image is the whole ring: a piece with corners on the ring (all "
-                 "of them that one point) and on the circle gives the points inside it the azimuth of its circle "
-                 "corners, so a pixel whose centre falls in the band shows the texture of the crossing's "
-                 "neighbourhood at an azimuth up to one of the patch's azimuth steps off. A narrower band (the table "
-                 "below) lets fewer pixel centres fall in it, but does not bound the error of those that do, and its "
-                 "innermost circle then meets the ring's outset; so the band stays as it is.")
+    if band is not None:
+        def each(key, variant, fmt="{}"):
+            return span([v[variant][key][n] for v in band.values() for n in CAMERAS], fmt)
+
+        extra = [v["refined"]["tris"][n] - v["plain"]["tris"][n] for v in band.values() for n in CAMERAS]
+        cost = [v["refined"]["t"][n] / v["plain"]["t"][n] for v in band.values() for n in CAMERAS]
+        near = {a: max(v["screen"].values()) for a, v in st.items() if a in band}
+        within = ("every pixel is placed within" if max(near.values()) <= tol
+                  else "single pixels are still placed beyond")
+        text += (f" Next to the Einstein ring {within} the {tol:g} px tolerance ("
+                 + "; ".join(f"{a} degrees: {e:.2f} px" for a, e in near.items()) + "). The axis patch's band "
+                 "next to the ring is drawn by faces with corners on it, which are all one source point, the axis "
+                 "crossing: such a face draws its points with the azimuth of its other corners, so each spans at most "
+                 "2 PATCH_AIM tol / R of azimuth (R: the ring's radius as seen, in pixels), joined to the grid by a fan "
+                 "(axis_patch.band_shape). Without that (the table below) single pixels there were up to "
+                 f"{each('scr', 'plain', '{:.2f}')} px off. Per patch it takes {each('lim', 'refined')} limit vertices "
+                 f"and {each('band', 'refined')} band faces instead of {each('lim', 'plain')} and "
+                 f"{each('band', 'plain')} ({span(extra, '{}')} more image triangles per frame, "
+                 f"{span(cost)} times the frame's cost).")
     return text
 SKY_BEGIN, SKY_END = "<!-- bench_physical_time_sky: begin -->", "<!-- bench_physical_time_sky: end -->"
 
@@ -248,7 +298,7 @@ def main(out_path):
                          exact_over_rest=t_ex / times["at rest"], zexact=max(z[1] for z in exact_z),
                          zexact_ring=np.nanmax([z[2] for z in exact_z]), screen=screen)
         print(rows[-3:], cost[-1], exact[-1], flush=True)
-    band = _tighter_band(table, settings)
+    band, band_figures = _plain_band(table, settings)
     text = "\n".join([
         "# A moving camera: accuracy and cost", "",
         f"<!-- generated by benchmarks/bench_physical_time.py on {code_version()} -->", "",
@@ -273,11 +323,14 @@ def main(out_path):
         "relative error of 1 + z of both moving cameras with it, off the axis and on the Einstein rings:", "",
         "| orbit angle (deg) | image vertices | frame (ms) | with exact 1 + z (ms) | over without | over at rest | "
         "1+z max | 1+z max on the ring |", "|---|---|---|---|---|---|---|---|", *exact, "",
-        _reading(st, settings.max_error_px), "",
-        f"The same next to the ring with the band four times tighter (budget.PATCH_BAND_FACTOR = "
-        f"{TIGHT_BAND:g} instead of {budget.PATCH_BAND_FACTOR:g}, for every camera; not the add-on's setting): "
-        "largest screen error of both orders (px) and per-frame cost (best of 5 in turn, ms), at rest / out / in:", "",
-        "| orbit angle (deg) | screen max | frame (ms) | ratio per frame |", "|---|---|---|---|", *band, "",
+        _reading(st, settings.max_error_px, band_figures), "",
+        "The same next to the ring with the band refined (the add-on) and, in brackets, plain (narrow, each of its "
+        "faces spanning one of the grid's azimuth steps; axis_patch.band_shape answering None), at rest / out / in: "
+        "largest screen error of both orders (px), the patch's limit vertices and band faces (those touching the "
+        "ring or the refined band's vertices), image triangles of both orders, and the per-frame CPU time (best "
+        f"of {REPEATS}, the two in turn, ms):", "",
+        "| orbit angle (deg) | screen max | limit vertices | band faces | image triangles | frame (ms) |",
+        "|---|---|---|---|---|---|", *band, "",
         "## Saturated colours", "",
         "A shifted colour is M(g) rgb (core.spectrum): the colour of the smoothest spectrum of rgb, shifted. A "
         "saturated colour's smoothest spectrum dips below zero, so its shift can leave the gamut: a channel "

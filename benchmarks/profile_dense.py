@@ -4,7 +4,7 @@ comparisons of pipeline.build_images: ``--compare A B``).
 
 The inputs of ``pipeline.build_images`` are captured once from Blender (benchmarks/bench_dense.py's
 scene: ``bpy.ops.grlens.demo_scene``, 1920x1080, the sphere's frames, the render tolerance, or the
-viewport's with ``--preview``) into an .npz (``--capture``, default /tmp/grlens_dense_<size>_<frames>.npz,
+viewport's with ``--preview``) into an .npz (``--capture``, default /tmp/grlens_dense_<CAPTURE_VERSION>_<size>_<frames>.npz,
 reused if present); the core then runs bpy-free on them, with the family's table for the camera's
 radius (lutgen.LUTFamily, the add-on's default). Stage times come from the progress hook
 (pipeline.Progress is called before every stage and inside long ones): time from one stage's call
@@ -12,7 +12,7 @@ to the next stage's, per stage and pass, and how far the progress fraction shown
 the next) strays from the fraction of the build's time gone.
 
 Usage: ./dev python benchmarks/profile_dense.py [--size 1M] [--frames 30] [--repeat 3] [--preview]
-       [--cprofile N] [--dump FILE] [--compare A B] [--write]
+       [--threads N] [--cprofile N] [--dump FILE] [--compare A B] [--write]
 """
 import argparse
 import os
@@ -23,6 +23,11 @@ import numpy as np
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
+
+
+CAPTURE_VERSION = "v2"
+"""In the default capture's file name: captures of an earlier gather (float64 UVs and normals) are not
+reused."""
 
 
 def capture(path, size, frames, preview):
@@ -112,6 +117,8 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--preview", action="store_true", help="the viewport's tolerance")
     ap.add_argument("--capture", default=None, help="the captured inputs (.npz)")
+    ap.add_argument("--threads", type=int, default=None, metavar="N",
+                    help="grlens_addon.core.frame.THREADS for the builds (default: as the add-on has it)")
     ap.add_argument("--cprofile", type=int, default=0, metavar="N", help="print the N costliest functions")
     ap.add_argument("--dump", default=None, help="write the image meshes' arrays to this .npz")
     ap.add_argument("--compare", nargs=2, default=None, metavar=("A", "B"), help="compare two dumps")
@@ -121,11 +128,15 @@ def main(argv=None):
     if args.compare:
         return compare(*args.compare)
     frames = [int(f) for f in args.frames.split(",")]
-    path = args.capture or (f"/tmp/grlens_dense_{args.size}{'_preview' if args.preview else ''}_"
+    path = args.capture or (f"/tmp/grlens_dense_{CAPTURE_VERSION}_{args.size}{'_preview' if args.preview else ''}_"
                             f"{'_'.join(map(str, frames))}.npz")
     if not os.path.exists(path):
         capture(path, args.size, frames, args.preview)
     runs = load(path)
+    if args.threads is not None:
+        from grlens_addon.core import frame
+
+        frame.THREADS = args.threads
     for run in runs:
         timed_build(run)  # (tables and caches first)
     dump = {}
@@ -178,10 +189,13 @@ def write(table, frame, total, tris, args):
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     from provenance import write_section
 
+    from grlens_addon.core import frame as core_frame
+
     write_section(OUT, BEGIN, END, "benchmarks/profile_dense.py", [
         f"Where the core's time goes (`./dev python benchmarks/profile_dense.py --write`: bench_dense's "
         f"{args.size} sphere, frame {frame}, the {'viewport' if args.preview else 'render'} tolerance, "
-        f"pipeline.build_images bpy-free on the inputs captured from Blender; medians of {args.repeat} builds, "
+        f"pipeline.build_images bpy-free on the inputs captured from Blender, {core_frame.THREADS} thread(s) "
+        f"(frame.THREADS); medians of {args.repeat} builds, "
         f"{total:.2f} s, image triangles {tris}; per stage, the time from its progress call to the "
         "next stage's):", "",
         "| stage (both orders' passes) | median [s] | share of the median build | STAGE_WEIGHTS share |",

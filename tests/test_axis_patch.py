@@ -121,7 +121,7 @@ def test_patch_on_a_tilted_plane(lut):
     (p,) = _patches(pts, tris, lut)
     assert p.complete
     n = p.n_azimuths
-    grid = p.source_position[n:]
+    grid = p.source_position[p.grid_vertices]
     x, y, z = observer_view.axis_coordinates(grid, CAMERA, HOLE)
     # on the plane through (-4, 0, 0) with normal (cos 0.5, -sin 0.5, 0)
     np.testing.assert_allclose((grid - [-4.0, 0, 0]) @ [math.cos(0.5), -math.sin(0.5), 0.0], 0.0, atol=1e-12)
@@ -143,10 +143,18 @@ def test_patch_on_a_tilted_plane(lut):
     assert len(p.replaced) > 0 and np.all(cd[tris[p.replaced]].max(axis=1) <= p.radius)
     rest = np.setdiff1d(np.arange(len(tris)), p.replaced)
     assert np.all(cd[tris[rest]].max(axis=1) > p.radius)
+    # the ring's edge: the limit vertices (the grid's n, and the refined band's between them) in
+    # azimuth order, each a point of the crossing (the same source point)
+    lim = np.flatnonzero(p.limit)
+    assert np.all(p.limit[:n]) and len(lim) > n and not p.limit[p.grid_vertices].any()
+    np.testing.assert_allclose(p.source_position[lim], p.crossing.point[None].repeat(len(lim), 0))
+    ring_order = lim[np.argsort(p.limit_psi[lim])]
+    step = np.diff(np.append(p.limit_psi[ring_order], p.limit_psi[ring_order[0]] + 2 * np.pi))
+    assert step.max() <= 2 * np.pi / p.ring_chords * (1 + 1e-9)
     for order in p.orders:
         im = p.images[order]
         assert im.valid.all()
-        ring = im.direction[:n]
+        ring = im.direction[ring_order]
         theta = _angle_from_hole(ring)
         np.testing.assert_allclose(theta, theta[0], rtol=1e-12)
         chord_mid = 0.5 * (ring + np.roll(ring, -1, axis=0))
@@ -154,11 +162,15 @@ def test_patch_on_a_tilted_plane(lut):
         sag = (theta - mid) / PIXEL
         assert 0 < sag.max() <= budget.PATCH_EDGE_FACTOR * budget.COVERAGE_FACTOR * MAX_ERROR * 1.0001
         exact = np.pi - connect(20.0, np.linalg.norm(p.crossing.point), np.pi, order).xi
-        np.testing.assert_allclose((theta - exact) / PIXEL, budget.CHORD_OUTSET * sag, rtol=1e-3, atol=1e-6)
-        np.testing.assert_allclose((mid - exact) / PIXEL, (budget.CHORD_OUTSET - 1.0) * sag, rtol=1e-3, atol=1e-6)
-        # the innermost circle is within BAND_FACTOR * max_error_px of the ring
-        inner = _angle_from_hole(im.direction[n:2 * n])
-        assert np.abs(inner - theta[0]).max() / PIXEL <= budget.PATCH_BAND_FACTOR * budget.COVERAGE_FACTOR * MAX_ERROR * 1.5
+        # the outset is CHORD_OUTSET of the longest chord's sag: the chords cross the ring
+        np.testing.assert_allclose((theta - exact) / PIXEL, budget.CHORD_OUTSET * sag.max(), rtol=1e-3, atol=1e-6)
+        np.testing.assert_allclose((mid - exact) / PIXEL, budget.CHORD_OUTSET * sag.max() - sag, rtol=1e-3, atol=1e-6)
+        assert np.all(mid < exact)
+        # the innermost circle is within the band (the wide one where the plane has no edge near the
+        # axis: BAND_WIDE_FACTOR of the coverage tolerance) of the ring
+        inner = _angle_from_hole(im.direction[p.grid_vertices][:n])
+        wide = budget.BAND_WIDE_FACTOR * budget.COVERAGE_FACTOR * MAX_ERROR
+        assert np.abs(inner - theta[0]).max() / PIXEL <= wide * 1.5
 
 
 @pytest.mark.parametrize("theta_deg", [0.5, 8.0, 60.0, 120.0, 175.0])
@@ -208,7 +220,7 @@ def test_patch_circles_on_a_steep_plane(lut, monkeypatch, tilt_deg):
 
     def circles(p):
         n = p.n_azimuths
-        d = np.hypot(*observer_view.axis_coordinates(p.source_position[n:], CAMERA, HOLE)[:2])
+        d = np.hypot(*observer_view.axis_coordinates(p.source_position[p.grid_vertices], CAMERA, HOLE)[:2])
         return d.reshape(-1, n)[:, 0]
 
     (p,) = _patches(pts, tris, lut)
@@ -274,8 +286,9 @@ def test_patch_stops_at_the_mesh(lut, monkeypatch):
     _, y, z = p.source_position.T
     assert np.abs(y).max() <= 0.04 + 1e-12 and np.abs(z).max() <= 0.04 + 1e-12
     n = p.n_azimuths
-    delta = np.hypot(*observer_view.axis_coordinates(p.source_position[n:], CAMERA, HOLE)[:2])
-    assert np.unique(np.round(delta, 9)).size > 1 and len(p.source_position) < n * (1 + np.unique(np.round(delta, 9)).size)
+    grid = p.source_position[p.grid_vertices]
+    delta = np.hypot(*observer_view.axis_coordinates(grid, CAMERA, HOLE)[:2])
+    assert np.unique(np.round(delta, 9)).size > 1 and len(grid) < n * np.unique(np.round(delta, 9)).size
     cd = np.hypot(*observer_view.axis_coordinates(pts, CAMERA, HOLE)[:2])
     assert 0 < len(p.replaced) < len(tris) and np.all(cd[tris[p.replaced]].max(axis=1) <= p.radius)
     assert _patches(*_grid(-4.0, 1.0, 10, hole_radius=0.15), lut) == []
@@ -295,10 +308,9 @@ def _clip_check(p, pts, tris):
     assert np.all(p.bary.sum(axis=2) == pytest.approx(1.0)) and p.bary.min() > -1e-9
     # the corners' positions are their barycentrics in the face's source triangle
     corner = np.einsum("fck,fkx->fcx", p.bary, pts[tris[p.face_src]])
-    grid = p.tris >= n
-    np.testing.assert_allclose(corner[grid], p.source_position[p.tris[grid]], atol=1e-12)
+    np.testing.assert_allclose(corner.reshape(-1, 3), p.source_position[p.tris.ravel()], atol=1e-12)
     e = np.sort(np.concatenate([p.tris[:, [0, 1]], p.tris[:, [1, 2]], p.tris[:, [2, 0]]]), axis=1)
-    e = e[e[:, 0] >= n]  # the limit vertices are one point with a turn of images: the ring's band
+    e = e[~p.limit[e].any(axis=1)]  # the limit vertices are one point with a turn of images: the ring
     key, count = np.unique(e, axis=0, return_counts=True)
     assert count.max() == 2
     px, py, _ = observer_view.axis_coordinates(p.source_position, CAMERA, HOLE)
@@ -463,7 +475,9 @@ def test_patch_limits(lut, monkeypatch):
     assert len(patches) == budget.MAX_PATCHES
     monkeypatch.setattr(budget, "MAX_GRID", 2000)
     for p in _patches(*_grid(-4.0, 1.0, 10), lut, pixel=PIXEL / 8):
-        assert len(p.source_position) <= 2000 + p.n_azimuths
+        assert len(p.source_position[p.grid_vertices]) <= 2000
+        # the refined band: at most MAX_BAND_AZIMUTHS limit vertices per turn (one more per sector)
+        assert 0 < p.limit.sum() <= budget.MAX_BAND_AZIMUTHS + 2 * p.n_azimuths
 
 
 def test_back_faces_of_a_closed_sphere(lut):
@@ -493,16 +507,16 @@ def test_patch_images_and_facing_from_one_lookup(lut):
     far, near = sorted(_patches(pts, tris, lut, closed=True), key=lambda p: p.crossing.along)
     assert 0 < far.facing[1].sum() < 0.3 * len(far.tris) and far.facing[2].sum() < 0.01 * len(far.tris)
     for p in (far, near):
-        n_lim = p.n_azimuths
+        off = ~p.limit  # the vertices off the axis (the limit vertices' images are the ring's points)
         for o, im in p.images.items():
-            want = mapping.map_vertices(p.source_position[n_lim:], SCENE, lut, o)
-            np.testing.assert_array_equal(im.position[n_lim:], want.position)
-            np.testing.assert_array_equal(im.distance[n_lim:], want.distance)
+            want = mapping.map_vertices(p.source_position[off], SCENE, lut, o)
+            np.testing.assert_array_equal(im.position[off], want.position)
+            np.testing.assert_array_equal(im.distance[off], want.distance)
     open_patches = _patches(pts, tris, lut, closed=False)
     for p in open_patches:
         for o, im in p.images.items():
-            np.testing.assert_array_equal(im.position[p.n_azimuths:],
-                                          mapping.map_vertices(p.source_position[p.n_azimuths:], SCENE, lut, o).position)
+            np.testing.assert_array_equal(im.position[~p.limit],
+                                          mapping.map_vertices(p.source_position[~p.limit], SCENE, lut, o).position)
 
 
 def test_hidden_patches_are_not_built(lut, monkeypatch):
@@ -674,13 +688,18 @@ def test_silhouette_of_an_open_disc_is_its_boundary(lut):
 def test_pipeline_ring_reaches_the_einstein_radius(lut):
     """Behind the hole, the order-1 image of the sphere starts at the Einstein ring of the crossing
     point, all round (no culled gap), and order 2 ends there (the same ring: phi = pi either way);
-    the ring's points lie CHORD_OUTSET of their chords' sag outside it."""
+    the ring's points lie CHORD_OUTSET of their chords' sag outside it (the refined band's chords,
+    far shorter than the patch-edge tolerance allows)."""
     pts, tris = _sphere([-3.0, 0.0, 0.01])
-    settings = pipeline.Settings(pixel_angle=PIXEL)
+    settings = pipeline.Settings(pixel_angle=PIXEL, max_error_px=MAX_ERROR)
     out = pipeline.build_images(pipeline.SourceMesh(pts, tris), SCENE, lut, settings)
     near = max(axis_patch.find_crossings(pts, tris, CAMERA, HOLE), key=lambda c: c.along)
     theta_e = np.pi - connect(20.0, abs(near.along), np.pi, 1).xi
+    patch = max(_patches(pts, tris, lut, closed=True), key=lambda p: p.crossing.along)
+    assert patch.band > 0 and patch.ring_chords > 4 * patch.n_azimuths
+    sag = abs(float(axis_patch.chord_sag(np.pi - theta_e, 2 * np.pi / patch.ring_chords)))
     most = budget.CHORD_OUTSET * budget.PATCH_EDGE_FACTOR * budget.COVERAGE_FACTOR * settings.max_error_px * PIXEL
+    assert budget.CHORD_OUTSET * sag < 0.1 * most
     outset = None
     for order in (1, 2):
         img = out[order]
@@ -690,7 +709,7 @@ def test_pipeline_ring_reaches_the_einstein_radius(lut):
         theta = _angle_from_hole(d)
         if order == 1:  # nothing of order 1 lies inside the ring (order 2 also shows the far side)
             outset = theta.min() - theta_e
-            assert 0.1 * most < outset <= most * 1.0001
+            assert outset == pytest.approx(budget.CHORD_OUTSET * sag, rel=1e-2)
         at_ring = np.abs(theta - theta_e - outset) < 1e-7
         pa = np.arctan2(d[at_ring, 2], d[at_ring, 1])
         assert len(np.unique(((pa + np.pi) / (2 * np.pi) * 64).astype(int) % 64)) == 64

@@ -211,6 +211,9 @@ def test_a_long_viewport_build_runs_in_the_worker_and_gives_the_synchronous_imag
         np.testing.assert_array_equal(p, old[n])
     fractions = []
     job.progress.callback = lambda stage, f: fractions.append(f)
+    job.thread.join(60)
+    # the images' edges were found in the worker (rebuild.compute), not by the upload on the main thread
+    assert all(img._edges is not None for item in job.plan.pending for img in item.images.values())
     _finish_in_timer()
     assert all(b >= a for a, b in zip(fractions, fractions[1:]))
     assert scene.grlens.status.startswith("1 object(s) lensed") and "viewport preview" in scene.grlens.status

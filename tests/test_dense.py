@@ -45,6 +45,7 @@ SCENES = {
 
 def _check_edges(img):
     verts, corner_edge = img.edges()
+    assert img.edges()[0] is verts  # (found once: a worker thread's build finds them for the upload)
     tris = img.tris
     assert corner_edge.shape == tris.shape
     ends = verts[corner_edge]  # (F, 3, 2): each corner's edge joins that corner and the next
@@ -98,10 +99,12 @@ def test_closed_volume_from_shared_normals():
 
 
 def test_block_passes_are_the_plain_arithmetic_to_the_bit(monkeypatch):
-    """The dense passes in blocks (frame.edge_lengths, visibility's normals and back-face masks) give
-    exactly what the plain whole-array arithmetic gives (observer_view.chord_length, silhouette.normals,
-    the corner-by-corner n . d test), NaN and degenerate triangles included, whatever the block size;
-    their checkpoint is called between blocks."""
+    """The dense passes in blocks (frame.edge_lengths, visibility's pass over the triangles) give
+    exactly what the plain whole-array arithmetic gives (observer_view.chord_length; the back-face
+    masks of visibility._away_rows), NaN and degenerate triangles included, whatever the block size,
+    the closed surface's volume that sum to rounding, and the back-face masks those of the unit
+    leaving directions dotted with the unit normals (but within 1e-12 of the margin); their
+    checkpoint is called between blocks."""
     from grlens_addon.core import frame as F
     from grlens_addon.core import observer_view
 
@@ -114,6 +117,15 @@ def test_block_passes_are_the_plain_arithmetic_to_the_bit(monkeypatch):
     d /= np.linalg.norm(d, axis=1)[:, None]
     d[11] = np.nan
     ev = rng.integers(0, len(pts), (7000, 2))
+    # the back-face test's inputs: an orthonormal pair e1, e2 per vertex and unit in-plane directions
+    e1 = np.array([0.6, 0.0, 0.8])
+    e2 = rng.normal(size=(len(pts), 3))
+    e2 -= np.multiply.outer(e2 @ e1, e1)
+    e2 /= np.linalg.norm(e2, axis=1)[:, None]
+    ang = rng.uniform(0, 2 * np.pi, (2, len(pts)))
+    in_plane = {1: (np.cos(ang[0]), np.sin(ang[0])), 2: (np.cos(ang[1]), np.sin(ang[1]))}
+    in_plane[2][0][11] = np.nan
+    ok = np.isfinite(pts).all(axis=1)[tris].all(axis=1)
     for block in (1000, 1 << 15):
         monkeypatch.setattr(F, "EDGE_BLOCK", block)
         monkeypatch.setattr(visibility, "TRI_BLOCK", block)
@@ -122,23 +134,41 @@ def test_block_passes_are_the_plain_arithmetic_to_the_bit(monkeypatch):
         assert len(calls) == (len(ev) - 1) // block
         np.testing.assert_array_equal(chord, observer_view.chord_length(d[ev[:, 1]], d[ev[:, 0]]))
         assert np.array_equal(length, observer_view.row_norm(pts[ev[:, 1]] - pts[ev[:, 0]]), equal_nan=True)
-        raw, unit = visibility._normals_in_blocks(pts, tris, lambda q: calls.append(q))
+        n_calls = len(calls)
+        six, away = visibility._whole_pass(pts, tris, e1, e2, in_plane, True, lambda q: calls.append(q))
+        assert len(calls) - n_calls == (len(tris) - 1) // block
         want = visibility.silhouette.normals(pts, tris)
-        assert np.array_equal(raw, want, equal_nan=True)
+        p0 = pts[tris[:, 0]] - pts[tris[0, 0]]
+        whole = np.einsum("ij,ij->", p0[ok], want[ok])  # (the triangles without a NaN corner)
+        clean = visibility._whole_pass(pts, tris[ok], e1, e2, {}, True)[0]
+        assert abs(clean - whole) <= 1e-12 * np.abs(np.einsum("ij,ij->i", p0[ok], want[ok])).sum()
+        assert np.isnan(six)  # (a NaN corner)
         with np.errstate(invalid="ignore", divide="ignore"):
-            want_unit = want / observer_view.row_norm(want)[:, None]
-        assert np.array_equal(unit, want_unit, equal_nan=True)
-        away = visibility._away_in_blocks(unit, tris, d)
-        with np.errstate(invalid="ignore"):
-            dots = np.stack([np.einsum("fx,fx->f", unit, d[tris[:, k]]) for k in range(3)], axis=1)
-        np.testing.assert_array_equal(away, (dots < -visibility.B.BACK_FACE_MARGIN).all(axis=1))
-        assert 0 < away.sum() < len(tris)
+            unit = want / observer_view.row_norm(want)[:, None]
+        assert set(away) == {1, 2}
+        for o in (1, 2):
+            # the same arithmetic on whole arrays, to the bit
+            np.testing.assert_array_equal(away[o], visibility._away_rows(unit, tris, e1, e2, in_plane)[o])
+            # against the unit directions d = (a e1 + b e2) / |a e1 + b e2| dotted with n
+            a, b = in_plane[o]
+            u = np.multiply.outer(a, e1) + b[:, None] * e2
+            with np.errstate(invalid="ignore", divide="ignore"):
+                u /= observer_view.row_norm(u)[:, None]
+                dots = np.stack([np.einsum("fx,fx->f", unit, u[tris[:, k]]) for k in range(3)], axis=1)
+            near = (np.abs(dots + visibility.B.BACK_FACE_MARGIN) < 1e-12).any(axis=1)
+            np.testing.assert_array_equal(away[o][~near], (dots < -visibility.B.BACK_FACE_MARGIN).all(axis=1)[~near])
+            assert 0 < away[o].sum() < len(tris)
 
 
-def test_the_map_in_chunks_is_one_call_to_the_bit(table, monkeypatch):
+@pytest.mark.parametrize("threads", [1, 2])
+def test_the_map_in_chunks_is_one_call_to_the_bit(table, monkeypatch, threads):
     """frame.images_in_chunks (a dense mesh's vertices and edge midpoints in calls of MAP_CHUNK points,
-    a checkpoint between calls) gives exactly the values of one call, tangents and plane included."""
+    a checkpoint between calls, or between pairs of calls run in two threads) gives exactly the
+    values of one call, tangents and plane included."""
     from grlens_addon.core import frame as F
+
+    monkeypatch.setattr(F, "THREADS", threads)
+    assert F.threads_for(table)
 
     src = _dense_sphere(60)
     fr = F.frame_context(SCENE, table, BA.make_settings(CAM), None, CAM.frustum_planes())
@@ -150,12 +180,37 @@ def test_the_map_in_chunks_is_one_call_to_the_bit(table, monkeypatch):
     for given in (plane, None):
         calls.clear()
         parts = F.images_in_chunks(fr, src.positions, given, True, (0.0, 0.5))
-        assert len(calls) == (len(src.positions) - 1) // 3000 and all(0 < c < 0.5 for c in calls)
+        n_calls = -(-len(src.positions) // 3000)
+        assert len(calls) == (n_calls - 1) // threads and all(0 < c < 0.5 for c in calls)
         for o in fr.orders:
             for name in ("position", "direction", "distance", "valid", "xi", "dt", "ux", "uy"):
                 assert np.array_equal(getattr(parts[o], name), getattr(whole[o], name), equal_nan=True), name
             for name in ("r", "phi", "e2", "on_axis"):
                 assert np.array_equal(getattr(parts[o].plane, name), getattr(plane, name)), name
+
+
+@pytest.mark.parametrize("name", ["sphere 180 (patches)", "dense sphere 60"])
+def test_two_threads_build_the_images_of_one(table, monkeypatch, name):
+    """build_images with frame.THREADS = 2 (the map's chunks two at a time, both orders assembled at
+    once) gives exactly the images of the calling thread alone, a light's irradiance included."""
+    from grlens_addon.core import frame as F
+
+    src = SCENES[name]()
+    rng = np.random.default_rng(6)
+    src.corner_normals = rng.normal(size=(len(src.tris), 3, 3)).astype(np.float32)
+    monkeypatch.setattr(pipeline, "ASSEMBLE_THREADS_MIN", 0)
+    monkeypatch.setattr(F, "MAP_CHUNK", 3000)
+    light = pipeline.Light(np.array([0.0, 0.0, 30.0]), 1.0, LUTFamily().at(30.0))
+    got = {}
+    for threads in (1, 2):
+        monkeypatch.setattr(F, "THREADS", threads)
+        got[threads] = pipeline.build_images(src, SCENE, table, BA.make_settings(CAM), light, CAM.frustum_planes())
+    assert list(got[1]) == list(got[2]) == [1, 2]
+    for o in got[1]:
+        for k, v in vars(got[1][o]).items():
+            if isinstance(v, np.ndarray):
+                assert np.array_equal(v, getattr(got[2][o], k), equal_nan=True), k
+        assert len(got[1][o].tris) > 0 and got[1][o].irradiance is not None
 
 
 def test_cleaning_shortcuts_keep_what_the_full_tests_keep():
@@ -207,6 +262,31 @@ def test_float32_uvs_give_the_same_image_uvs(table, name):
         np.testing.assert_array_equal(a[o].tris, b[o].tris)
         np.testing.assert_array_equal(a[o].corner_uv, b[o].corner_uv)
         assert b[o].corner_uv.dtype in (np.float32, np.float64)
+
+
+@pytest.mark.parametrize("name", ["sphere 180 (patches)", "floor (cut, strips)", "sphere 45"])
+def test_float32_normals_give_the_float32_of_the_image_normals(table, name):
+    """Corner normals given in float32 (as the gather passes them on) give, for whole source
+    triangles, the float32 of the image normals the same values in float64 give (what the upload
+    wrote before), and for cut pieces and patch faces normals interpolated in float64 from the same
+    values (equal to rounding); the GR irradiance from them is equal to 1e-6 relative."""
+    src = SCENES[name]()
+    rng = np.random.default_rng(4)
+    n = rng.normal(size=(len(src.tris), 3, 3))
+    n /= np.linalg.norm(n, axis=2, keepdims=True)
+    n32 = n.astype(np.float32)
+    settings = BA.make_settings(CAM)
+    light = pipeline.Light(np.array([0.0, 0.0, 30.0]), 1.0, LUTFamily().at(30.0))
+    a = pipeline.build_images(pipeline.SourceMesh(src.positions, src.tris, None, None, n32.astype(np.float64)),
+                              SCENE, table, settings, light, CAM.frustum_planes())
+    b = pipeline.build_images(pipeline.SourceMesh(src.positions, src.tris, None, None, n32), SCENE, table,
+                              settings, light, CAM.frustum_planes())
+    for o in a:
+        np.testing.assert_array_equal(a[o].tris, b[o].tris)
+        assert a[o].corner_normal.shape == b[o].corner_normal.shape
+        np.testing.assert_array_equal(np.asarray(a[o].corner_normal, np.float32),
+                                      np.asarray(b[o].corner_normal, np.float32))
+        np.testing.assert_allclose(b[o].irradiance, a[o].irradiance, rtol=1e-6, atol=0)
 
 
 def test_image_edges_upload_into_a_valid_blender_mesh(table):
@@ -291,9 +371,76 @@ def test_gather_reuses_what_it_derived_from_equal_arrays_only():
         inv_t = np.linalg.inv(np.diag([1.0, 2.0, 3.0])).T
         direct = first.corner_normals @ inv_t.T
         direct /= np.linalg.norm(direct, axis=-1, keepdims=True)
-        np.testing.assert_allclose(n2, direct, atol=1e-15)
-        np.testing.assert_allclose(np.linalg.norm(n1, axis=-1), 1.0, atol=1e-15)
+        # float32, as Blender stores normals: the float64 transform rounded once
+        assert n1.dtype == n2.dtype == first.corner_normals.dtype == np.float32
+        np.testing.assert_allclose(n2, direct, rtol=0, atol=6e-8)
+        np.testing.assert_allclose(np.linalg.norm(n1.astype(np.float64), axis=-1), 1.0, atol=2e-7)
+        rot_t = np.linalg.inv(rot).T
+        want = first.corner_normals.astype(np.float64) @ rot_t.T
+        want /= np.linalg.norm(want, axis=-1, keepdims=True)
+        np.testing.assert_allclose(n1, want, rtol=0, atol=2e-7)  # (Blender's own normals unit to float32)
     finally:
         bpy.data.meshes.remove(me)
         gather._KNOWN.clear()
         gather._LAST_NORMALS.clear()
+
+
+def test_gather_reuse_is_dropped_on_file_load_and_unregister():
+    """The gather's reuse (gather._KNOWN, _LAST_NORMALS: up to two meshes' arrays) is dropped when a
+    file is loaded (the load_pre handler) and when the add-on is unregistered: the last file's meshes
+    are not kept alive."""
+    bpy = pytest.importorskip("bpy")
+    import bmesh
+
+    import grlens_addon
+    from grlens_addon.blender import gather, handlers
+
+    grlens_addon.register()
+
+    def fill():
+        me = bpy.data.meshes.new("gather forget")
+        bm = bmesh.new()
+        bm.loops.layers.uv.new("UVMap")
+        bmesh.ops.create_uvsphere(bm, u_segments=8, v_segments=4, radius=1.0, calc_uvs=True)
+        bm.to_mesh(me)
+        bm.free()
+        part = gather.mesh_part(me)
+        gather._world_normals(part.corner_normals, np.eye(3))
+        bpy.data.meshes.remove(me)
+        assert gather._KNOWN and any(gather._KNOWN) and gather._LAST_NORMALS
+
+    try:
+        fill()
+        assert handlers.on_load_pre in bpy.app.handlers.load_pre
+        bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)  # (load_pre runs)
+        assert not any(gather._KNOWN) and not gather._LAST_NORMALS
+        fill()
+        grlens_addon.unregister()
+        assert not any(gather._KNOWN) and not gather._LAST_NORMALS
+    finally:
+        grlens_addon.register()
+        gather.forget_all()
+
+
+def test_unregister_stops_the_cores_worker_thread():
+    """Disabling the add-on shuts the core's worker thread for dense meshes down (frame.stop_threads):
+    no thread of grlens' is left running, and the next dense build makes a new one."""
+    pytest.importorskip("bpy")
+    import threading
+
+    import grlens_addon
+    from grlens_addon.core import frame
+
+    def workers():
+        return [t for t in threading.enumerate() if t.name.startswith("grlens-core") and t.is_alive()]
+
+    grlens_addon.register()
+    try:
+        pool = frame.beside()
+        assert pool is not None and pool.submit(lambda: 1).result() == 1
+        assert workers()
+        grlens_addon.unregister()
+        assert not workers() and not frame._POOL
+    finally:
+        grlens_addon.register()
+    assert frame.beside() is not pool

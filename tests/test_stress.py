@@ -239,8 +239,8 @@ class SubdivideSpy:
         self.calls = []
         self.original = original = subdivision.subdivide
 
-        def spy(points, tris, edges, levels, strips=None):
-            out = original(points, tris, edges, levels, strips)
+        def spy(points, tris, edges, levels, strips=None, **options):
+            out = original(points, tris, edges, levels, strips, **options)
             self.calls.append((len(tris), len(out.tris), int(np.unique(out.source_tri).size)))
             return out
 

@@ -57,7 +57,7 @@ class Part:
     """One evaluated mesh in its object's local space (BU): co (V, 3), tris (T, 3) vertex indices,
     corner_uv (T, 3, 2) or None (float32, as Blender stores them: the core carries them so, the upload
     writes them so), material (T,) slot indices, corner_normals (T, 3, 3) (local, not
-    normalised) or None, materials: its slots' materials (original data-blocks or None), and its
+    normalised; float32, as Blender stores them) or None, materials: its slots' materials (original data-blocks or None), and its
     loose vertices and edges (in no face)."""
 
     co: np.ndarray
@@ -120,6 +120,14 @@ _KNOWN_SIZE = 2
 read again with equal arrays (an object that moves, or a frame that changes nothing of it) reuses
 its triangles' corners, UVs and normals instead of deriving them again (comparing arrays is memory
 speed; the quads' split and the corners' gathers are not)."""
+
+
+def forget_all() -> None:
+    """Drop the arrays kept for reuse (_KNOWN, _LAST_NORMALS: up to two meshes' arrays): a file being
+    loaded or the add-on being disabled (rebuild.forget_all, registration.unregister) must not keep
+    the last file's meshes alive."""
+    _KNOWN.clear()
+    _LAST_NORMALS.clear()
 
 
 def _equal(a, b) -> bool:
@@ -197,8 +205,7 @@ def _mesh_part(me, materials, with_normals, co32, co, tri_poly, corner_vert, cou
     if with_normals:
         cn = np.empty(3 * n_l, dtype=np.float32)
         me.corner_normals.foreach_get("vector", cn)
-        normals = _known("normals", (loops, cn), lambda: cn.reshape(-1, 3).take(loops, axis=0).astype(np.float64)
-                         .reshape(-1, 3, 3))
+        normals = _known("normals", (loops, cn), lambda: cn.reshape(-1, 3).take(loops, axis=0).reshape(-1, 3, 3))
     # loose parts: edges in no face, vertices in no edge
     corner_edge = _int_attr(me, ".corner_edge", n_l, lambda: _loops(me, "edge_index"))
 
@@ -252,23 +259,22 @@ def _unit_rows(n) -> np.ndarray:
     return n
 
 
-def _rows_times(a, m) -> np.ndarray:
-    """``a`` (..., 3) @ ``m`` (3, 3) as one (N, 3) @ (3, 3) product (a single BLAS call instead of one
-    per leading index: several times faster for corner normals (T, 3, 3))."""
-    a = np.ascontiguousarray(a)
-    return (a.reshape(-1, 3) @ m).reshape(a.shape)
-
-
 _LAST_NORMALS: list = []
 """[(local corner normals, linear part of the matrix (bytes), world normals)] of the last objects
 placed: an object that only moves (its matrix's linear part and its mesh's normals the same, the
 normals' array reused by mesh_part) keeps its world normals."""
 
 
+NORMAL_BLOCK = 1 << 16
+"""Corners per block of :func:`_world_normals` (the float64 products stay in the cache)."""
+
+
 def _world_normals(local, lin) -> np.ndarray:
-    """Unit world corner normals of the ``local`` ones (T, 3, 3) under the linear part ``lin`` (3, 3)
-    of an object's matrix (not mirroring): by the inverse transpose, normalised (one factor for a
-    rotation and uniform scale); the last few results are kept (_LAST_NORMALS)."""
+    """Unit world corner normals (float32, as Blender stores normals: what the upload writes) of the
+    ``local`` ones (T, 3, 3) under the linear part ``lin`` (3, 3) of an object's matrix (not
+    mirroring): by the inverse transpose, in float64, normalised (one factor for a rotation and
+    uniform scale), rounded to float32 once, in blocks of NORMAL_BLOCK corners; the last few results
+    are kept (_LAST_NORMALS)."""
     key = np.ascontiguousarray(lin, dtype=np.float64).tobytes()
     for entry in _LAST_NORMALS:
         if entry[0] is local and entry[1] == key:
@@ -276,11 +282,15 @@ def _world_normals(local, lin) -> np.ndarray:
     inv = _inverse(lin[None])[0]
     gram = inv @ inv.T
     scale = np.trace(gram) / 3.0
-    if scale > 0 and np.allclose(gram, scale * np.eye(3), rtol=0.0, atol=1e-9 * scale):
-        # rotation and uniform scale: unit normals stay unit after one factor
-        nrm = _rows_times(local, inv / np.sqrt(scale))
-    else:
-        nrm = _unit_rows(_rows_times(local, inv))  # the inverse transpose, on rows
+    rows = np.ascontiguousarray(local).reshape(-1, 3)
+    out = np.empty(rows.shape, np.float32)
+    uniform = scale > 0 and np.allclose(gram, scale * np.eye(3), rtol=0.0, atol=1e-9 * scale)
+    m = inv / np.sqrt(scale) if uniform else inv
+    for s in range(0, len(rows), NORMAL_BLOCK):
+        e = min(s + NORMAL_BLOCK, len(rows))
+        block = rows[s:e].astype(np.float64) @ m  # (the inverse transpose, on rows)
+        out[s:e] = block if uniform else _unit_rows(block)  # (rotation and uniform scale: unit stays unit)
+    nrm = out.reshape(np.shape(local))
     _LAST_NORMALS.insert(0, (local, key, nrm))
     del _LAST_NORMALS[_KNOWN_SIZE:]
     return nrm
@@ -321,7 +331,7 @@ def _placed(part: Part, matrices: np.ndarray, with_normals: bool):
         n = np.einsum("kij,tcj->ktci", inv_t, part.corner_normals)
         if flip.any():
             n[flip] = n[flip][:, :, order]
-        nrm = _unit_rows(n.reshape(-1, 3, 3))
+        nrm = _unit_rows(n.reshape(-1, 3, 3)).astype(np.float32)  # (as _world_normals)
     return pos, tris.reshape(-1, 3), uv, nrm
 
 
@@ -363,7 +373,7 @@ def combine(placed_parts, with_normals: bool) -> tuple[pipeline.SourceMesh, list
         if any_uv:
             uv.append(u if u is not None else np.zeros((len(t), 3, 2)))
         if with_normals:
-            nrm.append(n if n is not None else np.zeros((len(t), 3, 3)))
+            nrm.append(n if n is not None else np.zeros((len(t), 3, 3), np.float32))
         mat.append(np.tile(lookup[local], len(matrices)))
     if not tris:
         return pipeline.SourceMesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, np.zeros(0, np.int64),

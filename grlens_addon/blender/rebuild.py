@@ -385,6 +385,7 @@ def forget_all() -> None:
     on their first update)."""
     _INPUTS.clear()
     upload.forget_all()
+    gather.forget_all()
 
 
 def _equal_inputs(a, b) -> bool:
@@ -688,6 +689,10 @@ def compute(plan: RebuildPlan, progress=None) -> None:
                     lines.append(line)
             item.images, item.built_lines, item.stats = images, lines, _stats(images)
             item.outcome = "built"
+            if progress is not None:  # (a build beside the interface: the images' edges found here, off
+                # the main thread, which uploads them; ImageMesh.edges keeps them)
+                for img in images.values():
+                    img.edges()
         except pipeline.Cancelled:
             raise
         except Exception as exc:  # noqa: BLE001 (one object's failure must not stop the others)

@@ -34,6 +34,9 @@ def unregister():
     from . import background
 
     background.stop()  # (a build beside the interface: cancelled, its worker waited for)
+    from ..core import frame
+
+    frame.stop_threads()  # (the core's worker thread for dense meshes, idle after background.stop)
     handlers.detach()
     bpy.types.VIEW3D_MT_add.remove(operators.menu_add)
     if bpy.app.timers.is_registered(_rebuild_after_enable):
@@ -43,6 +46,7 @@ def unregister():
     world.restore_all()  # the user's worlds come back when the add-on is disabled
     if isinstance(bpy.data, bpy.types.BlendData):  # (not while Blender starts or quits)
         rebuild.remove_all_images()  # no frozen images; the sources render again
+    rebuild.forget_all()  # (nothing of the last builds kept: inputs, topologies, the gather's arrays)
     properties.detach()
     for cls in reversed(_CLASSES):
         bpy.utils.unregister_class(cls)

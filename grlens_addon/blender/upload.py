@@ -149,7 +149,8 @@ def set_normals(mesh, img) -> None:
         return
     vals = np.ascontiguousarray(n, dtype=np.float32).reshape(-1, 3)
     if img.order == 2:
-        vals = np.negative(vals, out=vals if vals is not n else None)  # (exact: no float64 copy of -n first)
+        # (exact: no float64 copy of -n first; a new array when vals is the image's own float32 normals)
+        vals = np.negative(vals, out=None if np.may_share_memory(vals, n) else vals)
     if FREE_NORMALS:
         a = mesh.attributes.get("custom_normal")
         if a is None or a.data_type != "FLOAT_VECTOR" or a.domain != "CORNER":

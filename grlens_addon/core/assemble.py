@@ -57,16 +57,22 @@ class ImageMesh:
     subdivision.Edges), from which :meth:`edges` takes the edges of whole source triangles; None: the
     edges are found from the faces alone."""
 
+    _edges: tuple | None = field(repr=False, default=None, compare=False)
+
     def edges(self) -> tuple[np.ndarray, np.ndarray]:
         """(verts (E, 2), corner_edge (F, 3)): the mesh's unique undirected edges (vertex indices) and
         for each face corner k the edge joining corners k and (k + 1) % 3, as Blender stores a mesh. A
         dense source's faces are mostly whole source triangles, whose edges are the source's (kept
-        per topology): only the other faces' edges are sorted out (:func:`image_edges`)."""
-        if self.edge_basis is None:
-            e = subdivision.mesh_edges(self.tris) if len(self.tris) else subdivision.Edges(
-                np.zeros((0, 2), np.int64), np.zeros((0, 3), np.int64))
-            return e.verts, e.of_tri
-        return image_edges(self.tris, *self.edge_basis)
+        per topology): only the other faces' edges are sorted out (:func:`image_edges`). Found once
+        (a build in a worker thread finds them there, before the upload reads them)."""
+        if self._edges is None:
+            if self.edge_basis is None:
+                e = subdivision.mesh_edges(self.tris) if len(self.tris) else subdivision.Edges(
+                    np.zeros((0, 2), np.int64), np.zeros((0, 3), np.int64))
+                self._edges = (e.verts, e.of_tri)
+            else:
+                self._edges = image_edges(self.tris, *self.edge_basis)
+        return self._edges
 
 
 def image_edges(tris, vertex_source, face_source, source_tris, source_edges) -> tuple[np.ndarray, np.ndarray]:
@@ -167,7 +173,7 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
         rows = (sub.row_bary, pieces.selected.take(sub.row_src),
                 sub.corner_row if everything else sub.corner_row.take(kept, axis=0), sub.n_unit_rows)
     v_pos, v_dir = img.position.take(used, axis=0), img.direction.take(used, axis=0)
-    v_dist, v_src = img.distance[used], sub.positions.take(used, axis=0)
+    v_dist, v_src = img.distance.take(used), sub.positions.take(used, axis=0)
     patch_corners = None
     order_patches = [p for p in patches if order in p.orders]
     parts = _patch_parts(order_patches, patch_keep, order, len(used)) if order_patches else None
@@ -222,8 +228,8 @@ def assemble(frame: Frame, source: Source, pieces, keep, patches, patch_keep, re
     if redshift is not None:
         redshift = np.where(np.isnan(redshift), 0.0, redshift)  # 0: no circular orbit there (r <= 1.5 r_s, axis)
     return ImageMesh(order=order, positions=v_pos, tris=image_tris, corner_uv=corner_uv,
-                     material=mesh.material[src_tri], light_travel_time=v_dist, irradiance=irr, report=report,
-                     source_tri=source.origin[src_tri], source_position=v_src, redshift=redshift,
+                     material=mesh.material.take(src_tri), light_travel_time=v_dist, irradiance=irr, report=report,
+                     source_tri=source.origin.take(src_tri), source_position=v_src, redshift=redshift,
                      disc_colour=colour, corner_normal=n, redshift_gravity=gravity,
                      edge_basis=(vertex_source, src_tri, source.tris, source.edges))
 

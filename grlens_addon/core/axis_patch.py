@@ -21,9 +21,15 @@ quads (two triangles each) between consecutive circles, so:
   they sag by at most budget.Budget.patch_edge_px pixels; the points are moved off the circle by
   B.CHORD_OUTSET of that sag, so that the chords cross it (limit_images);
 * the ratio q keeps the tangential error of the linear interpolation inside a piece (a point of the
-  surface is drawn at the azimuth of its corners' mean, not its own) within ``max_error_px``;
-* the innermost circle is where the image is within ``BAND_FACTOR * max_error_px`` pixels of theta_E,
-  so the band between it and the limit vertices is thinner than that.
+  surface is drawn at the azimuth of its corners' mean weighted by their distances from the axis, not
+  its own) within B.PATCH_AIM of ``max_error_px`` (grid_shape);
+* the innermost circle is where the image is within B.BAND_WIDE_FACTOR (as far as the sheet has no
+  edge near the axis, else B.PATCH_BAND_FACTOR) times the coverage tolerance of theta_E;
+* the band between it and the ring is refined in azimuth (band_shape, _refine_band): its faces touch
+  the ring, where all their corners are the one point P, so they draw their points with the azimuth of
+  their other corners: each spans at most 2 B.PATCH_AIM max_error_px / ring_px (about pi ring_px /
+  (B.PATCH_AIM max_error_px) limit vertices per turn, three faces each), joined to the innermost
+  circle by a fan.
 
 The source triangles entirely inside the patch's drawn cells (connected to the crossed one, and
 wound like it in projection, i.e. on the same sheet of the surface) are *replaced*: the pipeline does
@@ -62,7 +68,8 @@ from scipy.sparse.csgraph import connected_components
 from . import budget as B
 from . import mapping, silhouette
 from .observer_view import (any_perpendicular, axis_coordinates, axis_crossing, axis_distance, hole_angle,
-                            longest_side, magnification, max_ring_span, place_images, projected_area, row_norm, within_axis_distance)
+                            longest_side, magnification, max_ring_span, nearest_to_axis, place_images, projected_area,
+                            row_norm, within_axis_distance)
 from .ragged import group_offsets
 
 @dataclass
@@ -91,7 +98,10 @@ class Patch:
     in for; radius (BU): its outer circle's distance from the axis; orders: the image orders whose
     Einstein ring it is; images: {order: mapping.Images} of its vertices; facing: {order: (F,) bool}
     the faces to draw (all, unless back faces of a closed surface are left out, see
-    :func:`build_patches`).
+    :func:`build_patches`). limit_psi (V,): the azimuth (radians) of each limit vertex, NaN for the
+    others; band: how many vertices the refined band (:func:`_refine_band`) appended at the end (its
+    limit vertices between the grid's azimuths and its inner points); ring_chords: the number of
+    equal chords per turn whose sag the limit vertices' outset is taken from (limit_images).
     """
 
     crossing: Crossing
@@ -110,6 +120,24 @@ class Patch:
     facing: dict = field(default_factory=dict, repr=False)
     cell: np.ndarray = field(default=None, repr=False)
     ring_radii: np.ndarray = field(default=None, repr=False)
+    limit_psi: np.ndarray = field(default=None, repr=False)
+    band: int = 0
+    ring_chords: int = 0
+
+    @property
+    def limit(self) -> np.ndarray:
+        """(V,) bool: the limit vertices (at the crossing point; their images are points of the ring)."""
+        if self.limit_psi is None:
+            out = np.zeros(len(self.source_position), bool)
+            out[:self.n_azimuths] = True
+            return out
+        return ~np.isnan(self.limit_psi)
+
+    @property
+    def grid_vertices(self) -> slice:
+        """The vertices of the circles (grid points, clipped cells' other vertices): after the
+        ``n_azimuths`` limit vertices, before the ``band`` vertices of the refined band."""
+        return slice(self.n_azimuths, len(self.source_position) - self.band)
 
 
 def find_crossings(points, tris, camera, hole, candidates=None, axis_xyz=None) -> list[Crossing]:
@@ -269,6 +297,45 @@ def _locate(radii, n_az, cand_tris, x, y, z, z_target):
     return best, bary
 
 
+def _locate_points(qx, qy, cand_tris, x, y, z, z_target):
+    """As :func:`_locate` for any points (qx, qy) (M,) in axis coordinates (BU): (index into
+    ``cand_tris`` of the triangle whose projection along the axis contains each, nearest to
+    ``z_target`` along the axis when several do, or -1; barycentrics (M, 3)). Only the triangles
+    within the points' largest distance from the axis are tested, each against the points inside
+    its box (the points sorted along x)."""
+    m = len(qx)
+    best = np.full(m, -1, np.int64)
+    bary = np.full((m, 3), np.nan)
+    if m == 0 or len(cand_tris) == 0:
+        return best, bary
+    reach = float(np.hypot(qx, qy).max())
+    near = np.flatnonzero(within_axis_distance(x, y, cand_tris, reach))
+    if near.size == 0:
+        return best, bary
+    tr = cand_tris[near]
+    px, py = x[tr], y[tr]
+    eps = 1e-12 * max(reach, 1e-300)
+    order = np.argsort(qx, kind="stable")
+    a = np.searchsorted(qx[order], px.min(axis=1) - eps, side="left")
+    count = np.maximum(np.searchsorted(qx[order], px.max(axis=1) + eps, side="right") - a, 0)
+    pt = np.repeat(np.arange(near.size), count)
+    pp = order[np.repeat(a, count) + group_offsets(count)]
+    ok = (qy[pp] >= py.min(axis=1)[pt] - eps) & (qy[pp] <= py.max(axis=1)[pt] + eps)
+    pt, pp = pt[ok], pp[ok]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        lam = _projected_bary(qx[pp], qy[pp], tr[pt], x, y)
+    with np.errstate(invalid="ignore"):
+        inside = (lam >= -1e-12).all(axis=1) & np.isfinite(lam.sum(axis=1))
+    sel = np.flatnonzero(inside)
+    if sel.size == 0:
+        return best, bary
+    gap = np.abs(np.einsum("mk,mk->m", lam[sel], z[tr[pt[sel]]]) - z_target)
+    first = _first_smallest(pp[sel], gap)
+    best[pp[sel][first]] = near[pt[sel][first]]
+    bary[pp[sel][first]] = lam[sel][first]
+    return best, bary
+
+
 def _first_smallest(key, value) -> np.ndarray:
     """Indices of one element per distinct ``key`` (ints): the one of smallest ``value`` (the first in
     order among equals; NaN only where all of its key's values are NaN), in increasing key order. As
@@ -389,9 +456,14 @@ def grid_shape(ring_radius_px, max_error_px) -> tuple[int, float]:
     n = int(np.clip(np.ceil(2.0 * np.pi / max(s, 1e-12)), 16, B.MAX_AZIMUTHS))
     s = 2.0 * np.pi / n
     # a piece spanning circles delta and q delta and one azimuth step draws its interior up to
-    # R s (q - 1) / (2 (q + 1)) pixels along the ring from where it belongs
-    a = min(0.5, 2.0 * max_error_px / (ring_radius_px * s))
-    return n, (1.0 + a) / (1.0 - a)
+    # R s (sqrt q - 1) / (sqrt q + 1) pixels along the ring from where it belongs (on its diagonal,
+    # whose points the interpolation weights by their distance from the axis); q at most 3
+    b = min(_Q3, B.PATCH_AIM * max_error_px / (ring_radius_px * s))
+    return n, ((1.0 + b) / (1.0 - b)) ** 2
+
+
+_Q3 = (np.sqrt(3.0) - 1.0) / (np.sqrt(3.0) + 1.0)  # grid_shape's bound at q = 3
+_RING_PROBES = 64  # azimuths at which a moving camera's ring is probed (its scale varies smoothly about it)
 
 
 def patching(frame) -> bool:
@@ -465,16 +537,21 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
                          facing={o: np.zeros(0, bool) for o in orders})
     # the ring's radius on screen, per order: a moving camera (scene.view_beta) sees it at the static
     # radius times the aberration's local scale, which varies about the ring: its largest at
-    # B.PROBE_AZIMUTHS azimuths sizes the grid
+    # _RING_PROBES azimuths sizes the grid, or the ring's length per radian of azimuth where that is
+    # larger (the static sin(theta_E) times the local scale): how far along the ring an azimuth
+    # error draws a point
     look = _limit_look(cr, mp, orders)
     beta = scene.view_beta
-    psi_ring = np.zeros(1) if beta is None else 2.0 * np.pi * np.arange(B.PROBE_AZIMUTHS) / B.PROBE_AZIMUTHS
+    psi_ring = np.zeros(1) if beta is None else 2.0 * np.pi * np.arange(_RING_PROBES) / _RING_PROBES
     ring = {o: limit_images(cr, psi_ring, mp, o, look[o]) for o in orders}
     if not all(bool(im.valid.all()) for im in ring.values()):
         return None
     seen = {o: hole_angle(im.direction, scene.camera, scene.hole, beta) for o, im in ring.items()}
     theta_e = {o: float(seen[o][0] / magnification(ring[o].direction[:1], beta)[0]) for o in orders}  # static
-    n_az, q = grid_shape(max(float(v.max()) for v in seen.values()) / pixel_angle, max_error_px)
+    rate = {o: magnification(im.direction, beta) * np.sin(np.asarray(look[o].xi, np.float64).ravel()[0])
+            for o, im in ring.items()}
+    ring_px = max(max(float(seen[o].max()), float(rate[o].max())) for o in orders) / pixel_angle
+    n_az, q = grid_shape(ring_px, max_error_px)
     # the innermost circle: probe the image at B.PROBE_AZIMUTHS azimuths in the crossed triangle's plane
     k = np.arange(B.MAX_CIRCLES + 1)
     probe_delta = radius * q ** (-k.astype(np.float64))
@@ -495,15 +572,42 @@ def _build_one(cr: Crossing, orders, points, tris, of_tri, n_edges, x, y, z, mp,
         return None
     start = int(bad[-1]) + 1 if bad.size else 0
     radius = float(probe_delta[start])
-    first = np.flatnonzero(gap[start:] <= band)
-    n_circles = int(first[0]) + 1 if first.size else len(k) - start  # circles radius q^-k, k = first .. 0
-    n_circles = max(1, min(n_circles, B.MAX_GRID // n_az))
-    radii = radius * q ** (-np.arange(n_circles - 1, -1, -1, dtype=np.float64))
+
+    def circles(width, reach=np.inf):  # the circles out to the first within ``width`` (rad) of the
+        # ring and ``reach`` (BU) of the axis
+        first = np.flatnonzero((gap[start:] <= width) & (probe_delta[start:] <= reach))
+        n_circles = int(first[0]) + 1 if first.size else len(k) - start  # circles radius q^-k, k = first .. 0
+        n_circles = max(1, min(n_circles, B.MAX_GRID // n_az))
+        return radius * q ** (-np.arange(n_circles - 1, -1, -1, dtype=np.float64))
+
     # the surface under the grid
     if cand is None or radius != first_radius:
         cand = _sheet(cr, radius, tris, of_tri, n_edges, x, y)
-    return _grid_patch(radii, n_az, cand, projected_area(x, y, t0[None])[0] < 0, points, tris, x, y, z,
-                       mp, orders, closed, cr, look)
+    # the wide band first (its faces are as exact as the grid's, and fewer circles are drawn) inside the
+    # sheet's nearest edge to the axis (a mesh boundary, hole or fold: the grid's circles find those);
+    # where its innermost circle does not go all round the sheet, the narrow one
+    wide = circles(B.BAND_WIDE_FACTOR * band / B.PATCH_BAND_FACTOR, _open_reach(cand, tris, of_tri, n_edges, x, y))
+    narrow = circles(band)
+    for radii in ((wide, narrow) if len(wide) < len(narrow) else (narrow,)):
+        patch = _grid_patch(radii, n_az, cand, projected_area(x, y, t0[None])[0] < 0, points, tris, x, y, z,
+                            mp, orders, closed, cr, look, (ring_px, max_error_px))
+        if patch is not None:
+            return patch
+    return None
+
+
+def _open_reach(cand, tris, of_tri, n_edges, x, y) -> float:
+    """The distance (BU) from the axis to the nearest edge of the sheet ``cand`` (triangles) that only
+    one of its triangles has: the mesh's boundary, a hole, or a fold (the triangles beyond it wound
+    the other way in projection are not on the sheet); inf where none. (The sheet's rim, where it
+    meets triangles farther than its radius, lies beyond the radius.)"""
+    if len(cand) == 0:
+        return 0.0
+    sides = of_tri[cand]
+    once = np.bincount(sides.ravel(), minlength=n_edges)[sides] == 1
+    if not once.any():
+        return np.inf
+    return float(nearest_to_axis(x, y, tris[cand])[2][once].min())
 
 
 def _sheet(cr, radius, tris, of_tri, n_edges, x, y) -> np.ndarray:
@@ -892,13 +996,26 @@ def _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing):
 
 
 def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, mp, orders, closed, crossing,
-                limit_look=None):
+                limit_look=None, ring=None):
     """The patch of ``crossing``: a ring of limit vertices at the crossing point, then the grid of
     circles ``radii`` (BU, increasing) x ``n_az`` azimuths on the surface of the triangles ``cand``
     (one sheet: wound alike in projection; hits nearest the crossing along the axis), with faces wound
-    counter-clockwise seen from the camera's side of the axis (clockwise with ``flip``). None when the
-    innermost circle is not complete."""
+    counter-clockwise seen from the camera's side of the axis (clockwise with ``flip``), the band
+    next to the ring refined (:func:`_refine_band`) for ``ring`` = (the ring's radius, the tolerance)
+    in pixels (None: not refined). None when the innermost circle is not complete."""
     old_hit, old_lam = hit, lam = _locate(radii, n_az, tris[cand], x, y, z, crossing.along)
+
+    def on_sheet(qx, qy):  # (triangle or -1, barycentrics, position) of points under (qx, qy)
+        h, l = _locate_points(qx, qy, tris[cand], x, y, z, crossing.along)
+        found = h >= 0
+        tri = np.where(found, cand[np.maximum(h, 0)], -1)
+        pos = np.full((len(qx), 3), np.nan)
+        pos[found] = np.einsum("mk,mkx->mx", l[found], points[tris[tri[found]]])
+        return tri, l, pos
+
+    def in_triangles(qx, qy, tri):  # barycentrics of (qx, qy) in the projections of triangles tri
+        return _projected_bary(qx, qy, tris[tri], x, y)
+
     if B.CLIP_TO_TRIANGLES and _plain_reach(hit, radii, n_az) < B.CLIP_REACH:
         cut = _clipped_grid(radii, n_az, hit, lam, cand, points, tris, x, y, crossing)
         if cut is None:
@@ -906,17 +1023,13 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, mp, orders, clos
     else:
         cut = False
     if cut is not False:
-        faces, bary = cut["faces"], cut["bary"]
-        if flip:  # to the source's winding
-            faces, bary = faces[:, ::-1], bary[:, ::-1]
         ring_radii = cut["ring_radii"]
-        patch = Patch(crossing=crossing, n_azimuths=n_az, source_position=cut["position"],
-                      tris=np.ascontiguousarray(faces),
-                      face_src=cut["face_src"], bary=np.ascontiguousarray(bary), replaced=cut["replaced"],
-                      radius=float(ring_radii[-1]), orders=tuple(orders), vertex_tri=cut["vertex_tri"],
-                      vertex_bary=cut["vertex_bary"], complete=True,
-                      cell=np.ones((len(ring_radii) - 1, n_az), bool), ring_radii=ring_radii)
-        return _shade(patch, points, tris, mp, orders, closed, limit_look)
+        px, py, _ = axis_coordinates(cut["position"], mp.scene.camera, mp.scene.hole)
+        mesh = dict(faces=cut["faces"], face_src=cut["face_src"], bary=cut["bary"], vertex_tri=cut["vertex_tri"],
+                    vertex_bary=cut["vertex_bary"], position=cut["position"], xy=np.stack([px, py], -1))
+        ring = None if ring is None else (*ring, on_sheet)  # each face on its sector's triangle
+        return _finish(mesh, n_az, flip, crossing, orders, cut["replaced"], ring_radii,
+                       np.ones((len(ring_radii) - 1, n_az), bool), ring, points, tris, mp, closed, limit_look)
     radii, new = _refined_radii(radii, n_az, hit, lam, points, tris[cand])
     if new.any():  # the added circles' points; the others' stay
         h, l = _locate(radii[new], n_az, tris[cand], x, y, z, crossing.along)
@@ -948,8 +1061,6 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, mp, orders, clos
     c = (r_i + 1) * n_az + (j_i + 1) % n_az
     d = r_i * n_az + (j_i + 1) % n_az
     faces = np.concatenate([np.stack([a, b, c], -1), np.stack([a, c, d], -1)])
-    if flip:  # to the source's winding
-        faces = faces[:, ::-1]
     # only the grid points of drawn cells are vertices (limit vertices first, all used)
     used = np.zeros(n_rings * n_az, bool)
     used[faces.ravel()] = True
@@ -977,21 +1088,239 @@ def _grid_patch(radii, n_az, cand, flip, points, tris, x, y, z, mp, orders, clos
         f_o, c_o = np.nonzero(other)
         v_o = faces[f_o, c_o]
         bary[f_o, c_o] = _projected_bary(vx[v_o], vy[v_o], tris[face_src[f_o]], x, y)
-    patch = Patch(crossing=crossing, n_azimuths=n_az, source_position=src_pos, tris=faces.astype(np.int64),
-                  face_src=face_src, bary=bary, replaced=replaced, radius=float(ring_radii[-1]),
-                  orders=tuple(orders), vertex_tri=vertex_tri, vertex_bary=vertex_bary, complete=bool(cell.all()),
-                  cell=cell, ring_radii=ring_radii)
+    mesh = dict(faces=faces.astype(np.int64), face_src=face_src, bary=bary, vertex_tri=vertex_tri,
+                vertex_bary=vertex_bary, position=src_pos, xy=np.stack([vx, vy], -1))
+    ring = None if ring is None else (*ring, on_sheet, in_triangles)  # faces as the grid's: see _refine_band
+    return _finish(mesh, n_az, flip, crossing, orders, replaced, ring_radii, cell, ring, points, tris, mp, closed,
+                   limit_look)
+
+
+def _finish(mesh, n_az, flip, crossing, orders, replaced, ring_radii, cell, ring, points, tris, mp, closed,
+            limit_look):
+    """The Patch of a grid's ``mesh`` (dict: faces counter-clockwise in the axis projection, the first
+    ``n_az`` vertices the limit vertices at azimuths 2 pi j / n_az; face_src, bary, vertex_tri,
+    vertex_bary, position, xy: each vertex's axis coordinates x, y (BU)), its band refined for
+    ``ring`` (see :func:`_grid_patch`), wound like the source (``flip``), with its images."""
+    n_v = len(mesh["position"])
+    limit_psi = np.full(n_v, np.nan)
+    limit_psi[:n_az] = 2.0 * np.pi * np.arange(n_az) / n_az
+    band, chords = 0, n_az
+    refined = _refine_band(mesh, n_az, *ring) if ring is not None else None
+    if refined is not None:
+        mesh, band_psi, chords = refined
+        band = len(mesh["position"]) - n_v
+        limit_psi = np.concatenate([limit_psi, band_psi])
+    faces, bary = mesh["faces"], mesh["bary"]
+    if flip:  # to the source's winding
+        faces, bary = faces[:, ::-1], bary[:, ::-1]
+    patch = Patch(crossing=crossing, n_azimuths=n_az, source_position=mesh["position"],
+                  tris=np.ascontiguousarray(faces), face_src=mesh["face_src"], bary=np.ascontiguousarray(bary),
+                  replaced=replaced, radius=float(ring_radii[-1]), orders=tuple(orders),
+                  vertex_tri=mesh["vertex_tri"], vertex_bary=mesh["vertex_bary"], complete=bool(cell.all()),
+                  cell=cell, ring_radii=ring_radii, limit_psi=limit_psi, band=band, ring_chords=chords)
     return _shade(patch, points, tris, mp, orders, closed, limit_look)
+
+
+def band_shape(ring_px, max_error_px, n_az) -> tuple[float, float, float] | None:
+    """How the band between the Einstein ring and a patch's innermost circle is drawn (see
+    :func:`_refine_band`), for a ring ``ring_px`` pixels from the hole's direction, the tolerance
+    ``max_error_px`` (pixels) and ``n_az`` azimuths per circle: (step, t, q) or None when the plain
+    band is within the tolerance already (its pieces span 2 pi / n_az of azimuth, drawn up to that
+    times ring_px pixels along the ring). ``step`` (radians): the largest azimuth between two limit
+    vertices (a piece touching the ring draws its points at most half of it off, along the ring);
+    ``t``: the inner polygon is the outer one scaled by t towards the axis; ``q``: the largest ratio of
+    distances from the axis of the corners of a piece between the two, which keeps the outer pieces
+    within the tolerance too (a piece whose corners span the azimuth S at distances within a ratio q
+    draws its points up to ring_px S (sqrt q - 1) / (sqrt q + 1) pixels along the ring from where they
+    belong: the interpolation weights its corners' azimuths by their distance from the axis)."""
+    s = 2.0 * np.pi / n_az
+    aim = B.PATCH_AIM * max_error_px
+    if not ring_px * s > aim:
+        return None
+    step = max(2.0 * aim / ring_px, 2.0 * np.pi / B.MAX_BAND_AZIMUTHS)
+    b = aim / (ring_px * s)
+    q = ((1.0 + b) / (1.0 - b)) ** 2
+    # the inner polygon's points lie on the chords of the circle t delta: as near as t delta cos(s / 2)
+    t = min(B.BAND_INNER_MAX, 1.0 / (q * np.cos(0.5 * s)))
+    return step, t, q
+
+
+def _refine_band(mesh, n_az, ring_px, max_error_px, on_sheet=None, in_triangles=None):
+    """The band of a patch next to the Einstein ring redrawn so that every point of it lies within
+    ``max_error_px`` of its image, for a ring ``ring_px`` pixels from the hole's direction (the
+    largest about it): (mesh, limit azimuths of the appended vertices (NaN for the others), chords
+    per turn of the ring's outset), or None where the plain band is within the tolerance
+    (:func:`band_shape`). ``mesh``: see :func:`_finish` (faces counter-clockwise in projection).
+
+    Why. A face with a limit vertex L (the crossing point P, drawn on the ring at its azimuth) and
+    grid points X, Y draws its points near L with the azimuth of X and Y, whatever their position
+    along the ring: a face whose corners span the azimuth S draws points up to ring_px S along the
+    ring from where they belong, so every face touching the ring must span little azimuth. Faces with
+    two limit vertices are one segment P X on the surface: all their points have X's azimuth.
+
+    How. Each face (L, X, Y) with one limit vertex is a sector P X Y of the surface about the axis
+    (faces with two or three limit vertices are segments or points of it, and are dropped). Its
+    azimuth range, psi_X to psi_Y, is cut into equal steps of at most ``step`` (band_shape); it
+    gets limit vertices at the steps (shared at psi_X and psi_Y with the neighbouring sectors: the
+    grid's own limit vertices where psi_X is a grid azimuth), and an inner chain: t X, points on the
+    segment t X - t Y at the steps' middle azimuths, t Y (t X = P + t (X - P), shared). Faces: (L_k,
+    I_k+1, L_k+1) and (L_k, I_k, I_k+1) between the ring and the chain (their points within half a
+    step of their azimuth), and a fan from X and Y to the chain (its points within the tolerance by
+    the ratio q of distances, band_shape). Every new vertex is a combination of P, X and Y, so it
+    lies on the face's source triangle (its barycentrics the same combination), and the edges X Y are
+    left as they are: the band joins the grid's other faces as before. Its vertices off the axis are
+    then put on the surface under them as the grid's are (``on_sheet``: (x, y) -> (triangle or -1,
+    barycentrics, position), see :func:`_grid_patch`; where it finds none they stay on the face).
+    With ``in_triangles`` ((x, y, triangles) -> barycentrics), each new face then takes, as the plain
+    grid's faces do, the triangle under its corner farthest from the axis (its corners' barycentrics
+    there, extrapolated); without, it keeps its sector's (a clipped grid's faces lie on it).
+    About 3 ring_px pi / max_error_px faces per patch."""
+    shape = band_shape(ring_px, max_error_px, n_az)
+    if shape is None:
+        return None
+    step, t, _ = shape
+    faces, bary, pos, xy = mesh["faces"], mesh["bary"], mesh["position"], mesh["xy"]
+    n_v = len(pos)
+    lim = faces < n_az
+    n_l = lim.sum(axis=1)
+    sec = np.flatnonzero(n_l == 1)
+    if sec.size == 0:
+        return None
+    keep = np.flatnonzero(n_l == 0)
+    # each sector's corners as (L, X, Y), counter-clockwise: psi_X to psi_Y is its range
+    turn = (np.argmax(lim[sec], axis=1)[:, None] + np.arange(3)[None, :]) % 3
+    f = np.take_along_axis(faces[sec], turn, axis=1)
+    fb = np.take_along_axis(bary[sec], turn[:, :, None], axis=1)  # (S, 3, 3) corner barycentrics
+    src = mesh["face_src"][sec]
+    L, X, Y = f[:, 0], f[:, 1], f[:, 2]
+    ax, ay, bx, by = xy[X, 0], xy[X, 1], xy[Y, 0], xy[Y, 1]
+    psi_x = np.arctan2(ay, ax)
+    span = np.maximum(np.arctan2(ax * by - ay * bx, ax * bx + ay * by), 0.0)  # psi_Y - psi_X in [0, pi]
+    n_int = np.maximum(np.ceil(span / step * (1.0 - 1e-12)), 1).astype(np.int64)  # steps per sector
+    n_s = len(sec)
+    p_pos = pos[L]  # the crossing point (every limit vertex's position)
+    # boundary vertices: each X / Y once, its limit vertex (the grid's where psi is a grid azimuth) and t X
+    ends = np.concatenate([X, Y])
+    ub, first = np.unique(ends, return_index=True)
+    ub_psi = np.arctan2(xy[ub, 1], xy[ub, 0])
+    j = np.rint(ub_psi * n_az / (2.0 * np.pi)).astype(np.int64)
+    on_grid = np.abs(np.angle(np.exp(1j * (ub_psi - 2.0 * np.pi * j / n_az)))) <= 1e-9
+    new_b = np.flatnonzero(~on_grid)
+    b_lim = np.where(on_grid, j % n_az, 0)
+    b_lim[new_b] = n_v + np.arange(new_b.size)
+    base_t = n_v + new_b.size  # the t X points
+    base_i = base_t + ub.size  # the limit vertices inside the sectors
+    n_in = n_int - 1
+    base_c = base_i + int(n_in.sum())  # the inner chains' middle points
+    at = np.searchsorted(ub, ends)
+    lim_x, lim_y = b_lim[at[:n_s]], b_lim[at[n_s:]]
+    t_x, t_y = base_t + at[:n_s], base_t + at[n_s:]
+    # the boundary points' data from a sector that has them (corner 1 for X, 2 for Y)
+    fs, corner = first % n_s, np.where(first < n_s, 1, 2)
+    pb = pos[ub]
+    bb = fb[fs, corner]
+    t_pos = (1.0 - t) * p_pos[fs] + t * pb
+    t_bary = (1.0 - t) * fb[fs, 0] + t * bb
+    # inside each sector: limit vertices at the steps, inner points at the steps' middles
+    si = np.repeat(np.arange(n_s), n_in)
+    ki = group_offsets(n_in) + 1.0
+    in_psi = psi_x[si] + span[si] * ki / n_int[si]
+    sc = np.repeat(np.arange(n_s), n_int)
+    kc = group_offsets(n_int) + 0.5
+    c_psi = psi_x[sc] + span[sc] * kc / n_int[sc]
+    dx, dy = np.cos(c_psi), np.sin(c_psi)
+    with np.errstate(invalid="ignore", divide="ignore"):  # where the ray at c_psi meets X + u (Y - X)
+        u = (dx * ay[sc] - dy * ax[sc]) / (dx * (ay[sc] - by[sc]) - dy * (ax[sc] - bx[sc]))
+    u = np.clip(np.nan_to_num(u, nan=0.5), 0.0, 1.0)[:, None]
+    c_pos = (1.0 - t) * p_pos[sc] + t * ((1.0 - u) * pos[X[sc]] + u * pos[Y[sc]])
+    c_bary = (1.0 - t) * fb[sc, 0] + t * ((1.0 - u) * fb[sc, 1] + u * fb[sc, 2])
+    # the chains, flat: limit chain k = 0 .. n_int (L_0 at psi_X), inner chain k = 0 .. n_int + 1
+    lc_len, ic_len = n_int + 1, n_int + 2
+    lc_start, ic_start = np.cumsum(lc_len) - lc_len, np.cumsum(ic_len) - ic_len
+    ls, lk = np.repeat(np.arange(n_s), lc_len), group_offsets(lc_len)
+    lc = np.where(lk == 0, lim_x[ls], np.where(lk == n_int[ls], lim_y[ls], 0))
+    inner_at = lk > 0
+    inner_at &= lk < n_int[ls]
+    lc[inner_at] = base_i + np.arange(int(n_in.sum()))
+    cs, ck = np.repeat(np.arange(n_s), ic_len), group_offsets(ic_len)
+    ic = np.where(ck == 0, t_x[cs], np.where(ck == n_int[cs] + 1, t_y[cs], 0))
+    mid_at = (ck > 0) & (ck <= n_int[cs])
+    ic[mid_at] = base_c + np.arange(int(n_int.sum()))
+    ic_bary = np.empty((ic.size, 3))
+    ic_bary[ck == 0] = (1.0 - t) * fb[:, 0] + t * fb[:, 1]
+    ic_bary[ck == n_int[cs] + 1] = (1.0 - t) * fb[:, 0] + t * fb[:, 2]
+    ic_bary[mid_at] = c_bary
+    # faces: between the ring and the chain, then the fan from X and Y to the chain
+    s1, k1 = np.repeat(np.arange(n_s), n_int), group_offsets(n_int)
+    ring_faces = np.stack([lc[lc_start[s1] + k1], ic[ic_start[s1] + k1 + 1], lc[lc_start[s1] + k1 + 1]], -1)
+    ring_bary = np.stack([fb[s1, 0], ic_bary[ic_start[s1] + k1 + 1], fb[s1, 0]], 1)
+    s2, k2 = np.repeat(np.arange(n_s), n_int + 1), group_offsets(n_int + 1)
+    chain_faces = np.stack([lc[lc_start[s2] + k2], ic[ic_start[s2] + k2], ic[ic_start[s2] + k2 + 1]], -1)
+    chain_bary = np.stack([fb[s2, 0], ic_bary[ic_start[s2] + k2], ic_bary[ic_start[s2] + k2 + 1]], 1)
+    half = (n_int + 1) // 2  # the inner point nearest the sector's middle azimuth
+    to_y = k2 >= half[s2]
+    apex = np.where(to_y, Y[s2], X[s2])
+    apex_b = np.where(to_y[:, None], fb[s2, 2], fb[s2, 1])
+    fan_faces = np.stack([ic[ic_start[s2] + k2], apex, ic[ic_start[s2] + k2 + 1]], -1)
+    fan_bary = np.stack([ic_bary[ic_start[s2] + k2], apex_b, ic_bary[ic_start[s2] + k2 + 1]], 1)
+    s3 = np.arange(n_s)
+    mid_faces = np.stack([ic[ic_start + half], X, Y], -1)
+    mid_bary = np.stack([ic_bary[ic_start + half], fb[:, 1], fb[:, 2]], 1)
+    new_faces = np.concatenate([ring_faces, chain_faces, fan_faces, mid_faces])
+    new_src = np.concatenate([src[s1], src[s2], src[s2], src[s3]])
+    out = dict(
+        faces=np.concatenate([faces[keep], new_faces]),
+        face_src=np.concatenate([mesh["face_src"][keep], new_src]),
+        bary=np.concatenate([bary[keep], ring_bary, chain_bary, fan_bary, mid_bary]),
+        vertex_tri=np.concatenate([mesh["vertex_tri"], np.full(new_b.size, -1), src[fs], np.full(si.size, -1),
+                                   src[sc]]),
+        vertex_bary=np.concatenate([mesh["vertex_bary"], np.zeros((new_b.size, 3)), t_bary, np.zeros((si.size, 3)),
+                                    c_bary]),
+        position=np.concatenate([pos, np.repeat(p_pos[:1], new_b.size, axis=0), t_pos,
+                                 np.repeat(p_pos[:1], si.size, axis=0), c_pos]),
+        xy=np.concatenate([xy, np.zeros((new_b.size, 2)), t * xy[ub], np.zeros((si.size, 2)),
+                           t * ((1.0 - u) * xy[X[sc]] + u * xy[Y[sc]])]))
+    if on_sheet is not None:  # the points off the axis onto the surface under them
+        rows = np.concatenate([base_t + np.arange(ub.size), base_c + np.arange(sc.size)])
+        tri, lam, where = on_sheet(out["xy"][rows, 0], out["xy"][rows, 1])
+        found = tri >= 0
+        rows, tri, lam, where = rows[found], tri[found], lam[found], where[found]
+        out["vertex_tri"][rows], out["vertex_bary"][rows], out["position"][rows] = tri, lam, where
+    if on_sheet is not None and in_triangles is not None:  # each new face on the triangle under its outer corner
+        nf = new_faces
+        far = np.take_along_axis(nf, np.argmax(np.hypot(*out["xy"][nf].transpose(2, 0, 1)), axis=1)[:, None],
+                                 axis=1)[:, 0]
+        tri = out["vertex_tri"][far]
+        tri = np.where(tri >= 0, tri, new_src)
+        new_src = tri
+        cxy = out["xy"][nf]  # (F, 3, 2)
+        new_bary = in_triangles(cxy[..., 0].ravel(), cxy[..., 1].ravel(), np.repeat(tri, 3)).reshape(-1, 3, 3)
+        out["face_src"][len(keep):] = new_src
+        out["bary"][len(keep):] = new_bary
+    # the new limit vertices: the crossing point, on the crossed triangle as the grid's are
+    lim_rows = np.concatenate([n_v + np.arange(new_b.size), base_i + np.arange(si.size)])
+    out["vertex_tri"][lim_rows] = mesh["vertex_tri"][0]
+    out["vertex_bary"][lim_rows] = mesh["vertex_bary"][0]
+    band_psi = np.full(len(out["position"]) - n_v, np.nan)
+    band_psi[:new_b.size] = ub_psi[new_b]
+    band_psi[base_i - n_v:base_i - n_v + si.size] = in_psi
+    band_psi = np.mod(band_psi, 2.0 * np.pi)
+    largest = float(np.max(span / n_int)) if n_s else 2.0 * np.pi / n_az
+    chords = int(np.ceil(2.0 * np.pi / max(largest, 1e-300) * (1.0 - 1e-12)))
+    return out, band_psi, max(chords, n_az)
 
 
 def _shade(patch: Patch, points, tris, mp, orders, closed, limit_look=None) -> Patch:
     """Fill in the patch's ``facing`` (which faces to draw per order: on a closed surface those with a
     corner whose ray leaves the face's source triangle's front) and ``images`` (of the vertices of the
     faces drawn in some order; the limit vertices' are the Einstein ring's points)."""
-    n_lim = patch.n_azimuths
     faces = patch.tris
-    grid_pos = patch.source_position[n_lim:]
-    psi = 2.0 * np.pi * np.arange(n_lim) / n_lim
+    lim = patch.limit
+    lim_at = np.flatnonzero(lim)
+    grid_at = np.flatnonzero(~lim)
+    grid_pos = patch.source_position[grid_at]
+    psi = (patch.limit_psi[lim_at] if patch.limit_psi is not None
+           else 2.0 * np.pi * np.arange(lim_at.size) / max(lim_at.size, 1))
     scene = mp.scene
     plane = mapping.plane_coordinates(grid_pos, scene)
     looked = None
@@ -999,8 +1328,10 @@ def _shade(patch: Patch, points, tris, mp, orders, closed, limit_look=None) -> P
         # which faces face the camera along each order's rays, from the rays' tangents; looked up
         # with the images (one interpolation stencil: most vertices of a patch are drawn)
         looked = mp.images(grid_pos, orders, plane, tangents=True)
-        grid_corner = faces >= n_lim  # limit vertices have no direction of their own
-        at = np.maximum(faces - n_lim, 0)  # each corner's grid vertex
+        grid_corner = ~lim[faces]  # limit vertices have no direction of their own
+        index = np.zeros(len(lim), np.int64)
+        index[grid_at] = np.arange(grid_at.size)
+        at = index[faces]  # each corner's grid vertex (0 for limit corners, not used)
         # n . d at each corner with the normal of the face's source triangle (the leaving direction
         # d = (a e1 + b e2) / |.|, so n . d has the sign of a n.e1 + b n.e2)
         src_tri, face_at = np.unique(patch.face_src, return_inverse=True)  # a patch lies on few triangles
@@ -1022,12 +1353,15 @@ def _shade(patch: Patch, points, tris, mp, orders, closed, limit_look=None) -> P
         regs = {o: looked[o] for o in shown}
     else:
         regs = mp.images(grid_pos, shown, plane)
+    n_v = len(lim)
     for o, reg in regs.items():
-        lim = limit_images(patch.crossing, psi, mp, o, limit_look and limit_look[o], chords=n_lim)
-        patch.images[o] = mapping.Images(
-            position=np.concatenate([lim.position, reg.position]),
-            direction=np.concatenate([lim.direction, reg.direction]),
-            distance=np.concatenate([lim.distance, reg.distance]),
-            valid=np.concatenate([lim.valid, reg.valid]), plane=None,
-            xi=np.concatenate([lim.xi, reg.xi]), dt=np.concatenate([lim.dt, reg.dt]), ux=None, uy=None)
+        lm = limit_images(patch.crossing, psi, mp, o, limit_look and limit_look[o],
+                          chords=patch.ring_chords or lim_at.size)
+        parts = {}
+        for name in ("position", "direction", "distance", "valid", "xi", "dt"):
+            a, b = getattr(lm, name), getattr(reg, name)
+            v = np.empty((n_v,) + a.shape[1:], a.dtype)
+            v[lim_at], v[grid_at] = a, b
+            parts[name] = v
+        patch.images[o] = mapping.Images(plane=None, ux=None, uy=None, **parts)
     return patch

@@ -58,7 +58,36 @@ so the tight aim costs little, and a second-order ring is less than a pixel wide
 
 PATCH_BAND_FACTOR = 1.0
 """The innermost circle of a patch lies where its image is within this times the coverage tolerance
-of the Einstein ring (the band inside it is drawn by pieces that span the whole way to the ring)."""
+of the Einstein ring; the band inside it is drawn by pieces that span the whole way to the ring,
+refined in azimuth (axis_patch.band_shape) so that they stay within the tolerance."""
+
+BAND_WIDE_FACTOR = 1.0
+"""The same as PATCH_BAND_FACTOR for a wide band a patch tries first (where the sheet has no edge
+near the axis; where its innermost circle does not go all round the sheet it takes the narrow
+band). The refined band draws its points as exactly as the grid's circles, so a wide band would only
+save circles (16: up to half a patch's faces next to a large ring), but its faces then reach over
+many source triangles and carry their corner values (UVs) extrapolated from one of them: across the
+benchmark sphere's UV seam next to the axis that drew textures 2-80 pixels off at 4-16
+(benchmarks/bench_accuracy.py, 0 and 180 deg). 1.0: off, the band as narrow as PATCH_BAND_FACTOR."""
+
+PATCH_AIM = 0.95
+"""An axis patch's pieces (its grid's rows and its band's azimuth steps, axis_patch.grid_shape and
+band_shape) keep their points' placement along the ring within this fraction of the tolerance:
+the rest is left for the placement across it (the image's distance from the ring is not linear in
+the distance from the axis, nor is the ring's chord its arc). Lower: more circles and band vertices;
+at 1.0 points of the grid's outer rows were measured up to 0.4% beyond the tolerance
+(tests/test_axis_band.py)."""
+
+MAX_BAND_AZIMUTHS = 16384
+"""At most this many limit vertices per turn in a patch's band next to the ring (about
+pi ring_px / Settings.max_error_px are needed: 16384 keeps the tolerance up to a ring about 1300 px
+in radius at 0.25 px; beyond, the band's pieces draw their points up to ring_px pi / 16384 pixels off
+along the ring). Trades faces (about three per limit vertex) for the placement next to the ring."""
+
+BAND_INNER_MAX = 0.9
+"""The refined band's inner polygon lies at most this fraction of the way out to the innermost
+circle (axis_patch.band_shape: usually nearer, as the tolerance requires); keeps its fan of pieces
+from becoming slivers where the ring is small on screen."""
 
 UNDER_PATCH_FACTOR = 1.0
 """Pieces that a complete axis patch draws over (inside its outer circle, on a source triangle it

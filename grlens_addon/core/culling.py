@@ -106,7 +106,8 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     tris = np.asarray(tris, dtype=np.int64)
     rep = CullReport()
     keep = np.ones(len(tris), dtype=bool)
-    bad_v = ~(valid[tris[:, 0]] & valid[tris[:, 1]] & valid[tris[:, 2]])
+    ok_v = valid.take(tris)  # (one gather of every corner)
+    bad_v = ~(ok_v[:, 0] & ok_v[:, 1] & ok_v[:, 2])
     rep.invalid_vertex = int(bad_v.sum())
     keep &= ~bad_v
     src_c = source_circumference
@@ -144,7 +145,8 @@ def cull(tris, image_dirs, valid, source_points, camera, cull_ratio, frustum_pla
     keep &= ~ring
     if frustum_planes is not None and image_points is not None and len(frustum_planes):
         bits = outside_bits(image_points, frustum_planes) if image_outside_bits is None else image_outside_bits
-        outside = (bits[tris[:, 0]] & bits[tris[:, 1]] & bits[tris[:, 2]]) != 0  # all 3 behind one plane
+        b = bits.take(tris)
+        outside = (b[:, 0] & b[:, 1] & b[:, 2]) != 0  # all 3 behind one plane
         out = keep & outside
         rep.outside_frustum = int(out.sum())
         keep &= ~outside

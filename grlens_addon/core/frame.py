@@ -289,6 +289,47 @@ def chord_lengths(directions, edge_verts) -> np.ndarray:
                                 directions.take(edge_verts[:, 0], axis=0))
 
 
+THREADS = 2
+"""Threads a build of a dense mesh uses (1: the calling thread alone): the map's chunks are looked up
+two at a time (one in a worker thread, each chunk's values its own: :func:`images_in_chunks`), both
+orders' image meshes assembled at once (pipeline.build_images). numpy releases the GIL inside its
+large operations, so the two run side by side on two free cores; the results do not depend on how
+they are scheduled (every piece writes arrays of its own). Only with tables whose lookups are safe
+from two threads (:func:`threads_for`)."""
+
+_POOL: list = []
+
+
+def beside():
+    """The one worker thread the builds share (a concurrent.futures pool made on first use), or None
+    when THREADS is 1."""
+    if THREADS < 2:
+        return None
+    if not _POOL:
+        import concurrent.futures
+
+        _POOL.append(concurrent.futures.ThreadPoolExecutor(max_workers=THREADS - 1,
+                                                           thread_name_prefix="grlens-core"))
+    return _POOL[0]
+
+
+def stop_threads() -> None:
+    """Shut the worker thread down (waiting for work it runs); the next dense build makes a new one.
+    For the add-on's unregister, so that disabling or reloading it leaves no thread of its own behind."""
+    while _POOL:
+        _POOL.pop().shutdown(wait=True)
+
+
+def threads_for(table) -> bool:
+    """Whether lookups in ``table`` may run in two threads at once: lutgen's LUT and WideLUT (a
+    family's tables make their rows under a lock); not the orbit table's RayMap (it counts its
+    solves)."""
+    from lutgen import LUT
+    from lutgen.wide_lut import WideLUT
+
+    return isinstance(table, (LUT, WideLUT))
+
+
 MAP_CHUNK = 1 << 16
 """Points per call of the table for a dense mesh's vertices and edge midpoints (:func:`images_in_chunks`:
 a cancellation point and the progress between calls; each point's values do not depend on the
@@ -303,28 +344,61 @@ def images_in_chunks(frame: Frame, points, plane=None, tangents: bool = False, p
     n = len(points)
     if n <= MAP_CHUNK:
         return frame.map.images(points, frame.orders, plane, tangents=tangents)
-    parts = []
-    for s in range(0, n, MAP_CHUNK):
-        if s:
-            frame.checkpoint(part[0] + (part[1] - part[0]) * s / n)
+    def chunk(s):
         e = min(s + MAP_CHUNK, n)
         sub = None if plane is None else mapping.PlaneCoordinates(
             r=plane.r[s:e], phi=plane.phi[s:e], e2=plane.e2[s:e], on_axis=plane.on_axis[s:e])
-        parts.append(frame.map.images(points[s:e], frame.orders, sub, tangents=tangents))
-    out = {}
-    for o in frame.orders:
-        values = {}
-        for f in dataclasses.fields(mapping.Images):
-            got = [getattr(p[o], f.name) for p in parts]
-            if f.name == "plane":
-                values[f.name] = plane if plane is not None else mapping.PlaneCoordinates(
-                    *(np.concatenate([getattr(g, k) for g in got]) for k in ("r", "phi", "e2", "on_axis")))
-            elif all(isinstance(g, np.ndarray) for g in got):
-                values[f.name] = np.concatenate(got)
-            else:
-                values[f.name] = got[0]  # (None)
-        out[o] = mapping.Images(**values)
+        return frame.map.images(points[s:e], frame.orders, sub, tangents=tangents)
+
+    pool = beside() if threads_for(frame.map.table) else None
+    starts = list(range(0, n, MAP_CHUNK))
+    out = None  # {order: mapping.Images} of all the points, made at the first chunk, filled chunk by chunk
+    step = 2 if pool is not None else 1
+    for i in range(0, len(starts), step):
+        if i:
+            frame.checkpoint(part[0] + (part[1] - part[0]) * starts[i] / n)
+        later = pool.submit(chunk, starts[i + 1]) if step == 2 and i + 1 < len(starts) else None
+        try:
+            done = [(starts[i], chunk(starts[i]))]
+        finally:
+            if later is not None:  # (waited for even when this thread's chunk failed)
+                done.append((starts[i + 1], later.result()))
+        for s, got in done:
+            if out is None:  # (each chunk copied in as it comes: its own arrays are freed for the next
+                # chunk's, not all kept until a concatenation)
+                out = {o: _empty_like_images(img, n, plane) for o, img in got.items()}
+                if plane is None:  # (one PlaneCoordinates for every order)
+                    for o in out:
+                        out[o].plane = out[frame.orders[0]].plane
+            for o, img in got.items():
+                _copy_images(out[o], img, s, min(s + MAP_CHUNK, n), with_plane=plane is None and o == frame.orders[0])
     return out
+
+
+_PLANE_FIELDS = ("r", "phi", "e2", "on_axis")
+
+
+def _empty_like_images(img, n, plane):
+    """mapping.Images of ``n`` points with uninitialised arrays shaped and typed like ``img``'s (None
+    where ``img`` has None), and ``plane`` (or new arrays like ``img.plane``'s when None)."""
+    def like(a):
+        return None if a is None else np.empty((n,) + a.shape[1:], a.dtype)
+
+    values = {f.name: like(getattr(img, f.name)) for f in dataclasses.fields(mapping.Images) if f.name != "plane"}
+    values["plane"] = plane if plane is not None else mapping.PlaneCoordinates(
+        *(like(getattr(img.plane, k)) for k in _PLANE_FIELDS))
+    return mapping.Images(**values)
+
+
+def _copy_images(dst, src, s, e, with_plane=False):
+    """``src``'s arrays (mapping.Images of points s to e) into rows s:e of ``dst``'s (and its plane's)."""
+    for f in dataclasses.fields(mapping.Images):
+        a = getattr(src, f.name)
+        if isinstance(a, np.ndarray):
+            getattr(dst, f.name)[s:e] = a
+    if with_plane:
+        for k in _PLANE_FIELDS:
+            getattr(dst.plane, k)[s:e] = getattr(src.plane, k)
 
 
 EDGE_BLOCK = 1 << 15

@@ -127,14 +127,11 @@ def plan_levels(frame: Frame, source: Source, coarse: SourceImages, sight, patch
         by_patch = replaced[selected]
         plan.set_aside["patch_replaced"] = int(by_patch.sum())
         selected = selected[~by_patch]
-    lv = levels.take(edges.of_tri.take(selected, axis=0))
-    tri_level = np.maximum(np.maximum(lv[:, 0], lv[:, 1]), lv[:, 2])
-    away = sight.back_faces(selected, tri_level, order)
-    plan.set_aside["back_face"] = int(away.size)
-    if away.size:
-        drop = np.zeros(len(tris), bool)
-        drop[away] = True
-        selected = selected[~drop[selected]]
+    away = sight.back_faces(selected, levels, order)  # (a mask over selected)
+    n_away = int(np.count_nonzero(away))
+    plan.set_aside["back_face"] = n_away
+    if n_away:
+        selected = selected[~away]
     plan.levels, plan.selected = levels, selected
     plan.known = _known_points(len(source.positions), levels, probe, img_m)
     if strip_tri is not None:

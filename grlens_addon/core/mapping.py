@@ -250,23 +250,32 @@ def leaving_direction(plane, scene: Scene, ux, uy) -> np.ndarray:
     return d
 
 
-def leaving_in_plane(plane, ux, uy):
+def leaving_in_plane(plane, ux, uy, trig=None):
     """(a, b), each (N,): :func:`leaving_direction` = (a e1 + b e2) / |(a, b)|, without the
     normalisation (a positive factor per point: enough for the sign of n . d). NaN where the ray is
-    undefined."""
-    c, s, f_r, r_uphi = _static_frame(plane, ux, uy)
+    undefined. ``trig``: :func:`plane_trig` of ``plane`` when the caller has it (several orders' rays
+    at the same points)."""
+    c, s, f_r, r_uphi = _static_frame(plane, ux, uy, trig)
     with np.errstate(invalid="ignore"):
         return -(f_r * c - r_uphi * s), -(f_r * s + r_uphi * c)
 
 
-def _static_frame(plane, ux, uy):
+def plane_trig(plane):
+    """(cos phi, sin phi, sqrt(1 - 1/r)), each (N,), of points with plane coordinates ``plane`` (r in
+    r_s): what the static frame's components of their rays' tangents need (:func:`_static_frame`)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.cos(plane.phi), np.sin(plane.phi), np.sqrt(1.0 - 1.0 / plane.r)
+
+
+def _static_frame(plane, ux, uy, trig=None):
     """cos phi, sin phi and the ray's tangent in the points' static frame: its components along e_r
-    and e_phi (f_r, r_uphi), from the table's (ux, uy) (along e1 and e2)."""
-    c, s = np.cos(plane.phi), np.sin(plane.phi)
+    and e_phi (f_r, r_uphi), from the table's (ux, uy) (along e1 and e2); ``trig``: plane_trig(plane)
+    or None."""
+    c, s, root = trig if trig is not None else plane_trig(plane)
     u_r = ux * c + uy * s  # dr/dlambda
     r_uphi = -ux * s + uy * c  # r dphi/dlambda
     with np.errstate(invalid="ignore", divide="ignore"):
-        f_r = u_r / np.sqrt(1.0 - 1.0 / plane.r)  # local static frame components
+        f_r = u_r / root  # local static frame components
     return c, s, f_r, r_uphi
 
 

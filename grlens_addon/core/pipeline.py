@@ -30,8 +30,8 @@ import numpy as np
 
 from . import axis_patch, culling, interior, level_plan, subdivision, visibility
 from .assemble import ImageMesh, assemble, empty_image
-from .frame import (DiscEmitter, Light, Settings, SourceMesh, Source, clean_source, frame_context,  # noqa: F401
-                    map_source, prepare_source)
+from .frame import (DiscEmitter, Light, Settings, SourceMesh, Source, beside, clean_source,  # noqa: F401
+                    frame_context, map_source, prepare_source, threads_for)
 from .mapping import Scene
 from .visibility import is_closed_outward, winding_number  # noqa: F401 (public names)
 
@@ -153,11 +153,42 @@ def build_images(src: SourceMesh, scene: Scene, lut, settings: Settings, light: 
         steps.finish()
         return {o: empty_image(o, _report_of_nothing(st.source)) for o in frame.orders}
     out = {}
-    for o, s in st.orders.items():
+    orders = list(st.orders.items())
+    order_keys = [o for o, _ in orders]
+    # both orders at once when a dense mesh makes it worth a thread (frame.THREADS; each order's image
+    # its own arrays: the same result however the two are scheduled)
+    pool = _assembly_pool(frame, st)
+    later = None
+    if pool is not None and len(orders) == 2:
+        o, s = orders.pop()
+        later = (o, pool.submit(assemble, frame, st.source, s.pieces, s.keep, st.patches, s.patch_keep, s.report,
+                                o, disc))
+    try:
+        for o, s in orders:
+            steps("assemble")
+            out[o] = assemble(frame, st.source, s.pieces, s.keep, st.patches, s.patch_keep, s.report, o, disc)
+    finally:
+        if later is not None:  # (waited for even when this thread's order failed or was cancelled)
+            got = later[1].result()
+    if later is not None:
         steps("assemble")
-        out[o] = assemble(frame, st.source, s.pieces, s.keep, st.patches, s.patch_keep, s.report, o, disc)
+        out[later[0]] = got
     steps.finish()
-    return out
+    return {o: out[o] for o in order_keys}
+
+
+ASSEMBLE_THREADS_MIN = 1 << 16
+"""Source triangles from which both orders' image meshes are assembled at once (frame.THREADS)."""
+
+
+def _assembly_pool(frame, st):
+    """The worker thread (frame.beside) for one order's assembly, or None: a small mesh, or a light
+    whose table is not safe from two threads (frame.threads_for)."""
+    if len(st.source.tris) < ASSEMBLE_THREADS_MIN:
+        return None
+    if frame.light is not None and not threads_for(frame.light.lut):
+        return None
+    return beside()
 
 
 @dataclass

@@ -356,7 +356,8 @@ def _strip_faces(src, of_tri, verts, levels, n_pts, xy, corner_order):
     return keys, bary, row_tri, faces, face_tri
 
 
-def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.ndarray, strips=None) -> Subdivided:
+def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.ndarray, strips=None,
+              copy: bool = True) -> Subdivided:
     """Subdivide triangles ``tris`` (T, 3) of vertices ``points`` (N, 3) with per-edge ``levels``
     (integers 1 .. GRID, shape (E,)). See the module docstring for the scheme.
 
@@ -367,7 +368,10 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
     triangle (a zipper): l1 + l2 + l3 - 2 faces for side levels l1, l2, l3 instead of about L^2, with
     no interior vertices. Meant for triangles whose image is long in that angle and narrow across it
     (around an Einstein ring, with xy the coordinates across the observer-hole axis). Triangles whose
-    first-to-last side has level 1, or with a corner whose xy is not finite, get the uniform grid."""
+    first-to-last side has level 1, or with a corner whose xy is not finite, get the uniform grid.
+
+    ``copy`` False: when nothing is split, the result's tris are ``tris`` itself (a caller's array of
+    its own), not a copy."""
     points = np.asarray(points, dtype=np.float64)
     tris = np.asarray(tris, dtype=np.int64)
     n_pts, n_edges = len(points), len(edges.verts)
@@ -389,7 +393,8 @@ def subdivide(points: np.ndarray, tris: np.ndarray, edges: Edges, levels: np.nda
         else:
             strip_sel = None
     if len(tris) and tri_level.max() == 1 and strip_sel is None:  # nothing to split: the source itself
-        return Subdivided(positions=points, tris=tris.copy(), source_tri=np.arange(len(tris)), row_bary=None,
+        return Subdivided(positions=points, tris=tris.copy() if copy else tris, source_tri=np.arange(len(tris)),
+                          row_bary=None,
                           row_src=None, corner_row=None, vertex_key=np.arange(n_pts), identity=True, n_pass=len(tris))
     src_parts, other_key_parts, other_pos_parts, level_parts = [], [], [], []
     row_bary_parts, row_src_parts, corner_row_parts = [], [], []
@@ -534,10 +539,12 @@ def cut(frame, source, plan, coarse_images) -> Pieces:
     sel = plan.selected
     edges = source.edges
     strips = None if plan.strips is None else (plan.strips, source.xy)
-    sub = subdivide(source.positions, source.tris[sel], Edges(edges.verts, edges.of_tri[sel]), plan.levels, strips)
+    sub = subdivide(source.positions, source.tris.take(sel, axis=0),
+                    Edges(edges.verts, edges.of_tri.take(sel, axis=0)), plan.levels, strips,
+                    copy=False)  # (the selection's tris are this call's own)
     if sub.identity:  # the source's own vertices, in order
         images = coarse_images
     else:
         images = frame.map.extend(coarse_images, sub.positions, sub.vertex_key, len(source.positions), plan.order,
                                   plan.known)
-    return Pieces(sub, sel[sub.source_tri], sel, images)
+    return Pieces(sub, sel.take(sub.source_tri), sel, images)

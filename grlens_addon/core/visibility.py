@@ -26,10 +26,11 @@ class Sight:
     def __init__(self, frame: Frame, source: Source, coarse):
         self.frame, self.source, self.coarse = frame, source, coarse
         self._closed = None
-        self._d = {}
-        self._normals = None
-        self._raw = None
+        self._tangent = {}
+        self._in_plane = {}
         self._away = {}
+        self._six_volume = None
+        self._trig = None
 
     def closed(self) -> bool:
         """True for a closed, outward-wound surface seen from outside (computed once)."""
@@ -38,72 +39,90 @@ class Sight:
             cam = self.frame.scene.camera
             lo, hi = src.positions.min(axis=0), src.positions.max(axis=0)
             outside_box = bool(np.any(cam < lo) or np.any(cam > hi))  # a closed surface winds 0 times there
-            self._closed = bool(is_closed_outward(src.positions, src.tris, src.edges, normals=self._raw_normals)
+            self._closed = bool(is_closed_outward(src.positions, src.tris, src.edges, six_volume=self._volume)
                                 and (outside_box or winding_number(src.positions, src.tris, cam) < 0.5))
         return self._closed
 
-    def _raw_normals(self) -> np.ndarray:
-        """(T, 3) the geometric normals (p1 - p0) x (p2 - p0) of every source triangle (BU^2, from the
-        winding; silhouette.normals), once: the closed surface's volume and the back faces share them."""
-        if self._raw is None:
-            self._raw, self._normals = _normals_in_blocks(self.source.positions, self.source.tris,
-                                                          lambda q: self.frame.checkpoint())
-        return self._raw
+    def _volume(self) -> float:
+        """Six times the volume the source's triangles enclose (BU^3; asked for a closed topology only),
+        from the one pass over every triangle that also finds the back faces of the orders whose rays'
+        tangents the map stage looked up (:func:`_whole_pass`)."""
+        if self._six_volume is None:
+            orders = [o for o in self.frame.orders if o not in self._away and self.coarse.images[o].ux is not None]
+            self._six_volume, away = _whole_pass(self.source.positions, self.source.tris, self.frame.scene.e1,
+                                                 self.source.plane.e2, {o: self.in_plane(o) for o in orders},
+                                                 True, lambda q: self.frame.checkpoint())
+            self._away.update(away)
+        return self._six_volume
+
+    def _tangents(self, order):
+        """(ux, uy) (N,) the tangents of ``order``'s rays at every source vertex (the map stage's, or
+        looked up once when it mapped without them)."""
+        if order not in self._tangent:
+            img = self.coarse.images[order]
+            if img.ux is None:  # mapped without tangents (no screen-space budget): look them up now
+                plane = self.source.plane
+                look = self.frame.map.rays(plane.r, plane.phi, (order,), ("dt", "ux", "uy"))[order]
+                self._tangent[order] = (look.ux, look.uy)
+            else:
+                self._tangent[order] = (img.ux, img.uy)
+        return self._tangent[order]
+
+    def in_plane(self, order):
+        """(a, b), each (N,): the unit direction a e1 + b e2 in which light leaves each source vertex
+        towards the camera along ``order``'s rays (e1: the hole-camera direction, e2: the vertex's
+        plane's, source.plane.e2; mapping.leaving_in_plane divided by its length sqrt(a^2 + b^2): e1
+        and e2 are orthonormal); NaN where there is no ray."""
+        if order not in self._in_plane:
+            if self._trig is None:  # (the same for every order)
+                self._trig = mapping.plane_trig(self.source.plane)
+            a, b = mapping.leaving_in_plane(self.source.plane, *self._tangents(order), self._trig)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                h = np.sqrt(a * a + b * b)
+                a /= h
+                b /= h
+            self._in_plane[order] = (a, b)
+        return self._in_plane[order]
 
     def leaving(self, vertices, order) -> np.ndarray:
         """(len(vertices), 3) the unit directions in which light leaves the source vertices ``vertices``
         towards the camera along ``order``'s rays (mapping.leaving_direction of the rays' tangents the
-        map stage looked up with the vertices' images)."""
-        if order not in self._d:
-            img = self.coarse.images[order]
-            if img.ux is None:  # mapped without tangents (no screen-space budget): look them up now
-                self._d[order] = self.frame.map.leaving(self.source.positions, (order,))[order][0]
-            else:
-                self._d[order] = mapping.leaving_direction(self.source.plane, self.frame.scene, img.ux, img.uy)
-        return self._d[order].take(vertices, axis=0)
+        map stage looked up with the vertices' images, for those vertices only)."""
+        vertices = np.asarray(vertices, dtype=np.int64)
+        ux, uy = self._tangents(order)
+        return mapping.leaving_direction(self.source.plane.take(vertices), self.frame.scene, ux.take(vertices),
+                                         uy.take(vertices))
 
     def turned_away(self, tri_idx, orders) -> np.ndarray:
         """(len(tri_idx),) bool: the source triangles ``tri_idx`` turned away (BACK_FACE_MARGIN) along
-        the rays of every order in ``orders`` (silhouette.turned_away, corner by corner: only the
-        triangles turned away at the corners before are looked at the next; the normals and corners
-        of ``tri_idx`` are gathered once, none when ``tri_idx`` is every triangle in order)."""
+        the rays of every order in ``orders``: n . d < -BACK_FACE_MARGIN at all three corners, n the
+        triangle's unit geometric normal, d = a e1 + b e2 the corner's unit leaving direction
+        (:meth:`in_plane`), as a n . e1 + b n . e2 (:func:`_away_rows`). Many triangles (a dense mesh's
+        selection): every triangle once per order, in one pass over blocks (:func:`_whole_pass`), kept
+        for the frame; else the triangles ``tri_idx`` alone (the same arithmetic per triangle)."""
         src = self.source
-        self._raw_normals()  # (unit geometric normals of every triangle, once, with the raw ones)
         tri_idx = np.asarray(tri_idx, dtype=np.int64)
         n_t = len(src.tris)
         if 2 * len(tri_idx) >= n_t or all(o in self._away for o in orders):
-            # many triangles (a dense mesh's selection): every triangle once per order, in blocks
-            # (the same arithmetic per triangle), kept for the frame
+            missing = [o for o in orders if o not in self._away]
+            if missing:
+                _, away = _whole_pass(src.positions, src.tris, self.frame.scene.e1, src.plane.e2,
+                                      {o: self.in_plane(o) for o in missing}, False, lambda q: self.frame.checkpoint())
+                self._away.update(away)
             away = None
             for o in orders:
-                if o not in self._away:
-                    self.leaving(np.zeros(0, np.int64), o)
-                    self._away[o] = _away_in_blocks(self._normals, src.tris, self._d[o],
-                                                    lambda q: self.frame.checkpoint())
                 a = self._away[o].take(tri_idx)
                 away = a if away is None else away & a
             return away if away is not None else np.zeros(len(tri_idx), bool)
-        every = len(tri_idx) == n_t and (n_t == 0 or (tri_idx[0] == 0 and tri_idx[-1] == n_t - 1
-                                                       and bool(np.all(np.diff(tri_idx) == 1))))
-        normals = self._normals if every else self._normals.take(tri_idx, axis=0)
-        tris = src.tris if every else src.tris.take(tri_idx, axis=0)
-        rows = None  # (the rows of tri_idx still turned away; None: all of them)
-        for o in orders:
-            self.leaving(np.zeros(0, np.int64), o)  # (every vertex's, once per order)
-            d = self._d[o]
-            for k in range(3):
-                if rows is None:
-                    n_k, corner = normals, tris[:, k]
-                else:
-                    n_k, corner = normals.take(rows, axis=0), tris[:, k].take(rows)
-                with np.errstate(invalid="ignore"):
-                    dots = np.einsum("fx,fx->f", n_k, d.take(corner, axis=0))
-                hit = np.flatnonzero(dots < -B.BACK_FACE_MARGIN)  # NaN (no ray): not turned away
-                rows = hit if rows is None else rows.take(hit)
-        away = np.zeros(len(tri_idx), bool)
-        if rows is not None:
-            away[rows] = True
-        return away
+        tris = src.tris.take(tri_idx, axis=0)
+        unit = silhouette.normals(src.positions, tris)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            unit /= mapping.row_norm(unit)[:, None]
+        away = _away_rows(unit, tris, self.frame.scene.e1, src.plane.e2, {o: self.in_plane(o) for o in orders})
+        out = None
+        for a in away.values():
+            out = a if out is None else out & a
+        return out if out is not None else np.zeros(len(tri_idx), bool)
 
     def hidden(self, tri_idx, orders) -> np.ndarray:
         """(len(tri_idx),) bool: back faces (:meth:`turned_away` on a closed surface; none otherwise)."""
@@ -133,19 +152,23 @@ class Sight:
         sign = silhouette.facing_signs(pts, local, self.leaving(corners, order))
         return (sign == sign[:, :1]).all(axis=1) & (sign[:, 0] != 0)
 
-    def back_faces(self, selected, tri_level, order) -> np.ndarray:
-        """The indices among ``selected`` (source triangles, with their levels ``tri_level``) hidden
-        behind the surface's front in ``order``, looked for only when their pieces would be many
-        (BACK_FACE_MIN_PIECES): among the split ones, or among all of them on a mesh that has that many
-        triangles itself (a dense mesh, whose back faces would otherwise all be drawn)."""
-        split = selected[tri_level > 1]
-        n_tris = len(self.source.tris)
+    def back_faces(self, selected, levels, order) -> np.ndarray:
+        """(len(selected),) bool: the triangles among ``selected`` (source triangles; ``levels`` (E,): the
+        plan's per-edge levels) hidden behind the surface's front in ``order``, looked for only when
+        their pieces would be many (BACK_FACE_MIN_PIECES): among all of them on a mesh that has that
+        many triangles itself (a dense mesh, whose back faces would otherwise all be drawn), or among
+        the split ones (a triangle's level: its edges' largest)."""
+        hidden = np.zeros(len(selected), bool)
         if len(selected) >= B.BACK_FACE_MIN_PIECES and self.closed():  # a dense mesh: every triangle
-            return selected[self.turned_away(selected, (order,))]
-        if split.size and int((tri_level[tri_level > 1] ** 2).sum()) >= max(B.BACK_FACE_MIN_PIECES, n_tris) \
+            return self.turned_away(selected, (order,))
+        lv = levels.take(self.source.edges.of_tri.take(selected, axis=0))
+        tri_level = np.maximum(np.maximum(lv[:, 0], lv[:, 1]), lv[:, 2])
+        split = np.flatnonzero(tri_level > 1)
+        n_tris = len(self.source.tris)
+        if split.size and int((tri_level.take(split) ** 2).sum()) >= max(B.BACK_FACE_MIN_PIECES, n_tris) \
                 and self.closed():
-            return split[self.turned_away(split, (order,))]
-        return np.zeros(0, np.int64)
+            hidden[split] = self.turned_away(selected.take(split), (order,))
+        return hidden
 
     def below_pixel(self, order, vertex_images: mapping.Images, mid_images: mapping.Images) -> bool:
         """True when ``order`` is 2 and all valid image points (vertices and probed edge midpoints) lie
@@ -167,7 +190,8 @@ class Sight:
             return np.arange(len(tris)), None
         out_v = culling.outside_bits(vertex_images.position, planes)  # (N,) bit k: outside plane k
         e = edges.of_tri
-        common = out_v[tris[:, 0]] & out_v[tris[:, 1]] & out_v[tris[:, 2]]
+        c = out_v.take(tris)  # (one gather of every corner)
+        common = c[:, 0] & c[:, 1] & c[:, 2]
         cand = np.flatnonzero(common)
         if cand.size == 0:
             return np.arange(len(tris)), out_v
@@ -191,41 +215,59 @@ TRI_BLOCK = 1 << 15
 cancellation point between blocks)."""
 
 
-def _normals_in_blocks(points, tris, checkpoint=None):
-    """((T, 3) geometric normals (p1 - p0) x (p2 - p0) (BU^2; silhouette.normals), (T, 3) the same
-    normalised (NaN for a degenerate triangle)) of the triangles ``tris`` of ``points``, in one pass
-    over blocks of TRI_BLOCK triangles (the corners gathered once per block). ``checkpoint``: None, or
-    called between blocks with the fraction of the triangles done."""
+def _whole_pass(points, tris, e1, e2, in_plane, volume=True, checkpoint=None):
+    """(six_volume, {order: away}): one pass over the triangles ``tris`` of ``points`` (BU) in blocks of
+    TRI_BLOCK (the corners gathered once per block): with ``volume``, six times the enclosed volume
+    (BU^3, the sum of (p0 - q) . ((p1 - p0) x (p2 - p0)) about the first triangle's first corner q,
+    as :func:`is_closed_outward`; else None), and for each order of ``in_plane`` ({order: (a, b)}:
+    the vertices' unit leaving directions a e1 + b e2, ``e1`` (3,) and ``e2`` (N, 3) as
+    Sight.in_plane) the mask (T,) of the triangles turned away at all three corners
+    (:func:`_away_rows`). ``checkpoint``: None, or called between blocks with the fraction done."""
     n_t = len(tris)
-    raw, unit = np.empty((n_t, 3)), np.empty((n_t, 3))
+    away = {o: np.empty(n_t, bool) for o in in_plane}
+    six = 0.0
+    q = points[tris[0, 0]] if n_t else None
     for s in range(0, n_t, TRI_BLOCK):
         if checkpoint is not None and s:
             checkpoint(s / n_t)
         e = min(s + TRI_BLOCK, n_t)
-        raw[s:e] = silhouette.normals(points, tris[s:e])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            np.divide(raw[s:e], mapping.row_norm(raw[s:e])[:, None], out=unit[s:e])
-    return raw, unit
+        t = tris[s:e]
+        p0, p1, p2 = (points.take(t[:, k], axis=0) for k in range(3))
+        p1 -= p0
+        p2 -= p0
+        raw = np.empty_like(p1)  # silhouette.normals' arithmetic
+        raw[:, 0] = p1[:, 1] * p2[:, 2] - p1[:, 2] * p2[:, 1]
+        raw[:, 1] = p1[:, 2] * p2[:, 0] - p1[:, 0] * p2[:, 2]
+        raw[:, 2] = p1[:, 0] * p2[:, 1] - p1[:, 1] * p2[:, 0]
+        if volume:
+            p0 -= q
+            six += float(np.einsum("ij,ij->", p0, raw))
+        if in_plane:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                raw /= mapping.row_norm(raw)[:, None]
+            for o, a in _away_rows(raw, t, e1, e2, in_plane).items():
+                away[o][s:e] = a
+    return (six if volume else None), away
 
 
-def _away_in_blocks(unit_normals, tris, directions, checkpoint=None) -> np.ndarray:
-    """(T,) bool: the triangles ``tris`` whose unit normals ``unit_normals`` (T, 3) are turned away
-    from the unit leaving ``directions`` (N, 3) of all three corners by more than BACK_FACE_MARGIN
-    (n . d < -margin; NaN, no ray: not turned away), in blocks of TRI_BLOCK triangles. ``checkpoint``:
-    None, or called between blocks with the fraction of the triangles done."""
-    n_t = len(tris)
-    away = np.empty(n_t, bool)
-    for s in range(0, n_t, TRI_BLOCK):
-        if checkpoint is not None and s:
-            checkpoint(s / n_t)
-        e = min(s + TRI_BLOCK, n_t)
-        n, t = unit_normals[s:e], tris[s:e]
-        with np.errstate(invalid="ignore"):
-            a = np.einsum("fx,fx->f", n, directions.take(t[:, 0], axis=0)) < -B.BACK_FACE_MARGIN
-            for k in (1, 2):
-                a &= np.einsum("fx,fx->f", n, directions.take(t[:, k], axis=0)) < -B.BACK_FACE_MARGIN
-        away[s:e] = a
-    return away
+def _away_rows(unit_normals, tris, e1, e2, in_plane) -> dict:
+    """{order: (T,) bool}: the triangles ``tris`` (T, 3) with unit normals ``unit_normals`` (T, 3)
+    turned away at all three corners along each order's rays: n . d < -BACK_FACE_MARGIN with d the
+    corner's unit leaving direction a e1 + b e2 (``in_plane`` {order: (a, b)} per vertex, ``e1`` (3,)
+    the hole-camera direction, ``e2`` (N, 3) the vertices' planes' second axes), computed as
+    a (n . e1) + b (n . e2) (n . e2 once per corner for every order). NaN (no ray): not turned away."""
+    out = {}
+    with np.errstate(invalid="ignore"):
+        n_e1 = unit_normals @ e1
+        for k in range(3):
+            c = tris[:, k]
+            n_e2 = np.einsum("fx,fx->f", unit_normals, e2.take(c, axis=0))
+            for o, (a, b) in in_plane.items():
+                dot = a.take(c) * n_e1
+                dot += b.take(c) * n_e2
+                hit = dot < -B.BACK_FACE_MARGIN
+                out[o] = hit if k == 0 else out[o] & hit
+    return out
 
 
 def see(frame: Frame, source: Source, coarse) -> Sight:
@@ -246,11 +288,13 @@ def _below_pixel(img_v: mapping.Images, img_m: mapping.Images, pixel_angle) -> b
     return bool(np.max(subdivision.chord_angle(d, np.broadcast_to(centre, d.shape))) * 2.0 < pixel_angle)
 
 
-def is_closed_outward(points, tris, edges: subdivision.Edges | None = None, normals=None) -> bool:
+def is_closed_outward(points, tris, edges: subdivision.Edges | None = None, normals=None, six_volume=None) -> bool:
     """True if the triangles ``tris`` of ``points`` (BU) form closed surfaces with consistent winding
     (every edge used by exactly two triangles, once in each direction) that enclose a positive
     volume (normals from the winding point outwards). ``normals``: optionally a callable giving the
-    triangles' geometric normals (p1 - p0) x (p2 - p0) (T, 3), asked only for a closed topology."""
+    triangles' geometric normals (p1 - p0) x (p2 - p0) (T, 3), asked only for a closed topology;
+    ``six_volume``: optionally a callable giving six times the enclosed volume itself (BU^3, the
+    sum below; Sight's pass over the triangles), asked only for a closed topology."""
     tris = np.asarray(tris, dtype=np.int64)
     if len(tris) == 0:
         return False
@@ -266,6 +310,8 @@ def is_closed_outward(points, tris, edges: subdivision.Edges | None = None, norm
     # six times the volume: the sum over triangles of (p0 - q) . ((p1 - p0) x (p2 - p0)), about a
     # vertex q (no cancellation far from the origin); (p0 - q) . ((p1 - p0) x (p2 - p0)) equals
     # (p0 - q) . ((p1 - q) x (p2 - q)), the signed volume of the tetrahedron (q, p0, p1, p2)
+    if six_volume is not None:
+        return bool(six_volume() > 0)
     p = np.asarray(points, dtype=np.float64)
     n = normals() if normals is not None else silhouette.normals(p, tris)
     q = p[tris[0, 0]]
