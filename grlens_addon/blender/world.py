@@ -106,6 +106,20 @@ def _vmath(nodes, op, x=0.0):
     return n
 
 
+def _texel_and_weight(N, L, j, x, y):
+    """Math nodes splitting the texel coordinate ``j`` (a socket) into its texel j0 = floor(j) and the
+    weight j - j0 of the next texel, for the 'closest' lookups' linear interpolation; nodes at ``x``
+    (the weight at x + 100) and height ``y``. Returns the nodes (j0, weight)."""
+    j0 = _math(N, "FLOOR", x=x)
+    j0.location.y = y
+    L.new(j, j0.inputs[0])
+    w = _math(N, "SUBTRACT", x=x + 100, label="weight")
+    w.location.y = y
+    L.new(j, w.inputs[0])
+    L.new(j0.outputs[0], w.inputs[1])
+    return j0, w
+
+
 def _build_group(name: str, image) -> bpy.types.NodeTree:
     """The node group of one world: outputs Vector (the escape direction) and Escapes (1/0).
 
@@ -180,13 +194,7 @@ def _build_group(name: str, image) -> bpy.types.NodeTree:
     j.location.y = -400
     L.new(ln.outputs[0], j.inputs[0])
     j.inputs[1].default_value = -(TABLE_SIZE - 1) / S_MAX
-    j0 = _math(N, "FLOOR", x=1500)
-    j0.location.y = -400
-    L.new(j.outputs[0], j0.inputs[0])
-    w = _math(N, "SUBTRACT", x=1600, label="weight")
-    w.location.y = -400
-    L.new(j.outputs[0], w.inputs[0])
-    L.new(j0.outputs[0], w.inputs[1])
+    j0, w = _texel_and_weight(N, L, j.outputs[0], 1500, -400)
     vals = []
     for k, tname in enumerate(("table", "table+1")):
         uk = _math(N, "MULTIPLY_ADD", x=1600)
@@ -304,13 +312,7 @@ def _build_shift_group(name: str) -> bpy.types.NodeTree:
     j.location.y = -1500
     L.new(gin.outputs["Doppler cos"], j.inputs[0])
     j.inputs[1].default_value = j.inputs[2].default_value = (SHIFT_SIZE - 1) / 2.0
-    j0 = _math(N, "FLOOR", x=250)
-    j0.location.y = -1500
-    L.new(j.outputs[0], j0.inputs[0])
-    w = _math(N, "SUBTRACT", x=300, label="weight")
-    w.location.y = -1500
-    L.new(j.outputs[0], w.inputs[0])
-    L.new(j0.outputs[0], w.inputs[1])
+    j0, w = _texel_and_weight(N, L, j.outputs[0], 250, -1500)
     uk = []
     for k in range(2):
         n = _math(N, "MULTIPLY_ADD", x=300)
