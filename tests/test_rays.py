@@ -43,6 +43,20 @@ def test_table_nodes_against_closed_forms(table):
         assert np.max(np.abs(got - u) / scale) < 3e-7, name
 
 
+def _spy_row_residual(monkeypatch, measure):
+    """Wrap RayMap._row_residual (the rows' residuals, one call per search pass) so that each call
+    appends ``measure(row)`` (e.g. np.size: the rows evaluated) to the returned list."""
+    record = []
+    real = rays.RayMap._row_residual
+
+    def counting(self, row, *a, **k):
+        record.append(measure(row))
+        return real(self, row, *a, **k)
+
+    monkeypatch.setattr(rays.RayMap, "_row_residual", counting)
+    return record
+
+
 def _targets(rng, r_obs, n):
     r = 10 ** rng.uniform(np.log10(1.06), 3, n)
     p = rng.uniform(0, np.pi, n)
@@ -171,14 +185,7 @@ def test_seed_index_chooses_only_where_the_search_starts(r_obs, monkeypatch):
     r, p = _targets(rng, r_obs, 4000)
     ok = r >= 1.05
     r, p = r[ok], p[ok]
-    evaluated = []
-    real = rays.RayMap._row_residual
-
-    def counting(self, row, *a, **k):
-        evaluated.append(np.size(row))
-        return real(self, row, *a, **k)
-
-    monkeypatch.setattr(rays.RayMap, "_row_residual", counting)
+    evaluated = _spy_row_residual(monkeypatch, np.size)
     m = rays.RayMap(r_obs)
     evaluated.clear()
     got = m.lookup_orders(r, p)
@@ -298,14 +305,7 @@ def test_row_search_passes_give_the_bisections_bracket(r_obs, monkeypatch):
     r, p = r[ok], p[ok]
     # the index disabled: every point goes through the search
     monkeypatch.setattr(rays.RayMap, "_seed", _no_seed)
-    calls = []
-    real = rays.RayMap._row_residual
-
-    def counting(self, row, *a, **k):
-        calls.append(np.size(row))
-        return real(self, row, *a, **k)
-
-    monkeypatch.setattr(rays.RayMap, "_row_residual", counting)
+    calls = _spy_row_residual(monkeypatch, np.size)
     m = rays.RayMap(r_obs)
     m.lookup_orders(r, p)  # the segments' nodes and the table's error at the observer made (first use)
     calls.clear()
@@ -337,14 +337,7 @@ def test_row_search_probes_from_a_window_off_the_root(r_obs, monkeypatch):
         return seg, np.clip(row + shift[:row.size], 0.0, self.r_count.take(seg) - 1.0)
 
     monkeypatch.setattr(rays.RayMap, "_seed", moved)
-    calls = []
-    real = rays.RayMap._row_residual
-
-    def counting(self, row, *a, **k):
-        calls.append(np.shape(row))
-        return real(self, row, *a, **k)
-
-    monkeypatch.setattr(rays.RayMap, "_row_residual", counting)
+    calls = _spy_row_residual(monkeypatch, np.shape)
     m = rays.RayMap(r_obs)
     m.lookup_orders(r, p)  # the segments' nodes and the table's error at the observer made (first use)
     calls.clear()
