@@ -327,22 +327,29 @@ def test_image_edges_upload_into_a_valid_blender_mesh(table):
         bpy.data.meshes.remove(me)
 
 
+def _uv_sphere(bpy, name, segments, rings):
+    """A new Blender mesh ``name``: a UV sphere of radius 1 BU, ``segments`` x ``rings``, UVs in "UVMap"."""
+    import bmesh
+
+    me = bpy.data.meshes.new(name)
+    bm = bmesh.new()
+    bm.loops.layers.uv.new("UVMap")
+    bmesh.ops.create_uvsphere(bm, u_segments=segments, v_segments=rings, radius=1.0, calc_uvs=True)
+    bm.to_mesh(me)
+    bm.free()
+    return me
+
+
 def test_gather_reuses_what_it_derived_from_equal_arrays_only():
     """gather.mesh_part reuses the triangle corners, UVs and normals it derived from a mesh whose
     arrays are equal to those read just before (an object that only moves), and derives them again
     (the same as a first read) as soon as positions, UVs or the topology differ; the world normals are
     reused for the same local normals and the same linear part of the matrix only."""
     bpy = pytest.importorskip("bpy")
-    import bmesh
 
     from grlens_addon.blender import gather
 
-    me = bpy.data.meshes.new("gather reuse")
-    bm = bmesh.new()
-    bm.loops.layers.uv.new("UVMap")
-    bmesh.ops.create_uvsphere(bm, u_segments=16, v_segments=8, radius=1.0, calc_uvs=True)
-    bm.to_mesh(me)
-    bm.free()
+    me = _uv_sphere(bpy, "gather reuse", 16, 8)
     try:
         def fresh():
             gather._KNOWN.clear()
@@ -390,7 +397,6 @@ def test_gather_reuse_is_dropped_on_file_load_and_unregister():
     file is loaded (the load_pre handler) and when the add-on is unregistered: the last file's meshes
     are not kept alive."""
     bpy = pytest.importorskip("bpy")
-    import bmesh
 
     import grlens_addon
     from grlens_addon.blender import gather, handlers
@@ -398,12 +404,7 @@ def test_gather_reuse_is_dropped_on_file_load_and_unregister():
     grlens_addon.register()
 
     def fill():
-        me = bpy.data.meshes.new("gather forget")
-        bm = bmesh.new()
-        bm.loops.layers.uv.new("UVMap")
-        bmesh.ops.create_uvsphere(bm, u_segments=8, v_segments=4, radius=1.0, calc_uvs=True)
-        bm.to_mesh(me)
-        bm.free()
+        me = _uv_sphere(bpy, "gather forget", 8, 4)
         part = gather.mesh_part(me)
         gather._world_normals(part.corner_normals, np.eye(3))
         bpy.data.meshes.remove(me)
