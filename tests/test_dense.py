@@ -4,6 +4,7 @@ cut ones, strips, axis patches, refined pieces); the closed surface's volume fro
 the upload of those edges into Blender (a valid mesh, as Blender would have found them)."""
 import os
 import sys
+import threading
 
 import numpy as np
 import pytest
@@ -445,3 +446,34 @@ def test_unregister_stops_the_cores_worker_thread():
     finally:
         grlens_addon.register()
     assert frame.beside() is not pool
+
+
+def test_a_failed_order_raises_its_own_error_not_the_workers(table, monkeypatch):
+    """When both orders are assembled at once and both fail, the calling thread's error is raised (the
+    worker's order is waited for, its error dropped); when only the worker's order fails, its error is
+    raised."""
+    from grlens_addon.core import frame as F
+
+    src = SCENES["sphere 180 (patches)"]()
+    monkeypatch.setattr(pipeline, "ASSEMBLE_THREADS_MIN", 0)
+    monkeypatch.setattr(F, "THREADS", 2)
+    real = pipeline.assemble
+    main = threading.get_ident()
+
+    class Here(Exception):
+        pass
+
+    class Worker(Exception):
+        pass
+
+    for fail_here in (True, False):
+        def failing(*args, **kw):
+            if threading.get_ident() != main:
+                raise Worker()
+            if fail_here:
+                raise Here()
+            return real(*args, **kw)
+
+        monkeypatch.setattr(pipeline, "assemble", failing)
+        with pytest.raises(Here if fail_here else Worker):
+            pipeline.build_images(src, SCENE, table, BA.make_settings(CAM), None, CAM.frustum_planes())

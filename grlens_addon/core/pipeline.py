@@ -23,6 +23,7 @@ Units: positions in Blender units (BU); light travel time as a length c*dt in BU
 """
 from __future__ import annotations
 
+import concurrent.futures
 import threading
 from dataclasses import dataclass, field
 
@@ -163,13 +164,18 @@ def build_images(src: SourceMesh, scene: Scene, lut, settings: Settings, light: 
         o, s = orders.pop()
         later = (o, pool.submit(assemble, frame, st.source, s.pieces, s.keep, st.patches, s.patch_keep, s.report,
                                 o, disc))
+    done_here = False
     try:
         for o, s in orders:
             steps("assemble")
             out[o] = assemble(frame, st.source, s.pieces, s.keep, st.patches, s.patch_keep, s.report, o, disc)
+        done_here = True
     finally:
-        if later is not None:  # (waited for even when this thread's order failed or was cancelled)
-            got = later[1].result()
+        if later is not None:  # waited for even when this thread's order failed or was cancelled; then
+            if done_here:      # this thread's exception is the one raised (the worker's is dropped)
+                got = later[1].result()
+            else:
+                concurrent.futures.wait([later[1]])
     if later is not None:
         steps("assemble")
         out[later[0]] = got
